@@ -1,0 +1,46 @@
+// Loom common definitions: errors, exit codes, the host+device marker.
+#pragma once
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+
+#if defined(__CUDACC__)
+#define LOOM_HD __host__ __device__
+#else
+#define LOOM_HD
+#endif
+
+namespace loom {
+
+using Index = std::int32_t;
+
+/// Process exit codes of the `loom` CLI (documented in README.md).
+enum ExitCode : int {
+  kExitOk = 0,
+  kExitInternal = 1,   ///< unexpected failure (a bug or an I/O error while running)
+  kExitBadInput = 2,   ///< scene, mesh, material file or CLI flag rejected
+  kExitDiverged = 3,   ///< the simulation diverged (NaN/Inf or a bound exceeded)
+  kExitSolverFailed = 4  ///< a linear solve failed and the scene's policy says stop
+};
+
+/// Bad input: a scene file, mesh, material file or CLI flag. The message names the
+/// file, the line where there is one, and the fix.
+class InputError : public std::runtime_error {
+ public:
+  explicit InputError(const std::string& what) : std::runtime_error(what) {}
+};
+
+/// The simulation left the range where its numbers mean anything.
+class DivergenceError : public std::runtime_error {
+ public:
+  explicit DivergenceError(const std::string& what) : std::runtime_error(what) {}
+};
+
+/// A linear solve failed (not converged, indefinite system) and the policy says stop.
+class SolverError : public std::runtime_error {
+ public:
+  explicit SolverError(const std::string& what) : std::runtime_error(what) {}
+};
+
+}  // namespace loom

@@ -1,0 +1,38 @@
+// LinearSolver: three phases (analyze_pattern once, factorize per matrix, solve), after
+// polysolve. Solves A dv = b on the range of the constraint filter S with the prescribed
+// constrained part z: (I - S) dv = z and S (A dv - b) = 0 (NUMERICS.md 3.3/3.4).
+#pragma once
+
+#include <span>
+#include <string>
+
+#include "loom/bsr.hpp"
+#include "loom/common.hpp"
+
+namespace loom {
+
+struct SolveReport {
+  bool converged = false;
+  int iterations = 0;          ///< 1 for direct solvers
+  double residual = 0;         ///< relative residual |S(b - A dv)| / |S(b - A z)| (0 if b-hat is 0)
+  double analyze_seconds = 0;
+  double factorize_seconds = 0;
+  double solve_seconds = 0;
+  std::string message;         ///< why it failed, when it failed
+};
+
+class LinearSolver {
+ public:
+  virtual ~LinearSolver() = default;
+  virtual std::string name() const = 0;
+  /// Symbolic phase: called once per sparsity pattern.
+  virtual void analyze_pattern(const BsrMatrix& A, const Filter& S) = 0;
+  /// Numeric phase: called each time A's values (or S) change. Returns false (with
+  /// report.message) when A is not positive definite on range(S).
+  virtual bool factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) = 0;
+  /// Solve. dv holds the initial guess on entry (warm start) and the solution on exit.
+  virtual SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
+                            std::span<const double> z, std::span<double> dv) = 0;
+};
+
+}  // namespace loom

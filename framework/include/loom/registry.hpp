@@ -1,0 +1,108 @@
+// The plugin registry and loader.
+//
+// A plugin is a shared module named loom_<kind>_<name>.so (kind: material, integrator,
+// solver) exporting the entry points defined by LOOM_PLUGIN (loom/plugin.hpp). The loader
+// finds modules on the plugin path: $LOOM_PLUGIN_PATH (colon separated), then the build
+// tree's plugin folder, then the install tree's (<prefix>/lib/loom/plugins). Only modules
+// that a scene names are loaded.
+#pragma once
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "loom/common.hpp"
+#include "loom/integrator.hpp"
+#include "loom/linear_solver.hpp"
+#include "loom/material.hpp"
+#include "loom/mesh.hpp"
+#include "loom/params.hpp"
+
+namespace loom {
+
+/// Bumped whenever an interface in framework/include/loom changes incompatibly.
+constexpr int kPluginAbiVersion = 1;
+
+enum class PluginKind { Material, Integrator, Solver };
+const char* to_string(PluginKind k);
+
+struct PluginInfo {
+  PluginKind kind = PluginKind::Material;
+  std::string name;
+  std::string backend = "cpu";
+  std::string version = "1.0";
+  std::string description;
+  std::string module_path;   ///< filled in by the loader
+};
+
+using MaterialFactory = std::function<std::unique_ptr<Material>(const Params&, const Mesh&)>;
+using IntegratorFactory = std::function<std::unique_ptr<Integrator>(const Params&)>;
+using SolverFactory = std::function<std::unique_ptr<LinearSolver>(const Params&)>;
+
+class Registry {
+ public:
+  void add_material(PluginInfo info, MaterialFactory f);
+  void add_integrator(PluginInfo info, IntegratorFactory f);
+  void add_solver(PluginInfo info, SolverFactory f);
+
+  bool has(PluginKind kind, const std::string& name, const std::string& backend = "cpu") const;
+  /// Create; params.check_unused() is called after the factory returns.
+  std::unique_ptr<Material> make_material(const std::string& name, const std::string& backend,
+                                          const Params& params, const Mesh& mesh) const;
+  std::unique_ptr<Integrator> make_integrator(const std::string& name, const std::string& backend,
+                                              const Params& params) const;
+  std::unique_ptr<LinearSolver> make_solver(const std::string& name, const std::string& backend,
+                                            const Params& params) const;
+  std::vector<PluginInfo> list() const;
+  /// Backends registered for (kind, name).
+  std::vector<std::string> backends(PluginKind kind, const std::string& name) const;
+  void set_current_module(const std::string& path) { current_module_ = path; }
+
+ private:
+  struct Entry {
+    PluginInfo info;
+    MaterialFactory material;
+    IntegratorFactory integrator;
+    SolverFactory solver;
+  };
+  const Entry& find(PluginKind kind, const std::string& name, const std::string& backend) const;
+  std::map<std::tuple<int, std::string, std::string>, Entry> entries_;
+  std::string current_module_;
+};
+
+class PluginLoader {
+ public:
+  explicit PluginLoader(Registry& registry, std::vector<std::string> search_path = default_search_path());
+  ~PluginLoader();
+  PluginLoader(const PluginLoader&) = delete;
+  PluginLoader& operator=(const PluginLoader&) = delete;
+
+  /// $LOOM_PLUGIN_PATH entries, then the build tree, then the install tree.
+  static std::vector<std::string> default_search_path();
+  const std::vector<std::string>& search_path() const { return search_path_; }
+
+  /// Load the module providing (kind, name) unless it is already registered. Throws
+  /// InputError naming what is available (with "did you mean") when no module is found,
+  /// and a clear error when dlopen fails or the ABI version differs.
+  void ensure(PluginKind kind, const std::string& name);
+  /// Whether a module for (kind, name) exists on the path (or is already registered).
+  bool available(PluginKind kind, const std::string& name) const;
+  /// Names of all modules of a kind on the path.
+  std::vector<std::string> names(PluginKind kind) const;
+  /// Load every module on the path (for `loom plugins`); failures go to errors.
+  void load_all(std::vector<std::string>& errors);
+  /// Load one module file by path.
+  void load_file(const std::string& path);
+
+ private:
+  std::string find_module(PluginKind kind, const std::string& name) const;
+  Registry& registry_;
+  std::vector<std::string> search_path_;
+  std::vector<void*> handles_;
+  std::vector<std::string> loaded_;
+};
+
+}  // namespace loom
