@@ -96,6 +96,7 @@ class PluginLoader {
   void load_all(std::vector<std::string>& errors);
   /// Load one module file by path.
   void load_file(const std::string& path);
+  Registry& registry() { return registry_; }
 
  private:
   std::string find_module(PluginKind kind, const std::string& name) const;

@@ -1,0 +1,187 @@
+// The `loom` command line: run, validate, plugins.
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "loom/common.hpp"
+#include "loom/output.hpp"
+#include "loom/registry.hpp"
+#include "loom/simulation.hpp"
+
+namespace {
+
+const char* kUsage = R"(loom: cloth simulation from a scene file
+
+usage:
+  loom run SCENE.yaml [--out DIR] [--frames N] [--set key=value]... [--quiet]
+      Simulate and write one OBJ per frame (frame_00000.obj, ...) and stats.csv to DIR
+      (default: the scene's output.dir, else out/<scene name>).
+  loom validate SCENE.yaml [--set key=value]...
+      Check the scene and its combo without running; print what would be built.
+  loom plugins
+      List the plugins on the plugin path (kind, name, backend, version, module).
+  loom --help | --version
+
+options:
+  --set key=value   override any scene key by its dotted path, e.g. --set integrator.dt=0.0005
+                    (repeatable; the value is YAML: --set gravity=[0,0,-9.81])
+  --out DIR         output folder
+  --frames N        number of frames to simulate (overrides 'frames')
+  --quiet           no progress bar or summary
+
+environment:
+  LOOM_PLUGIN_PATH  colon-separated folders searched first for plugin modules
+  OMP_NUM_THREADS   threads (the scene's 'threads' key takes precedence)
+
+exit codes: 0 ok, 1 internal error, 2 bad input (scene, mesh, flags), 3 diverged,
+            4 linear solver failed
+)";
+
+struct Args {
+  std::string command, scene, out;
+  int frames = -1;
+  bool quiet = false;
+  std::vector<std::string> sets;
+};
+
+[[noreturn]] void usage_error(const std::string& msg) {
+  std::cerr << "loom: " << msg << "\n(run 'loom --help' for usage)\n";
+  std::exit(loom::kExitBadInput);
+}
+
+Args parse_args(int argc, char** argv) {
+  Args a;
+  if (argc < 2) usage_error("missing command: one of run, validate, plugins");
+  a.command = argv[1];
+  if (a.command == "--help" || a.command == "-h" || a.command == "help") {
+    std::cout << kUsage;
+    std::exit(0);
+  }
+  if (a.command == "--version") {
+    std::cout << "loom " << LOOM_VERSION_STRING << " (plugin ABI " << loom::kPluginAbiVersion << ")\n";
+    std::exit(0);
+  }
+  const std::vector<std::string> commands = {"run", "validate", "plugins"};
+  if (std::find(commands.begin(), commands.end(), a.command) == commands.end()) {
+    const std::string hint = loom::closest_match(a.command, commands);
+    usage_error("unknown command '" + a.command + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
+                "; commands: run, validate, plugins");
+  }
+  for (int i = 2; i < argc; ++i) {
+    const std::string s = argv[i];
+    auto value = [&](const char* flag) -> std::string {
+      const std::string f = flag;
+      if (s.size() > f.size() && s.compare(0, f.size() + 1, f + "=") == 0) return s.substr(f.size() + 1);
+      if (i + 1 >= argc) usage_error(f + " needs a value");
+      return argv[++i];
+    };
+    if (s == "--help" || s == "-h") {
+      std::cout << kUsage;
+      std::exit(0);
+    } else if (s == "--out" || s.rfind("--out=", 0) == 0) {
+      a.out = value("--out");
+    } else if (s == "--frames" || s.rfind("--frames=", 0) == 0) {
+      const std::string v = value("--frames");
+      char* end = nullptr;
+      const long n = std::strtol(v.c_str(), &end, 10);
+      if (v.empty() || *end != '\0' || n < 0 || n > 100000000)
+        usage_error("--frames needs a non-negative integer (got '" + v + "')");
+      a.frames = static_cast<int>(n);
+    } else if (s == "--set" || s.rfind("--set=", 0) == 0) {
+      const std::string kv = value("--set");
+      if (kv.find('=') == std::string::npos || kv[0] == '=')
+        usage_error("--set needs key=value, e.g. --set integrator.dt=0.0005 (got '" + kv + "')");
+      a.sets.push_back(kv);
+    } else if (s == "--quiet" || s == "-q") {
+      a.quiet = true;
+    } else if (!s.empty() && s[0] == '-') {
+      const std::string hint = loom::closest_match(s, {"--out", "--frames", "--set", "--quiet", "--help"});
+      usage_error("unknown option '" + s + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)"));
+    } else if (a.scene.empty()) {
+      a.scene = s;
+    } else {
+      usage_error("unexpected argument '" + s + "' (one scene file per run)");
+    }
+  }
+  if (a.command != "plugins" && a.scene.empty()) usage_error(a.command + " needs a scene file, e.g. loom " + a.command + " scenes/hanging_cloth.yaml");
+  if (a.command == "plugins" && !a.scene.empty()) usage_error("plugins takes no scene file");
+  return a;
+}
+
+std::string stem(const std::string& path) {
+  std::string s = path.substr(path.find_last_of('/') == std::string::npos ? 0 : path.find_last_of('/') + 1);
+  const auto dot = s.rfind('.');
+  return dot == std::string::npos ? s : s.substr(0, dot);
+}
+
+int cmd_plugins() {
+  loom::Registry registry;
+  loom::PluginLoader loader(registry);
+  std::vector<std::string> errors;
+  loader.load_all(errors);
+  std::printf("plugin path:\n");
+  for (const auto& d : loader.search_path()) std::printf("  %s\n", d.c_str());
+  std::printf("\n%-11s %-22s %-8s %-8s %s\n", "KIND", "NAME", "BACKEND", "VERSION", "DESCRIPTION");
+  for (const auto& p : registry.list())
+    std::printf("%-11s %-22s %-8s %-8s %s\n", loom::to_string(p.kind), p.name.c_str(), p.backend.c_str(),
+                p.version.c_str(), p.description.c_str());
+  for (const auto& e : errors) std::fprintf(stderr, "loom: warning: %s\n", e.c_str());
+  return errors.empty() ? 0 : loom::kExitBadInput;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Args args = parse_args(argc, argv);
+  try {
+    if (args.command == "plugins") return cmd_plugins();
+    loom::Registry registry;
+    loom::PluginLoader loader(registry);
+    loom::Simulation sim(args.scene, args.sets, loader);
+    if (args.frames >= 0) sim.set_frames(args.frames);
+    if (args.command == "validate") {
+      for (const auto& line : sim.describe()) std::cout << line << "\n";
+      std::cout << "ok: the scene is valid\n";
+      return 0;
+    }
+    if (!args.out.empty()) sim.output().dir = args.out;
+    if (sim.output().dir.empty()) sim.output().dir = "out/" + stem(args.scene);
+    const bool tty = ::isatty(STDOUT_FILENO) && !args.quiet && loom::is_output_rank();
+    const auto t0 = std::chrono::steady_clock::now();
+    auto progress = [&](int f, int total) {
+      if (!tty) return;
+      const int width = 40;
+      const int filled = total > 0 ? width * f / total : width;
+      const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      std::printf("\r[%.*s%*s] %d/%d frames  t = %.4g s  %.1f s elapsed", filled,
+                  "########################################", width - filled, "", f, total, sim.scene().state.time, el);
+      std::fflush(stdout);
+    };
+    sim.run(progress);
+    if (tty) std::printf("\n");
+    if (!args.quiet && loom::is_output_rank()) {
+      const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      std::printf("loom: %d frames (%lld steps, %.4g s simulated) in %.3g s; wrote %s\n", sim.frames(),
+                  static_cast<long long>(sim.scene().state.step), sim.scene().state.time, el, sim.output().dir.c_str());
+    }
+    return 0;
+  } catch (const loom::InputError& e) {
+    std::cerr << "loom: error: " << e.what() << "\n";
+    return loom::kExitBadInput;
+  } catch (const loom::DivergenceError& e) {
+    std::cerr << "loom: " << e.what() << "\n(frames written before the divergence are kept)\n";
+    return loom::kExitDiverged;
+  } catch (const loom::SolverError& e) {
+    std::cerr << "loom: linear solver failed: " << e.what() << "\n";
+    return loom::kExitSolverFailed;
+  } catch (const std::exception& e) {
+    std::cerr << "loom: internal error: " << e.what() << "\n";
+    return loom::kExitInternal;
+  }
+}

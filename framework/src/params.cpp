@@ -1,0 +1,381 @@
+#include "loom/params.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+namespace loom {
+
+namespace {
+struct Doc {
+  YAML::Node root;
+  std::string source;
+  std::map<std::string, std::set<std::string>> asked;  // path -> keys asked for
+};
+}  // namespace
+
+struct Params::Impl {
+  std::shared_ptr<Doc> doc;
+  YAML::Node node;
+  std::string path;   // dotted path, "" for the root
+  bool present = true;
+  int line = -1;      // 1-based line of this node (or of its parent when missing)
+};
+
+namespace {
+
+std::string join_path(const std::string& a, const std::string& b) { return a.empty() ? b : a + "." + b; }
+
+int line_of(const YAML::Node& n, int fallback) {
+  if (!n.IsDefined() || n.IsNull()) {
+    // Null nodes still carry a mark when they come from the file.
+    if (n.IsDefined() && n.Mark().line >= 0) return n.Mark().line + 1;
+    return fallback;
+  }
+  return n.Mark().line >= 0 ? n.Mark().line + 1 : fallback;
+}
+
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    cur[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t sub = prev[j - 1] + (std::tolower(a[i - 1]) == std::tolower(b[j - 1]) ? 0 : 1);
+      cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, sub});
+    }
+    std::swap(prev, cur);
+  }
+  return prev[b.size()];
+}
+
+std::string describe_value(const YAML::Node& n) {
+  if (!n.IsDefined()) return "nothing";
+  if (n.IsNull()) return "an empty value";
+  if (n.IsScalar()) return "'" + n.Scalar() + "'";
+  if (n.IsSequence()) return "a list";
+  if (n.IsMap()) return "a mapping";
+  return "a value";
+}
+
+std::string fmt_double(double v) {
+  std::ostringstream os;
+  os.precision(10);
+  os << v;
+  return os.str();
+}
+
+}  // namespace
+
+std::string closest_match(const std::string& word, const std::vector<std::string>& candidates) {
+  std::string best;
+  std::size_t best_d = std::string::npos;
+  for (const auto& c : candidates) {
+    const std::size_t d = edit_distance(word, c);
+    if (d < best_d) { best_d = d; best = c; }
+  }
+  if (best.empty()) return "";
+  const std::size_t limit = std::max<std::size_t>(2, word.size() / 3);
+  if (best_d <= limit) return best;
+  // prefix / containment also counts as close
+  if (!word.empty() && (best.find(word) != std::string::npos || word.find(best) != std::string::npos)) return best;
+  return "";
+}
+
+Params::Params() : impl_(std::make_shared<Impl>()) {
+  impl_->doc = std::make_shared<Doc>();
+  impl_->present = false;
+}
+Params::Params(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Params::~Params() = default;
+Params::Params(const Params&) = default;
+Params& Params::operator=(const Params&) = default;
+
+Params Params::from_string(const std::string& yaml, const std::string& source_name) {
+  auto doc = std::make_shared<Doc>();
+  doc->source = source_name;
+  try {
+    doc->root = YAML::Load(yaml);
+  } catch (const YAML::ParserException& e) {
+    std::ostringstream os;
+    os << source_name << ":" << (e.mark.line + 1) << ":" << (e.mark.column + 1) << ": YAML syntax error: " << e.msg
+       << ". Fix the YAML at that line (check indentation, colons and brackets).";
+    throw InputError(os.str());
+  }
+  if (!doc->root.IsDefined() || doc->root.IsNull()) doc->root = YAML::Node(YAML::NodeType::Map);
+  auto impl = std::make_shared<Impl>();
+  impl->doc = doc;
+  impl->node = doc->root;
+  impl->line = line_of(doc->root, 1);
+  return Params(impl);
+}
+
+Params Params::from_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path + ": cannot open file (does it exist, and is it readable?)");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return from_string(ss.str(), path);
+}
+
+bool Params::valid() const { return impl_->present && impl_->node.IsDefined() && !impl_->node.IsNull(); }
+bool Params::is_map() const { return valid() && impl_->node.IsMap(); }
+bool Params::is_sequence() const { return valid() && impl_->node.IsSequence(); }
+bool Params::is_scalar() const { return valid() && impl_->node.IsScalar(); }
+
+bool Params::has(const std::string& key) const {
+  if (!is_map()) return false;
+  const YAML::Node& n = impl_->node;
+  for (auto it = n.begin(); it != n.end(); ++it)
+    if (it->first.Scalar() == key) return true;
+  return false;
+}
+
+std::vector<std::string> Params::keys() const {
+  std::vector<std::string> out;
+  if (!is_map()) return out;
+  for (auto it = impl_->node.begin(); it != impl_->node.end(); ++it) out.push_back(it->first.Scalar());
+  return out;
+}
+
+std::size_t Params::size() const { return is_sequence() ? impl_->node.size() : 0; }
+
+std::string Params::where() const {
+  const std::string& src = impl_->doc->source.empty() ? std::string("<params>") : impl_->doc->source;
+  if (impl_->line > 0) return src + ":" + std::to_string(impl_->line);
+  return src;
+}
+std::string Params::path() const { return impl_->path; }
+std::string Params::source() const { return impl_->doc->source; }
+
+void Params::fail(const std::string& message) const {
+  std::string p = impl_->path.empty() ? "" : impl_->path + ": ";
+  throw InputError(where() + ": " + p + message);
+}
+
+Params Params::child(const std::string& key) const {
+  impl_->doc->asked[impl_->path].insert(key);
+  auto impl = std::make_shared<Impl>();
+  impl->doc = impl_->doc;
+  impl->path = join_path(impl_->path, key);
+  impl->line = impl_->line;
+  impl->present = false;
+  if (is_map()) {
+    const YAML::Node& n = impl_->node;
+    for (auto it = n.begin(); it != n.end(); ++it) {
+      if (it->first.Scalar() == key) {
+        impl->node = it->second;
+        impl->present = true;
+        impl->line = line_of(it->second, line_of(it->first, impl_->line));
+        break;
+      }
+    }
+  }
+  return Params(impl);
+}
+
+Params Params::at(std::size_t i) const {
+  auto impl = std::make_shared<Impl>();
+  impl->doc = impl_->doc;
+  impl->path = impl_->path + "[" + std::to_string(i) + "]";
+  impl->line = impl_->line;
+  impl->present = false;
+  if (is_sequence() && i < impl_->node.size()) {
+    impl->node = impl_->node[i];
+    impl->present = true;
+    impl->line = line_of(impl->node, impl_->line);
+  }
+  return Params(impl);
+}
+
+double Params::as_double() const {
+  if (!is_scalar()) fail("expected a number, got " + describe_value(impl_->node) + ".");
+  try {
+    return impl_->node.as<double>();
+  } catch (const YAML::Exception&) {
+    fail("expected a number, got '" + impl_->node.Scalar() + "'.");
+  }
+}
+
+std::int64_t Params::as_int() const {
+  if (!is_scalar()) fail("expected an integer, got " + describe_value(impl_->node) + ".");
+  try {
+    return impl_->node.as<long long>();
+  } catch (const YAML::Exception&) {
+    fail("expected an integer, got '" + impl_->node.Scalar() + "'.");
+  }
+}
+
+bool Params::as_bool() const {
+  if (!is_scalar()) fail("expected true or false, got " + describe_value(impl_->node) + ".");
+  try {
+    return impl_->node.as<bool>();
+  } catch (const YAML::Exception&) {
+    fail("expected true or false, got '" + impl_->node.Scalar() + "'.");
+  }
+}
+
+std::string Params::as_string() const {
+  if (!is_scalar()) fail("expected a text value, got " + describe_value(impl_->node) + ".");
+  return impl_->node.Scalar();
+}
+
+std::vector<double> Params::as_doubles() const {
+  if (!is_sequence()) fail("expected a list of numbers like [0, -9.81, 0], got " + describe_value(impl_->node) + ".");
+  std::vector<double> out;
+  for (std::size_t i = 0; i < size(); ++i) out.push_back(at(i).as_double());
+  return out;
+}
+
+double Params::get(const std::string& key, double def) const {
+  Params c = child(key);
+  return c.valid() ? c.as_double() : def;
+}
+std::int64_t Params::get(const std::string& key, std::int64_t def) const {
+  Params c = child(key);
+  return c.valid() ? c.as_int() : def;
+}
+int Params::get(const std::string& key, int def) const {
+  Params c = child(key);
+  if (!c.valid()) return def;
+  const std::int64_t v = c.as_int();
+  if (v < -2147483647LL || v > 2147483647LL) c.fail("integer out of range.");
+  return static_cast<int>(v);
+}
+bool Params::get(const std::string& key, bool def) const {
+  Params c = child(key);
+  return c.valid() ? c.as_bool() : def;
+}
+std::string Params::get(const std::string& key, const std::string& def) const {
+  Params c = child(key);
+  return c.valid() ? c.as_string() : def;
+}
+std::string Params::get(const std::string& key, const char* def) const { return get(key, std::string(def)); }
+
+double Params::require_double(const std::string& key) const {
+  Params c = child(key);
+  if (!c.valid()) fail("missing required key '" + key + "' (a number).");
+  return c.as_double();
+}
+std::int64_t Params::require_int(const std::string& key) const {
+  Params c = child(key);
+  if (!c.valid()) fail("missing required key '" + key + "' (an integer).");
+  return c.as_int();
+}
+std::string Params::require_string(const std::string& key) const {
+  Params c = child(key);
+  if (!c.valid()) fail("missing required key '" + key + "'.");
+  return c.as_string();
+}
+
+double Params::get_positive(const std::string& key, double def) const {
+  Params c = child(key);
+  if (!c.valid()) return def;
+  const double v = c.as_double();
+  if (!std::isfinite(v) || v <= 0) c.fail("must be a finite number > 0 (got " + fmt_double(v) + "). Fix: give a positive value.");
+  return v;
+}
+double Params::get_nonnegative(const std::string& key, double def) const {
+  Params c = child(key);
+  if (!c.valid()) return def;
+  const double v = c.as_double();
+  if (!std::isfinite(v) || v < 0) c.fail("must be a finite number >= 0 (got " + fmt_double(v) + "). Fix: give a value >= 0.");
+  return v;
+}
+double Params::get_in_range(const std::string& key, double def, double lo, double hi) const {
+  Params c = child(key);
+  if (!c.valid()) return def;
+  const double v = c.as_double();
+  if (!std::isfinite(v) || v < lo || v > hi)
+    c.fail("must be in [" + fmt_double(lo) + ", " + fmt_double(hi) + "] (got " + fmt_double(v) + ").");
+  return v;
+}
+std::string Params::get_choice(const std::string& key, const std::string& def,
+                               const std::vector<std::string>& choices) const {
+  Params c = child(key);
+  if (!c.valid()) return def;
+  const std::string v = c.as_string();
+  if (std::find(choices.begin(), choices.end(), v) != choices.end()) return v;
+  std::string list;
+  for (const auto& s : choices) list += (list.empty() ? "" : ", ") + s;
+  std::string hint = closest_match(v, choices);
+  c.fail("unknown value '" + v + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") + ". Choose one of: " + list + ".");
+}
+
+void Params::mark_used(const std::string& key) const { impl_->doc->asked[impl_->path].insert(key); }
+
+void Params::check_unused(const std::vector<std::string>& also_known) const {
+  if (!is_map()) return;
+  const auto& asked = impl_->doc->asked[impl_->path];
+  std::vector<std::string> known(asked.begin(), asked.end());
+  known.insert(known.end(), also_known.begin(), also_known.end());
+  for (auto it = impl_->node.begin(); it != impl_->node.end(); ++it) {
+    const std::string k = it->first.Scalar();
+    if (asked.count(k) || std::find(also_known.begin(), also_known.end(), k) != also_known.end()) continue;
+    std::string msg = "unknown key '" + k + "'";
+    if (!impl_->path.empty()) msg += " in '" + impl_->path + "'";
+    const std::string hint = closest_match(k, known);
+    if (!hint.empty()) msg += " (did you mean '" + hint + "'?)";
+    std::sort(known.begin(), known.end());
+    known.erase(std::unique(known.begin(), known.end()), known.end());
+    if (!known.empty()) {
+      msg += ". Known keys here: ";
+      for (std::size_t i = 0; i < known.size(); ++i) msg += (i ? ", " : "") + known[i];
+    }
+    msg += ".";
+    const int line = line_of(it->first, impl_->line);
+    const std::string& src = impl_->doc->source.empty() ? std::string("<params>") : impl_->doc->source;
+    throw InputError(src + ":" + std::to_string(line) + ": " + msg);
+  }
+}
+
+void Params::set_path(const std::string& dotted_key, const std::string& value_yaml) {
+  if (dotted_key.empty()) throw InputError("--set: empty key. Use --set section.key=value, e.g. --set integrator.dt=0.0005");
+  YAML::Node value;
+  try {
+    value = YAML::Load(value_yaml);
+  } catch (const YAML::Exception& e) {
+    throw InputError("--set " + dotted_key + "=" + value_yaml + ": the value is not valid YAML (" + e.what() + ")");
+  }
+  if (!value.IsDefined() || value.IsNull()) value = YAML::Node(value_yaml);
+  std::vector<std::string> parts;
+  std::stringstream ss(dotted_key);
+  std::string part;
+  while (std::getline(ss, part, '.')) {
+    if (part.empty()) throw InputError("--set " + dotted_key + ": empty component in the dotted key.");
+    parts.push_back(part);
+  }
+  // Navigate with non-const access, creating maps on the way. yaml-cpp nodes are handles,
+  // so we keep a chain of handles and assign into the last one.
+  std::vector<YAML::Node> chain{impl_->node};
+  for (std::size_t i = 0; i + 1 < parts.size(); ++i) {
+    YAML::Node cur = chain.back();
+    if (!cur.IsMap() && !cur.IsNull() && cur.IsDefined())
+      throw InputError("--set " + dotted_key + ": '" + parts[i] + "' is inside a value that is not a mapping.");
+    YAML::Node next = cur[parts[i]];
+    if (!next.IsDefined() || next.IsNull()) {
+      cur[parts[i]] = YAML::Node(YAML::NodeType::Map);
+      next = cur[parts[i]];
+    } else if (!next.IsMap()) {
+      throw InputError("--set " + dotted_key + ": '" + parts[i] + "' is a " +
+                       (next.IsSequence() ? "list" : "value") + ", not a section; cannot set a key inside it.");
+    }
+    chain.push_back(next);
+  }
+  YAML::Node last = chain.back();
+  last[parts.back()] = value;
+}
+
+std::string Params::dump() const {
+  if (!impl_->present) return "";
+  YAML::Emitter out;
+  out << impl_->node;
+  return out.c_str();
+}
+
+}  // namespace loom

@@ -1,0 +1,467 @@
+#include "loom/simulation.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <limits>
+#include <sstream>
+
+#include "loom/output.hpp"
+
+namespace fs = std::filesystem;
+
+namespace loom {
+
+std::string resolve_path(const std::string& base_dir, const std::string& path) {
+  if (path.empty() || fs::path(path).is_absolute() || base_dir.empty()) return path;
+  return (fs::path(base_dir) / path).lexically_normal().string();
+}
+
+namespace {
+
+std::string fmt(double v) {
+  std::ostringstream os;
+  os.precision(6);
+  os << v;
+  return os.str();
+}
+
+std::string join(const std::vector<std::string>& v) {
+  std::string s;
+  for (const auto& x : v) s += (s.empty() ? "" : ", ") + x;
+  return s;
+}
+
+const std::vector<std::string> kPinGroups = {"top_corners", "top_edge", "left_corners", "left_edge",
+                                             "bottom_corners", "bottom_edge", "right_edge", "corners"};
+
+// Vertices of a named pin group. Grids use their structure; other meshes use the bounding box
+// in the plane of the two largest extents ("top" = largest y).
+std::vector<Index> pin_group(const Mesh& mesh, const std::string& group, const Params& where) {
+  std::vector<Index> out;
+  const Index n = mesh.num_vertices();
+  if (mesh.grid) {
+    const GridInfo& g = *mesh.grid;
+    auto row = [&](Index iy) { for (Index ix = 0; ix < g.nx; ++ix) out.push_back(g.index(ix, iy)); };
+    auto colm = [&](Index ix) { for (Index iy = 0; iy < g.ny; ++iy) out.push_back(g.index(ix, iy)); };
+    if (group == "top_corners") out = {g.index(0, g.ny - 1), g.index(g.nx - 1, g.ny - 1)};
+    else if (group == "top_edge") row(g.ny - 1);
+    else if (group == "bottom_edge") row(0);
+    else if (group == "left_corners") out = {g.index(0, 0), g.index(0, g.ny - 1)};
+    else if (group == "left_edge") colm(0);
+    else if (group == "right_edge") colm(g.nx - 1);
+    else if (group == "bottom_corners") out = {g.index(0, 0), g.index(g.nx - 1, 0)};
+    else if (group == "corners") out = {g.index(0, 0), g.index(g.nx - 1, 0), g.index(0, g.ny - 1), g.index(g.nx - 1, g.ny - 1)};
+  } else {
+    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], mesh.positions[3 * i + k]);
+        hi[k] = std::max(hi[k], mesh.positions[3 * i + k]);
+      }
+    const double ext = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+    const double tol = 1e-6 * ext;
+    auto select = [&](int axis, bool high) {
+      std::vector<Index> s;
+      for (Index i = 0; i < n; ++i) {
+        const double c = mesh.positions[3 * i + axis];
+        if (high ? c >= hi[axis] - tol : c <= lo[axis] + tol) s.push_back(i);
+      }
+      return s;
+    };
+    auto extremes = [&](const std::vector<Index>& s, int axis) {
+      if (s.empty()) return std::vector<Index>{};
+      Index a = s[0], b = s[0];
+      for (Index i : s) {
+        if (mesh.positions[3 * i + axis] < mesh.positions[3 * a + axis]) a = i;
+        if (mesh.positions[3 * i + axis] > mesh.positions[3 * b + axis]) b = i;
+      }
+      return a == b ? std::vector<Index>{a} : std::vector<Index>{a, b};
+    };
+    if (group == "top_edge") out = select(1, true);
+    else if (group == "bottom_edge") out = select(1, false);
+    else if (group == "left_edge") out = select(0, false);
+    else if (group == "right_edge") out = select(0, true);
+    else if (group == "top_corners") out = extremes(select(1, true), 0);
+    else if (group == "bottom_corners") out = extremes(select(1, false), 0);
+    else if (group == "left_corners") out = extremes(select(0, false), 1);
+    else if (group == "corners") {
+      out = extremes(select(1, true), 0);
+      auto b = extremes(select(1, false), 0);
+      out.insert(out.end(), b.begin(), b.end());
+    }
+  }
+  if (out.empty() && std::find(kPinGroups.begin(), kPinGroups.end(), group) == kPinGroups.end()) {
+    const std::string hint = closest_match(group, kPinGroups);
+    where.fail("unknown pin group '" + group + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
+               ". Groups: " + join(kPinGroups) + "; or give {vertices: [i, j, ...]}.");
+  }
+  return out;
+}
+
+}  // namespace
+
+Simulation::Simulation() = default;
+Simulation::~Simulation() = default;
+
+Simulation::Simulation(const std::string& path, const std::vector<std::string>& overrides, PluginLoader& loader) {
+  if (!fs::exists(path)) throw InputError(path + ": scene file not found. Fix: check the path (scenes/ has examples).");
+  Params root = Params::from_file(path);
+  for (const auto& o : overrides) {
+    const auto eq = o.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw InputError("--set " + o + ": expected key=value, e.g. --set integrator.dt=0.0005");
+    root.set_path(o.substr(0, eq), o.substr(eq + 1));
+  }
+  build(root, fs::path(path).parent_path().string(), loader);
+}
+
+std::unique_ptr<Simulation> Simulation::from_string(const std::string& yaml, const std::string& source_name,
+                                                    const std::string& base_dir,
+                                                    const std::vector<std::string>& overrides, PluginLoader& loader) {
+  std::unique_ptr<Simulation> sim(new Simulation());
+  Params root = Params::from_string(yaml, source_name);
+  for (const auto& o : overrides) {
+    const auto eq = o.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw InputError("--set " + o + ": expected key=value, e.g. --set integrator.dt=0.0005");
+    root.set_path(o.substr(0, eq), o.substr(eq + 1));
+  }
+  sim->build(root, base_dir, loader);
+  return sim;
+}
+
+void Simulation::build(const Params& root, const std::string& base_dir, PluginLoader& loader) {
+  if (!root.is_map()) root.fail("a scene file must be a YAML mapping with mesh, material, integrator, ... sections.");
+  scene_ = std::make_unique<Scene>();
+  Scene& sc = *scene_;
+  sc.source = root.source();
+  root.child("description");  // free text, allowed
+  root.child("name");
+
+  sc.backend = root.get_choice("backend", "cpu", {"cpu", "cuda"});
+  sc.threads = root.get("threads", 0);
+  if (sc.threads < 0) root.child("threads").fail("must be >= 0 (0 = all cores).");
+  if (sc.threads > 0) omp_set_num_threads(sc.threads);
+
+  // ---- mesh ----
+  Params mesh = root.child("mesh");
+  if (!mesh.valid()) root.fail("missing 'mesh' section. Fix: add mesh: {grid: {nx: 32, ny: 32, width: 1, height: 1}} or mesh: {obj: file.obj}.");
+  if (!mesh.is_map()) mesh.fail("must be a mapping with 'grid' or 'obj'.");
+  const bool has_grid = mesh.has("grid"), has_obj = mesh.has("obj");
+  if (has_grid == has_obj) mesh.fail("give exactly one of 'grid' or 'obj'.");
+  if (has_grid) {
+    Params g = mesh.child("grid");
+    if (!g.is_map()) g.fail("must be a mapping like {nx: 32, ny: 32, width: 1.0, height: 1.0}.");
+    const auto nx = g.require_int("nx"), ny = g.require_int("ny");
+    if (nx < 2 || ny < 2 || nx > 20000 || ny > 20000) g.fail("nx and ny must be in [2, 20000] (got " + std::to_string(nx) + " x " + std::to_string(ny) + ").");
+    const double w = g.get_positive("width", 1.0), h = g.get_positive("height", 1.0);
+    const std::string plane = g.get_choice("plane", "xy", {"xy", "xz"});
+    const std::string diag = g.get_choice("diagonals", "alternate", {"alternate", "uniform"});
+    g.check_unused();
+    sc.mesh = make_grid(static_cast<Index>(nx), static_cast<Index>(ny), w, h,
+                        plane == "xy" ? GridPlane::XY : GridPlane::XZ, diag == "alternate");
+  } else {
+    Params o = mesh.child("obj");
+    const std::string file = resolve_path(base_dir, o.as_string());
+    if (!fs::exists(file)) o.fail("OBJ file '" + file + "' not found. Fix: paths are relative to the scene file's folder.");
+    sc.mesh = read_obj(file);
+    const double scale = mesh.get_positive("scale", 1.0);
+    for (double& c : sc.mesh.positions) c *= scale;
+  }
+  mesh.check_unused();
+
+  // ---- material ----
+  Params mat = root.child("material");
+  if (!mat.is_map()) root.fail("missing 'material' section. Fix: add material: {type: mass_spring, ...}.");
+  material_name_ = mat.require_string("type");
+  loader.ensure(PluginKind::Material, material_name_);
+  sc.material = loader.registry().make_material(material_name_, sc.backend, mat, sc.mesh);
+
+  // ---- state ----
+  State& st = sc.state;
+  const Index n = sc.mesh.num_vertices();
+  st.resize(n);
+  st.x = sc.mesh.positions;
+  sc.material->compute_masses(st.mass);
+  for (Index i = 0; i < n; ++i)
+    if (!(st.mass[i] > 0) || !std::isfinite(st.mass[i]))
+      mat.fail("material '" + material_name_ + "' gave vertex " + std::to_string(i) + " the mass " + fmt(st.mass[i]) +
+               "; masses must be finite and > 0. Fix: check density / vertex_mass, and that every vertex belongs to a triangle.");
+  st.update_inverse_masses();
+
+  // ---- pins ----
+  Params pins = root.child("pins");
+  if (pins.valid()) {
+    if (!pins.is_sequence()) pins.fail("must be a list, e.g. pins: [top_corners] or pins: [{vertices: [0, 31]}].");
+    for (std::size_t k = 0; k < pins.size(); ++k) {
+      Params e = pins.at(k);
+      std::vector<Index> vs;
+      if (e.is_scalar()) {
+        vs = pin_group(sc.mesh, e.as_string(), e);
+      } else if (e.is_map()) {
+        if (e.has("group")) {
+          Params g = e.child("group");
+          vs = pin_group(sc.mesh, g.as_string(), g);
+        }
+        if (e.has("vertices")) {
+          Params list = e.child("vertices");
+          if (!list.is_sequence()) list.fail("must be a list of vertex indices.");
+          for (std::size_t q = 0; q < list.size(); ++q) {
+            const auto idx = list.at(q).as_int();
+            if (idx < 0 || idx >= n)
+              list.at(q).fail("vertex index " + std::to_string(idx) + " is out of range (the mesh has " +
+                              std::to_string(n) + " vertices, numbered from 0).");
+            vs.push_back(static_cast<Index>(idx));
+          }
+        }
+        e.check_unused();
+        if (vs.empty()) e.fail("a pin entry needs 'group' or 'vertices'.");
+      } else {
+        e.fail("a pin entry is a group name (top_corners, ...) or {vertices: [...]}.");
+      }
+      for (Index i : vs) st.pin(i);
+    }
+  }
+
+  // ---- gravity ----
+  Params grav = root.child("gravity");
+  if (grav.valid()) {
+    const auto g = grav.as_doubles();
+    if (g.size() != 3) grav.fail("gravity needs 3 components, e.g. [0, -9.81, 0].");
+    for (double c : g)
+      if (!std::isfinite(c)) grav.fail("gravity components must be finite numbers.");
+    sc.gravity = {g[0], g[1], g[2]};
+  }
+
+  // ---- integrator ----
+  Params integ = root.child("integrator");
+  if (!integ.is_map()) root.fail("missing 'integrator' section. Fix: add integrator: {type: symplectic_euler, dt: 0.001, substeps: 10}.");
+  integrator_name_ = integ.require_string("type");
+  dt_ = integ.get_positive("dt", 1e-3);
+  substeps_ = integ.get("substeps", 1);
+  if (substeps_ < 1) integ.child("substeps").fail("must be an integer >= 1 (steps per frame).");
+  loader.ensure(PluginKind::Integrator, integrator_name_);
+  integrator_ = loader.registry().make_integrator(integrator_name_, sc.backend, integ);
+  const IntegratorNeeds needs = integrator_->needs();
+  if (needs.springs && !sc.material->springs())
+    integ.fail("integrator '" + integrator_name_ + "' works per spring, but material '" + material_name_ +
+               "' has no springs. Fix: use material type mass_spring, or an integrator that works with any material "
+               "(symplectic_euler, rk4, baraff_witkin).");
+  if (needs.jacobian && !sc.material->has_jacobian())
+    integ.fail("integrator '" + integrator_name_ + "' needs force Jacobians, which material '" + material_name_ +
+               "' does not provide. Fix: use an explicit integrator (symplectic_euler, rk4) with this material.");
+
+  // ---- solver ----
+  Params solver = root.child("solver");
+  if (needs.linear_solver) {
+    if (!solver.valid())
+      root.fail("integrator '" + integrator_name_ + "' is implicit and needs a linear solver. Fix: add "
+                "solver: {type: eigen_pcg} (or a list: solver: {type: [cholmod, eigen_ldlt]}).");
+    std::vector<std::string> names;
+    Params type = solver.is_map() ? solver.child("type") : solver;
+    if (type.is_scalar()) names.push_back(type.as_string());
+    else if (type.is_sequence())
+      for (std::size_t k = 0; k < type.size(); ++k) names.push_back(type.at(k).as_string());
+    else
+      (solver.is_map() ? solver : root).fail("solver needs 'type': a solver name or a list of names (first available is used).");
+    if (names.empty()) type.fail("the solver list is empty.");
+    std::string chosen;
+    std::vector<std::string> skipped;
+    for (const auto& nm : names) {
+      if (loader.available(PluginKind::Solver, nm)) { chosen = nm; break; }
+      skipped.push_back(nm);
+    }
+    if (chosen.empty()) {
+      const auto avail = loader.names(PluginKind::Solver);
+      const std::string hint = names.size() == 1 ? closest_match(names[0], avail) : "";
+      type.fail("none of the solvers [" + join(names) + "] is available in this build" +
+                (hint.empty() ? "" : " (did you mean '" + hint + "'?)") + ". Available: " +
+                (avail.empty() ? "none" : join(avail)) + ".");
+    }
+    if (!skipped.empty() && is_output_rank())
+      std::cerr << "loom: solver " << join(skipped) << " not available in this build; using " << chosen << "\n";
+    solver_name_ = chosen;
+    loader.ensure(PluginKind::Solver, chosen);
+    Params sp = solver.is_map() ? solver.child(chosen) : Params();
+    if (solver.is_map()) {
+      for (const auto& nm : names) solver.mark_used(nm);
+      solver.check_unused();
+    }
+    sc.solver = loader.registry().make_solver(chosen, sc.backend, sp);
+  } else if (solver.valid()) {
+    if (solver.is_map())
+      for (const auto& k : solver.keys()) solver.mark_used(k);
+    solver_name_ = "";
+    if (is_output_rank())
+      std::cerr << "loom: note: the 'solver' section is ignored: integrator '" << integrator_name_
+                << "' is explicit and solves no linear system.\n";
+  }
+
+  // ---- frames, output, guards ----
+  frames_ = root.get("frames", 60);
+  if (frames_ < 0) root.child("frames").fail("must be >= 0.");
+  Params out = root.child("output");
+  if (out.valid()) {
+    if (!out.is_map()) out.fail("must be a mapping like {dir: out/run, obj: true, stats: true}.");
+    output_.dir = out.get("dir", std::string());
+    output_.obj = out.get("obj", true);
+    output_.stats = out.get("stats", true);
+    output_.every = out.get("every", 1);
+    if (output_.every < 1) out.child("every").fail("must be >= 1 (write every n-th frame).");
+    out.check_unused();
+  }
+  Params guard = root.child("guard");
+  if (guard.valid()) {
+    if (!guard.is_map()) guard.fail("must be a mapping like {max_velocity: 1000, max_strain: 10}.");
+    guard_.max_velocity = guard.get_positive("max_velocity", guard_.max_velocity);
+    guard_.max_strain = guard.get_positive("max_strain", guard_.max_strain);
+    guard_.check_every = guard.get("check_every", 1);
+    if (guard_.check_every < 1) guard.child("check_every").fail("must be >= 1.");
+    guard.check_unused();
+  }
+  root.check_unused();
+
+  integrator_->prepare(sc, dt_);
+  prepared_ = true;
+}
+
+std::vector<std::string> Simulation::describe() const {
+  const Scene& sc = *scene_;
+  std::vector<std::string> lines;
+  lines.push_back("scene:      " + sc.source);
+  lines.push_back("mesh:       " + sc.mesh.source + " (" + std::to_string(sc.mesh.num_vertices()) + " vertices, " +
+                  std::to_string(sc.mesh.num_triangles()) + " triangles)");
+  std::string m = "material:   " + material_name_;
+  for (const auto& [k, v] : sc.material->describe()) m += ", " + k + " " + v;
+  lines.push_back(m);
+  lines.push_back("integrator: " + integrator_name_ + ", dt " + fmt(dt_) + " s, " + std::to_string(substeps_) +
+                  " steps per frame (frame time " + fmt(dt_ * substeps_) + " s)");
+  if (!solver_name_.empty()) lines.push_back("solver:     " + solver_name_);
+  lines.push_back("backend:    " + sc.backend + ", threads " +
+                  std::to_string(sc.threads > 0 ? sc.threads : omp_get_max_threads()));
+  double mass = 0;
+  for (double mi : sc.state.mass) mass += mi;
+  lines.push_back("pins:       " + std::to_string(sc.state.pin_list.size()) + " vertices; total mass " + fmt(mass) + " kg");
+  lines.push_back("gravity:    [" + fmt(sc.gravity[0]) + ", " + fmt(sc.gravity[1]) + ", " + fmt(sc.gravity[2]) + "]");
+  lines.push_back("frames:     " + std::to_string(frames_) + " (" + fmt(frames_ * substeps_ * dt_) + " s simulated)");
+  lines.push_back("output:     " + (output_.dir.empty() ? std::string("none") : output_.dir));
+  return lines;
+}
+
+void Simulation::check_state(bool check_strain) {
+  const State& st = scene_->state;
+  const Index n = st.size();
+  const double vmax2 = guard_.max_velocity * guard_.max_velocity;
+  Index bad = std::numeric_limits<Index>::max();
+  const double* x = st.x.data();
+  const double* v = st.v.data();
+#pragma omp parallel for reduction(min : bad) schedule(static)
+  for (Index i = 0; i < n; ++i) {
+    const double a = x[3 * i] + x[3 * i + 1] + x[3 * i + 2];
+    const double v2 = v[3 * i] * v[3 * i] + v[3 * i + 1] * v[3 * i + 1] + v[3 * i + 2] * v[3 * i + 2];
+    // NaN fails every comparison: !(v2 <= vmax2) catches NaN and Inf too.
+    if (!(v2 <= vmax2) || !std::isfinite(a)) bad = std::min(bad, i);
+  }
+  const std::string when = "step " + std::to_string(st.step) + " (t = " + fmt(st.time) + " s)";
+  const std::string fix = " Fix: reduce integrator.dt (or raise substeps), add damping, or choose a more stable "
+                          "integrator (baraff_witkin); raise guard.max_velocity only if such speeds are real.";
+  if (bad != std::numeric_limits<Index>::max()) {
+    const double* xi = &x[3 * bad];
+    const double* vi = &v[3 * bad];
+    const double speed = std::sqrt(vi[0] * vi[0] + vi[1] * vi[1] + vi[2] * vi[2]);
+    std::string what;
+    if (!std::isfinite(xi[0]) || !std::isfinite(xi[1]) || !std::isfinite(xi[2]))
+      what = "position (" + fmt(xi[0]) + ", " + fmt(xi[1]) + ", " + fmt(xi[2]) + ") is not finite";
+    else if (!std::isfinite(speed))
+      what = "velocity (" + fmt(vi[0]) + ", " + fmt(vi[1]) + ", " + fmt(vi[2]) + ") is not finite";
+    else
+      what = "speed " + fmt(speed) + " m/s exceeds guard.max_velocity = " + fmt(guard_.max_velocity) + " m/s";
+    throw DivergenceError("diverged at " + when + ": vertex " + std::to_string(bad) + ": " + what + "." + fix);
+  }
+  if (check_strain) {
+    const double s = scene_->material->max_strain(st.x);
+    if (!(s <= guard_.max_strain))
+      throw DivergenceError("diverged at " + when + ": the largest strain is " + fmt(s) + ", beyond guard.max_strain = " +
+                            fmt(guard_.max_strain) + "." + fix);
+  }
+}
+
+void Simulation::step() {
+  const auto t0 = std::chrono::steady_clock::now();
+  integrator_->step(*scene_, dt_);
+  step_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ++steps_in_frame_;
+  const StepStats s = integrator_->last_step();
+  force_evals_ += s.force_evaluations;
+  linear_iters_ += s.linear_iterations;
+  if (scene_->state.step % guard_.check_every == 0) check_state(false);
+}
+
+void Simulation::advance_frame() {
+  for (int k = 0; k < substeps_; ++k) step();
+  check_state(true);
+}
+
+Simulation::FrameStats Simulation::measure(int frame) const {
+  const Scene& sc = *scene_;
+  FrameStats fs;
+  fs.frame = frame;
+  fs.time = sc.state.time;
+  fs.kinetic = kinetic_energy(sc.state);
+  fs.gravitational = gravitational_energy(sc.state, sc.gravity.data());
+  fs.elastic = sc.material->elastic_energy(sc.state.x);
+  fs.max_strain = sc.material->max_strain(sc.state.x);
+  fs.wall_ms_per_step = steps_in_frame_ > 0 ? 1e3 * step_seconds_ / steps_in_frame_ : 0.0;
+  fs.force_evaluations = force_evals_;
+  fs.linear_iterations = linear_iters_;
+  return fs;
+}
+
+void Simulation::run(const std::function<void(int, int)>& progress) {
+  const bool write = !output_.dir.empty() && is_output_rank();
+  std::ofstream stats;
+  if (write) {
+    prepare_output_dir(output_.dir);
+    // Record exactly what ran (with --set overrides applied).
+    if (output_.stats) {
+      stats.open((fs::path(output_.dir) / "stats.csv").string(), std::ios::trunc);
+      if (!stats) throw InputError("cannot write " + output_.dir + "/stats.csv. Fix: choose a writable --out folder.");
+      stats << "frame,time,kinetic_energy,gravitational_energy,elastic_energy,total_energy,max_strain,"
+               "wall_ms_per_step,force_evaluations,linear_iterations\n";
+      stats.precision(10);
+    }
+  }
+  auto emit = [&](int frame) {
+    if (!write) return;
+    const FrameStats f = measure(frame);
+    if (output_.stats) {
+      stats << f.frame << ',' << f.time << ',' << f.kinetic << ',' << f.gravitational << ',' << f.elastic << ','
+            << (f.kinetic + f.gravitational + f.elastic) << ',' << f.max_strain << ',' << f.wall_ms_per_step << ','
+            << f.force_evaluations << ',' << f.linear_iterations << '\n';
+      stats.flush();
+    }
+    if (output_.obj && frame % output_.every == 0) {
+      char name[32];
+      std::snprintf(name, sizeof(name), "frame_%05d.obj", frame);
+      write_file_atomic((fs::path(output_.dir) / name).string(),
+                        obj_text(scene_->mesh, scene_->state.x, "t = " + fmt(scene_->state.time) + " s"));
+    }
+  };
+  emit(0);
+  for (int f = 1; f <= frames_; ++f) {
+    step_seconds_ = 0;
+    steps_in_frame_ = 0;
+    advance_frame();
+    emit(f);
+    if (progress) progress(f, frames_);
+  }
+}
+
+}  // namespace loom
