@@ -1,0 +1,81 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "loom/mesh.hpp"
+
+namespace {
+std::string write_temp(const std::string& name, const std::string& text) {
+  const auto p = std::filesystem::temp_directory_path() / ("loom_test_" + name);
+  std::ofstream(p) << text;
+  return p.string();
+}
+std::string obj_error(const std::string& text) {
+  const std::string path = write_temp("bad.obj", text);
+  try {
+    loom::read_obj(path);
+  } catch (const loom::InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+}  // namespace
+
+TEST(Mesh, GridCountsAndGeometry) {
+  const loom::Mesh m = loom::make_grid(4, 3, 3.0, 2.0);
+  EXPECT_EQ(m.num_vertices(), 12);
+  EXPECT_EQ(m.num_triangles(), 2 * 3 * 2);
+  // (nx-1)(ny) + nx(ny-1) + diagonals (nx-1)(ny-1)
+  EXPECT_EQ(m.edges().size(), 3u * 3 + 4 * 2 + 3 * 2);
+  ASSERT_TRUE(m.grid.has_value());
+  const loom::Index top_right = m.grid->index(3, 2);
+  EXPECT_DOUBLE_EQ(m.positions[3 * top_right], 3.0);
+  EXPECT_DOUBLE_EQ(m.positions[3 * top_right + 1], 2.0);
+  // every triangle counter-clockwise in the xy plane (positive signed area)
+  for (loom::Index t = 0; t < m.num_triangles(); ++t) {
+    const auto* T = &m.triangles[3 * t];
+    const double* a = &m.positions[3 * T[0]];
+    const double* b = &m.positions[3 * T[1]];
+    const double* c = &m.positions[3 * T[2]];
+    EXPECT_GT((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]), 0.0);
+  }
+}
+
+TEST(Mesh, GridRejectsBadSizes) {
+  EXPECT_THROW(loom::make_grid(1, 5, 1, 1), loom::InputError);
+  EXPECT_THROW(loom::make_grid(5, 5, 0, 1), loom::InputError);
+  EXPECT_THROW(loom::make_grid(5, 5, 1, std::nan("")), loom::InputError);
+}
+
+TEST(Mesh, ObjReadsQuadsUvsAndNegativeIndices) {
+  const std::string path = write_temp("quad.obj",
+                                      "# quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                                      "f 1/1 2/2 3/3 4/4\nf -4/1 -2/3 -1/4\n");
+  const loom::Mesh m = loom::read_obj(path);
+  EXPECT_EQ(m.num_vertices(), 4);
+  EXPECT_EQ(m.num_triangles(), 3);
+  ASSERT_EQ(m.uvs.size(), 8u);
+  EXPECT_DOUBLE_EQ(m.uvs[2 * 2], 1.0);
+}
+
+TEST(Mesh, ObjErrorsNameFileLineAndFix) {
+  std::string e = obj_error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
+  EXPECT_NE(e.find("bad.obj:4"), std::string::npos) << e;
+  EXPECT_NE(e.find("out of range"), std::string::npos) << e;
+  e = obj_error("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+  EXPECT_NE(e.find("bad.obj:2"), std::string::npos) << e;
+  EXPECT_NE(e.find("NaN"), std::string::npos) << e;
+  e = obj_error("v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 4\nf 1 2 3\n");
+  EXPECT_NE(e.find("bad.obj:6"), std::string::npos) << e;
+  EXPECT_NE(e.find("degenerate"), std::string::npos) << e;
+  e = obj_error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 1 2\n");
+  EXPECT_NE(e.find("repeated"), std::string::npos) << e;
+  e = obj_error("v 0 0 0\n");
+  EXPECT_NE(e.find("no faces"), std::string::npos) << e;
+  e = obj_error("v 0 0\n");
+  EXPECT_NE(e.find("bad.obj:1"), std::string::npos) << e;
+  EXPECT_THROW(loom::read_obj("/nonexistent.obj"), loom::InputError);
+}

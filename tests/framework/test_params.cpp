@@ -1,0 +1,96 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "loom/params.hpp"
+
+using loom::InputError;
+using loom::Params;
+
+namespace {
+std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+}  // namespace
+
+TEST(Params, TypedReadsAndDefaults) {
+  Params p = Params::from_string("a: 1.5\nb: 3\nc: true\nd: hello\ne: [1, 2, 3]\n", "t.yaml");
+  EXPECT_DOUBLE_EQ(p.get("a", 0.0), 1.5);
+  EXPECT_EQ(p.get("b", 0), 3);
+  EXPECT_TRUE(p.get("c", false));
+  EXPECT_EQ(p.get("d", "x"), "hello");
+  EXPECT_EQ(p.child("e").as_doubles().size(), 3u);
+  EXPECT_DOUBLE_EQ(p.get("missing", 7.0), 7.0);
+  EXPECT_FALSE(p.child("missing").valid());
+  EXPECT_EQ(p.keys(), (std::vector<std::string>{"a", "b", "c", "d", "e"}));
+}
+
+TEST(Params, WrongTypeNamesFileLineAndPath) {
+  Params p = Params::from_string("x: 1\nsection:\n  dt: abc\n", "scene.yaml");
+  const std::string e = error_of([&] { p.child("section").get("dt", 0.1); });
+  EXPECT_NE(e.find("scene.yaml:3"), std::string::npos) << e;
+  EXPECT_NE(e.find("section.dt"), std::string::npos) << e;
+  EXPECT_NE(e.find("expected a number"), std::string::npos) << e;
+  const std::string e2 = error_of([&] { p.get("x", std::string("s")); p.child("section").get("dt", 3); });
+  EXPECT_NE(e2.find("expected an integer"), std::string::npos) << e2;
+}
+
+TEST(Params, RangeChecksRejectZeroNegativeNanInf) {
+  Params p = Params::from_string("a: 0\nb: -1\nc: .nan\nd: .inf\ne: 2\n", "r.yaml");
+  EXPECT_NE(error_of([&] { p.get_positive("a", 1.0); }).find("r.yaml:1"), std::string::npos);
+  EXPECT_NE(error_of([&] { p.get_positive("b", 1.0); }).find("> 0"), std::string::npos);
+  EXPECT_NE(error_of([&] { p.get_positive("c", 1.0); }).find("r.yaml:3"), std::string::npos);
+  EXPECT_NE(error_of([&] { p.get_nonnegative("d", 1.0); }).find("finite"), std::string::npos);
+  EXPECT_NE(error_of([&] { p.get_in_range("e", 0.0, 0.0, 1.0); }).find("[0, 1]"), std::string::npos);
+  EXPECT_DOUBLE_EQ(p.get_positive("e", 1.0), 2.0);
+}
+
+TEST(Params, UnknownKeyGetsDidYouMean) {
+  Params p = Params::from_string("stifness: 10\ndensity: 1\n", "m.yaml");
+  p.get("stiffness", 1.0);
+  p.get("density", 1.0);
+  const std::string e = error_of([&] { p.check_unused({"type"}); });
+  EXPECT_NE(e.find("m.yaml:1"), std::string::npos) << e;
+  EXPECT_NE(e.find("unknown key 'stifness'"), std::string::npos) << e;
+  EXPECT_NE(e.find("did you mean 'stiffness'"), std::string::npos) << e;
+}
+
+TEST(Params, ChoiceSuggestsClosest) {
+  Params p = Params::from_string("variant: velocty\n", "c.yaml");
+  const std::string e = error_of([&] { p.get_choice("variant", "velocity", {"velocity", "analytic_position"}); });
+  EXPECT_NE(e.find("did you mean 'velocity'"), std::string::npos) << e;
+  EXPECT_NE(e.find("analytic_position"), std::string::npos) << e;
+}
+
+TEST(Params, SyntaxErrorHasLine) {
+  const std::string e = error_of([] { Params::from_string("a: 1\nb: [1, 2\nc: 3\n", "bad.yaml"); });
+  EXPECT_NE(e.find("bad.yaml:"), std::string::npos) << e;
+  EXPECT_NE(e.find("YAML syntax error"), std::string::npos) << e;
+}
+
+TEST(Params, MissingFile) {
+  const std::string e = error_of([] { Params::from_file("/nonexistent/scene.yaml"); });
+  EXPECT_NE(e.find("/nonexistent/scene.yaml"), std::string::npos) << e;
+}
+
+TEST(Params, SetPathOverridesAndCreates) {
+  Params p = Params::from_string("integrator:\n  dt: 0.001\n", "s.yaml");
+  p.set_path("integrator.dt", "0.0005");
+  p.set_path("material.stiffness.bend", "12");
+  p.set_path("gravity", "[0, 0, -9.81]");
+  EXPECT_DOUBLE_EQ(p.child("integrator").get("dt", 0.0), 0.0005);
+  EXPECT_DOUBLE_EQ(p.child("material").child("stiffness").get("bend", 0.0), 12.0);
+  EXPECT_DOUBLE_EQ(p.child("gravity").as_doubles()[2], -9.81);
+  EXPECT_NE(error_of([&] { p.set_path("integrator.dt.x", "1"); }).find("not a section"), std::string::npos);
+  EXPECT_NE(error_of([&] { p.set_path("a..b", "1"); }).find("empty component"), std::string::npos);
+}
+
+TEST(Params, ClosestMatch) {
+  EXPECT_EQ(loom::closest_match("mas_spring", {"mass_spring", "gnatv"}), "mass_spring");
+  EXPECT_EQ(loom::closest_match("zzzzzz", {"mass_spring", "gnatv"}), "");
+}
