@@ -13,6 +13,7 @@
 #include "loom/output.hpp"
 #include "loom/registry.hpp"
 #include "loom/simulation.hpp"
+#include "render_cmd.hpp"
 
 namespace {
 
@@ -24,6 +25,9 @@ usage:
       (default: the scene's output.dir, else out/<scene name>).
   loom validate SCENE.yaml [--set key=value]...
       Check the scene and its combo without running; print what would be built.
+  loom render RUN_DIR [--scene SCENE.yaml] [--out DIR] [--set render.key=value]...
+      Draw the frames of a run to PNG images (DIR, default RUN_DIR/render) with the
+      renderer plugin the scene's render section names (default: gl).
   loom plugins
       List the plugins on the plugin path (kind, name, backend, version, module).
   loom --help | --version
@@ -44,7 +48,7 @@ exit codes: 0 ok, 1 internal error, 2 bad input (scene, mesh, flags), 3 diverged
 )";
 
 struct Args {
-  std::string command, scene, out;
+  std::string command, scene, out, render_scene;
   int frames = -1;
   bool quiet = false;
   std::vector<std::string> sets;
@@ -67,11 +71,11 @@ Args parse_args(int argc, char** argv) {
     std::cout << "loom " << LOOM_VERSION_STRING << " (plugin ABI " << loom::kPluginAbiVersion << ")\n";
     std::exit(0);
   }
-  const std::vector<std::string> commands = {"run", "validate", "plugins"};
+  const std::vector<std::string> commands = {"run", "validate", "plugins", "render"};
   if (std::find(commands.begin(), commands.end(), a.command) == commands.end()) {
     const std::string hint = loom::closest_match(a.command, commands);
     usage_error("unknown command '" + a.command + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
-                "; commands: run, validate, plugins");
+                "; commands: run, validate, render, plugins");
   }
   for (int i = 2; i < argc; ++i) {
     const std::string s = argv[i];
@@ -98,6 +102,8 @@ Args parse_args(int argc, char** argv) {
       if (kv.find('=') == std::string::npos || kv[0] == '=')
         usage_error("--set needs key=value, e.g. --set integrator.dt=0.0005 (got '" + kv + "')");
       a.sets.push_back(kv);
+    } else if (a.command == "render" && (s == "--scene" || s.rfind("--scene=", 0) == 0)) {
+      a.render_scene = value("--scene");
     } else if (s == "--quiet" || s == "-q") {
       a.quiet = true;
     } else if (!s.empty() && s[0] == '-') {
@@ -109,6 +115,7 @@ Args parse_args(int argc, char** argv) {
       usage_error("unexpected argument '" + s + "' (one scene file per run)");
     }
   }
+  if (a.command == "render" && a.scene.empty()) usage_error("render needs the output folder of a run, e.g. loom render out/hanging_cloth");
   if (a.command != "plugins" && a.scene.empty()) usage_error(a.command + " needs a scene file, e.g. loom " + a.command + " scenes/hanging_cloth.yaml");
   if (a.command == "plugins" && !a.scene.empty()) usage_error("plugins takes no scene file");
   return a;
@@ -141,6 +148,10 @@ int main(int argc, char** argv) {
   const Args args = parse_args(argc, argv);
   try {
     if (args.command == "plugins") return cmd_plugins();
+    if (args.command == "render") {
+      loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
+      return loom::cli::render_command(r);
+    }
     loom::Registry registry;
     loom::PluginLoader loader(registry);
     loom::Simulation sim(args.scene, args.sets, loader);

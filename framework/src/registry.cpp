@@ -9,6 +9,7 @@ const char* to_string(PluginKind k) {
     case PluginKind::Material: return "material";
     case PluginKind::Integrator: return "integrator";
     case PluginKind::Solver: return "solver";
+    case PluginKind::Renderer: return "renderer";
   }
   return "?";
 }
@@ -22,19 +23,26 @@ auto key(PluginKind k, const std::string& name, const std::string& backend) {
 void Registry::add_material(PluginInfo info, MaterialFactory f) {
   info.kind = PluginKind::Material;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, std::move(f), {}, {}};
+  Entry e{info, std::move(f), {}, {}, {}};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 void Registry::add_integrator(PluginInfo info, IntegratorFactory f) {
   info.kind = PluginKind::Integrator;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, {}, std::move(f), {}};
+  Entry e{info, {}, std::move(f), {}, {}};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 void Registry::add_solver(PluginInfo info, SolverFactory f) {
   info.kind = PluginKind::Solver;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, {}, {}, std::move(f)};
+  Entry e{info, {}, {}, std::move(f), {}};
+  entries_[key(info.kind, info.name, info.backend)] = std::move(e);
+}
+
+void Registry::add_renderer(PluginInfo info, RendererFactory f) {
+  info.kind = PluginKind::Renderer;
+  if (info.module_path.empty()) info.module_path = current_module_;
+  Entry e{info, {}, {}, {}, std::move(f)};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 
@@ -85,6 +93,13 @@ std::unique_ptr<LinearSolver> Registry::make_solver(const std::string& name, con
   auto m = find(PluginKind::Solver, name, backend).solver(params);
   params.check_unused();
   return m;
+}
+
+std::unique_ptr<Renderer> Registry::make_renderer(const std::string& name, const Params& params,
+                                                  const std::string& base_dir) const {
+  auto r = find(PluginKind::Renderer, name, "cpu").renderer(params, base_dir);
+  params.check_unused({"type"});
+  return r;
 }
 
 std::vector<PluginInfo> Registry::list() const {

@@ -144,6 +144,9 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   sc.source = root.source();
   root.child("description");  // free text, allowed
   root.child("name");
+  root.child("render");       // read by `loom render`, not by a run
+  resolved_yaml_ = root.dump();
+  base_dir_ = base_dir.empty() ? std::string(".") : base_dir;
 
   sc.backend = root.get_choice("backend", "cpu", {"cpu", "cuda"});
   sc.threads = root.get("threads", 0);
@@ -454,6 +457,14 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
                         obj_text(scene_->mesh, scene_->state.x, "t = " + fmt(scene_->state.time) + " s"));
     }
   };
+  if (write) {
+    std::error_code ec;
+    const std::string abs_base = fs::absolute(base_dir_, ec).lexically_normal().string();
+    write_file_atomic((fs::path(output_.dir) / "scene.yaml").string(),
+                      "# The scene as it ran (overrides applied), written by loom run.\n"
+                      "# Relative paths resolve against the original scene's folder:\n"
+                      "# loom-scene-dir: " + abs_base + "\n" + resolved_yaml_ + "\n");
+  }
   emit(0);
   for (int f = 1; f <= frames_; ++f) {
     step_seconds_ = 0;

@@ -168,7 +168,7 @@ TEST_F(Fixture, DivergenceNamesStepVertexValueAndKeepsFrames) {
     ++files;
     EXPECT_EQ(f.path().string().find(".tmp"), std::string::npos);
   }
-  EXPECT_EQ(files, 4);  // 3 frames + stats.csv
+  EXPECT_EQ(files, 5);  // 3 frames + stats.csv + scene.yaml
   std::ifstream stats(out / "stats.csv");
   std::string line;
   int lines = 0;

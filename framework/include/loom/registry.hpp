@@ -1,7 +1,7 @@
 // The plugin registry and loader.
 //
 // A plugin is a shared module named loom_<kind>_<name>.so (kind: material, integrator,
-// solver) exporting the entry points defined by LOOM_PLUGIN (loom/plugin.hpp). The loader
+// solver, renderer) exporting the entry points defined by LOOM_PLUGIN (loom/plugin.hpp). The loader
 // finds modules on the plugin path: $LOOM_PLUGIN_PATH (colon separated), then the build
 // tree's plugin folder, then the install tree's (<prefix>/lib/loom/plugins). Only modules
 // that a scene names are loaded.
@@ -20,13 +20,14 @@
 #include "loom/material.hpp"
 #include "loom/mesh.hpp"
 #include "loom/params.hpp"
+#include "loom/renderer.hpp"
 
 namespace loom {
 
 /// Bumped whenever an interface in framework/include/loom changes incompatibly.
 constexpr int kPluginAbiVersion = 1;
 
-enum class PluginKind { Material, Integrator, Solver };
+enum class PluginKind { Material, Integrator, Solver, Renderer };
 const char* to_string(PluginKind k);
 
 struct PluginInfo {
@@ -41,12 +42,16 @@ struct PluginInfo {
 using MaterialFactory = std::function<std::unique_ptr<Material>(const Params&, const Mesh&)>;
 using IntegratorFactory = std::function<std::unique_ptr<Integrator>(const Params&)>;
 using SolverFactory = std::function<std::unique_ptr<LinearSolver>(const Params&)>;
+/// Renderer factories get the `render:` section of the scene (camera, light, fabric, ...)
+/// and the scene file's folder for resolving relative paths.
+using RendererFactory = std::function<std::unique_ptr<Renderer>(const Params&, const std::string& base_dir)>;
 
 class Registry {
  public:
   void add_material(PluginInfo info, MaterialFactory f);
   void add_integrator(PluginInfo info, IntegratorFactory f);
   void add_solver(PluginInfo info, SolverFactory f);
+  void add_renderer(PluginInfo info, RendererFactory f);
 
   bool has(PluginKind kind, const std::string& name, const std::string& backend = "cpu") const;
   /// Create; params.check_unused() is called after the factory returns.
@@ -56,6 +61,8 @@ class Registry {
                                               const Params& params) const;
   std::unique_ptr<LinearSolver> make_solver(const std::string& name, const std::string& backend,
                                             const Params& params) const;
+  std::unique_ptr<Renderer> make_renderer(const std::string& name, const Params& params,
+                                          const std::string& base_dir) const;
   std::vector<PluginInfo> list() const;
   /// Backends registered for (kind, name).
   std::vector<std::string> backends(PluginKind kind, const std::string& name) const;
@@ -67,6 +74,7 @@ class Registry {
     MaterialFactory material;
     IntegratorFactory integrator;
     SolverFactory solver;
+    RendererFactory renderer;
   };
   const Entry& find(PluginKind kind, const std::string& name, const std::string& backend) const;
   std::map<std::tuple<int, std::string, std::string>, Entry> entries_;

@@ -51,6 +51,10 @@ class Simulation {
   std::string integrator_name() const { return integrator_name_; }
   std::string material_name() const { return material_name_; }
   std::string solver_name() const { return solver_name_; }
+  /// The scene as it ran (with --set overrides applied), as YAML text.
+  const std::string& resolved_yaml() const { return resolved_yaml_; }
+  /// Folder of the scene file (relative paths in the scene resolve against it).
+  const std::string& base_dir() const { return base_dir_; }
 
   /// Lines describing what was built (counts, plugins, backend), for `loom validate`.
   std::vector<std::string> describe() const;
@@ -83,6 +87,7 @@ class Simulation {
   std::unique_ptr<Scene> scene_;
   std::unique_ptr<Integrator> integrator_;
   std::string integrator_name_, material_name_, solver_name_;
+  std::string resolved_yaml_, base_dir_;
   double dt_ = 1e-3;
   int substeps_ = 1;
   int frames_ = 1;

@@ -147,9 +147,17 @@ LOOM_HD inline void jacobian(const RestTriangle<R>& t, const Curves<R>& c, const
       const T cuv = ms * dsg[2];
       const T geo = ms * (sg[0] * (uj * ui) + sg[1] * (vj * vi) + sg[2] * (uj * vi + vj * ui));
       T* B = J[j][i];
-      for (int r = 0; r < 3; ++r)
-        for (int q = 0; q < 3; ++q)
-          B[3 * r + q] = cuu * u[r] * u[q] + cvv * v[r] * v[q] + cuv * gj[r] * gi[q];
+      if (i == j) {  // symmetric block: compute the upper triangle, mirror it exactly
+        for (int r = 0; r < 3; ++r)
+          for (int q = r; q < 3; ++q) {
+            B[3 * r + q] = cuu * u[r] * u[q] + cvv * v[r] * v[q] + cuv * gj[r] * gi[q];
+            B[3 * q + r] = B[3 * r + q];
+          }
+      } else {
+        for (int r = 0; r < 3; ++r)
+          for (int q = 0; q < 3; ++q)
+            B[3 * r + q] = cuu * u[r] * u[q] + cvv * v[r] * v[q] + cuv * gj[r] * gi[q];
+      }
       B[0] += geo;
       B[4] += geo;
       B[8] += geo;
