@@ -1,0 +1,154 @@
+// End-to-end tests of the `loom` executable: exit codes, files, messages.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sys/wait.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Result {
+  int code = -1;
+  std::string out;  // stdout and stderr together
+};
+
+Result run(const std::string& args, bool test_plugins = true) {
+  std::string cmd;
+  if (test_plugins) cmd += "LOOM_PLUGIN_PATH=" LOOM_TEST_PLUGIN_DIR " ";
+  cmd += std::string(LOOM_EXE) + " " + args + " 2>&1";
+  Result r;
+  FILE* p = popen(cmd.c_str(), "r");
+  std::array<char, 4096> buf{};
+  while (fgets(buf.data(), buf.size(), p)) r.out += buf.data();
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+fs::path scratch(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() / ("loom_cli_" + name);
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+std::string write_scene(const fs::path& dir, const std::string& text, const std::string& name = "scene.yaml") {
+  std::ofstream(dir / name) << text;
+  return (dir / name).string();
+}
+
+const char* kScene = R"(mesh:
+  grid: {nx: 5, ny: 5, width: 1.0, height: 1.0}
+material:
+  type: test_gravity_only
+integrator:
+  type: test_explicit_euler
+  dt: 0.01
+  substeps: 4
+pins: [top_edge]
+frames: 3
+)";
+
+}  // namespace
+
+TEST(Cli, HelpVersionAndUsageErrors) {
+  EXPECT_EQ(run("--help").code, 0);
+  EXPECT_NE(run("--help").out.find("loom run SCENE.yaml"), std::string::npos);
+  EXPECT_EQ(run("--version").code, 0);
+  Result r = run("");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("missing command"), std::string::npos) << r.out;
+  r = run("rnu x.yaml");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("did you mean 'run'"), std::string::npos) << r.out;
+  r = run("run x.yaml --fames 3");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("did you mean '--frames'"), std::string::npos) << r.out;
+  r = run("run x.yaml --frames -3");
+  EXPECT_EQ(r.code, 2);
+  r = run("run x.yaml --set novalue");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("key=value"), std::string::npos) << r.out;
+  r = run("run");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("needs a scene file"), std::string::npos) << r.out;
+}
+
+TEST(Cli, ValidatePrintsTheCombo) {
+  const auto dir = scratch("validate");
+  const Result r = run("validate " + write_scene(dir, kScene));
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("25 vertices, 32 triangles"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("test_explicit_euler"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("pins:       5 vertices"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("ok: the scene is valid"), std::string::npos) << r.out;
+}
+
+TEST(Cli, RunWritesFramesStatsAndResolvedScene) {
+  const auto dir = scratch("run");
+  const Result r = run("run " + write_scene(dir, kScene) + " --out " + (dir / "out").string() +
+                       " --frames 2 --set integrator.dt=0.005");
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(fs::exists(dir / "out" / "frame_00000.obj"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "frame_00002.obj"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "frame_00003.obj"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "stats.csv"));
+  std::ifstream sc(dir / "out" / "scene.yaml");
+  std::string all((std::istreambuf_iterator<char>(sc)), {});
+  EXPECT_NE(all.find("dt: 0.005"), std::string::npos) << all;
+  // no progress bar when stdout is not a terminal
+  EXPECT_EQ(r.out.find("\r["), std::string::npos);
+}
+
+TEST(Cli, BadInputExitsWith2AndNamesFileAndLine) {
+  const auto dir = scratch("bad");
+  std::string s = kScene;
+  Result r = run("run " + write_scene(dir, s + "frames: [\n", "syntax.yaml"));
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("syntax.yaml:"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("YAML syntax error"), std::string::npos) << r.out;
+  r = run("run " + write_scene(dir, std::string(kScene) + "gravty: [0, -9.81, 0]\n", "key.yaml"));
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("key.yaml:11"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("did you mean 'gravity'"), std::string::npos) << r.out;
+  r = run("run " + (dir / "missing.yaml").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("not found"), std::string::npos) << r.out;
+  r = run("run " + write_scene(dir, kScene) + " --out /proc/loom_not_writable");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("--out"), std::string::npos) << r.out;
+  std::string nan_dt = kScene;
+  nan_dt.replace(nan_dt.find("dt: 0.01"), 8, "dt: .nan");
+  r = run("validate " + write_scene(dir, nan_dt, "nan.yaml"));
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("nan.yaml:7"), std::string::npos) << r.out;
+  // plugins not on the path: the error lists what is available
+  r = run("validate " + write_scene(dir, kScene), false);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("unknown material 'test_gravity_only'"), std::string::npos) << r.out;
+}
+
+TEST(Cli, DivergenceExitsWith3AndKeepsEarlierFrames) {
+  const auto dir = scratch("diverge");
+  std::string s = kScene;
+  s.replace(s.find("type: test_explicit_euler"), 25, "type: test_explicit_euler\n  blow_up_at: 6");
+  const Result r = run("run " + write_scene(dir, s) + " --out " + (dir / "out").string());
+  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_NE(r.out.find("diverged at step 7"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("vertex 5"), std::string::npos) << r.out;
+  EXPECT_TRUE(fs::exists(dir / "out" / "frame_00001.obj"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "frame_00002.obj"));
+}
+
+TEST(Cli, PluginsListsModulesOnThePath) {
+  const Result r = run("plugins");
+  EXPECT_NE(r.out.find("test_gravity_only"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find(LOOM_TEST_PLUGIN_DIR), std::string::npos) << r.out;
+  // the deliberately broken test modules are reported, and the exit code says so
+  EXPECT_NE(r.out.find("ABI version"), std::string::npos) << r.out;
+  EXPECT_EQ(r.code, 2);
+}
