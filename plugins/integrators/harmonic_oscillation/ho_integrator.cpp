@@ -1,0 +1,110 @@
+#include "ho_integrator.hpp"
+
+#include <algorithm>
+#include <utility>
+
+namespace loom {
+
+HoVariant parse_ho_variant(const std::string& s) {
+  if (s == "velocity") return HoVariant::Velocity;
+  if (s == "analytic_position") return HoVariant::AnalyticPosition;
+  if (s == "kang_cho_2011") return HoVariant::KangCho2011;
+  throw InputError("harmonic_oscillation: unknown variant '" + s +
+                   "'; use velocity, analytic_position or kang_cho_2011");
+}
+
+const char* to_string(HoVariant v) {
+  switch (v) {
+    case HoVariant::Velocity: return "velocity";
+    case HoVariant::AnalyticPosition: return "analytic_position";
+    case HoVariant::KangCho2011: return "kang_cho_2011";
+  }
+  return "?";
+}
+
+HoIntegrator::HoIntegrator(const Params& p) {
+  if (p.valid())
+    variant_ = parse_ho_variant(
+        p.get_choice("variant", "velocity", {"velocity", "analytic_position", "kang_cho_2011"}));
+}
+
+void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out) {
+  SpringSet sorted = set;            // copied once, so that the layout can store it in traversal order
+  layout = SpringLayout(n, sorted);
+  layout.reorder(sorted);
+  const Index S = sorted.size();
+  out.i.resize(S);
+  out.j.resize(S);
+  out.l0.resize(S);
+  out.k.resize(S);
+  out.c.resize(S);
+  for (Index q = 0; q < S; ++q) {
+    out.i[q] = std::min(sorted.i[q], sorted.j[q]);   // HO is symmetric in (i, j)
+    out.j[q] = std::max(sorted.i[q], sorted.j[q]);
+    out.l0[q] = sorted.rest_length[q];
+    out.k[q] = sorted.stiffness[q];
+    out.c[q] = sorted.damping[q];
+  }
+}
+
+void HoIntegrator::prepare(Scene& scene, double h) {
+  const Material* mat = scene.material.get();
+  const SpringSet* set = mat ? mat->springs() : nullptr;
+  if (!set)
+    throw InputError(scene.source + ": integrator harmonic_oscillation needs a spring material, but material '" +
+                     (mat ? mat->name() : std::string("(none)")) +
+                     "' exposes no springs. Fix: use material type mass_spring, or an integrator that works with "
+                     "any material (symplectic_euler, rk4, baraff_witkin).");
+  if (variant_ == HoVariant::KangCho2011 &&
+      std::any_of(set->damping.begin(), set->damping.end(), [](double c) { return c != 0.0; }))
+    throw InputError(scene.source + ": harmonic_oscillation variant kang_cho_2011 (the published formula) has no "
+                     "spring damping. Fix: set the material's spring damping to 0, or use variant velocity or "
+                     "analytic_position, which integrate the damper exactly.");
+  for (Index q = 0; q < set->size(); ++q)
+    if (!(set->stiffness[q] >= 0.0) || !(set->damping[q] >= 0.0))
+      throw InputError(scene.source + ": harmonic_oscillation needs springs with stiffness >= 0 and damping >= 0 "
+                       "(spring " + std::to_string(q) + "). Fix: check the material's stiffness and damping.");
+  const Index n = scene.state.size();
+  if (set != source_ || layout_.num_vertices() != n || layout_.num_springs() != set->size()) {
+    build_ho_springs(n, *set, layout_, springs_);
+    source_ = set;
+  }
+  vnew_.assign(3 * static_cast<std::size_t>(n), 0.0);
+  xnew_.assign(variant_ == HoVariant::AnalyticPosition ? 3 * static_cast<std::size_t>(n) : 0, 0.0);
+  update_ho_coefficients(springs_, variant_, scene.state.inv_mass.data(), h);
+  h_ = h;
+}
+
+void HoIntegrator::step(Scene& scene, double h) {
+  State& s = scene.state;
+  if (h != h_ || vnew_.size() != s.x.size()) prepare(scene, h);
+  const std::array<double, 3> g{scene.gravity[0], scene.gravity[1], scene.gravity[2]};
+  switch (variant_) {
+    case HoVariant::Velocity:
+      ho_step_arrays<double, HoVariant::Velocity>(layout_, springs_, s.x.data(), s.v.data(), vnew_.data(),
+                                                  nullptr, s.inv_mass.data(), h, g);
+      break;
+    case HoVariant::KangCho2011:
+      ho_step_arrays<double, HoVariant::KangCho2011>(layout_, springs_, s.x.data(), s.v.data(), vnew_.data(),
+                                                     nullptr, s.inv_mass.data(), h, g);
+      break;
+    case HoVariant::AnalyticPosition: {
+      ho_step_arrays<double, HoVariant::AnalyticPosition>(layout_, springs_, s.x.data(), s.v.data(),
+                                                          vnew_.data(), xnew_.data(), s.inv_mass.data(), h, g);
+      const std::ptrdiff_t m = static_cast<std::ptrdiff_t>(s.x.size());
+      double* x = s.x.data();
+      double* v = s.v.data();
+      const double* xn = xnew_.data();
+      const double* vn = vnew_.data();
+#pragma omp parallel for schedule(static) if (m >= 3 * kHoSerialSprings)
+      for (std::ptrdiff_t d = 0; d < m; ++d) {
+        x[d] = xn[d];
+        v[d] = vn[d];
+      }
+      break;
+    }
+  }
+  finish_step(s, h);
+}
+
+}  // namespace loom

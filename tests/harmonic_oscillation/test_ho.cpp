@@ -1,0 +1,441 @@
+// harmonic_oscillation: isolated springs against exact solutions, hard cases, conservation,
+// pins, refusal of materials without springs.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "exact_spring.hpp"
+#include "ho_integrator.hpp"
+#include "loom/kernels/ho.hpp"
+#include "loom/params.hpp"
+#include "test_spring_material.hpp"
+
+#include <omp.h>
+
+using namespace loom;
+using loom::testing::exact_axial;
+using loom::testing::make_scene;
+using loom::testing::TestSpringMaterial;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+enum class Masses { Equal, OneToFive, Pinned };
+const char* name(Masses m) { return m == Masses::Equal ? "equal" : m == Masses::OneToFive ? "1:5" : "pinned"; }
+
+// Isolated spring i=0, j=1 along axis n, k = 2000, l0 = 1.
+struct SpringCase {
+  Masses masses;
+  double rate_sign;    // sign of the initial stretch rate
+  double theta;        // omega h
+  double zeta;         // damping ratio (0 = undamped)
+  bool gravity = false;
+  HoVariant variant = HoVariant::Velocity;
+
+  double k = 2000, l0 = 1, d0 = 0.1;
+  double mi = 1, mj = 1;
+  double wi = 1, wj = 1, W = 2, omega = 0, beta = 0, c = 0, h = 0, rate0 = 0;
+  double n[3] = {1.0 / 3, 2.0 / 3, -2.0 / 3};
+  double xi0[3] = {0.3, -0.2, 0.1};
+  double vc[3] = {0.2, -0.1, 0.4};   // common translation velocity (free cases)
+  std::array<double, 3> g{0, 0, 0};
+
+  std::unique_ptr<Scene> build() {
+    mj = masses == Masses::OneToFive ? 5.0 : 1.0;
+    wi = 1 / mi;
+    wj = masses == Masses::Pinned ? 0.0 : 1 / mj;
+    W = wi + wj;
+    omega = std::sqrt(k * W);
+    beta = zeta * omega;
+    c = 2 * beta / W;
+    h = theta / omega;
+    rate0 = rate_sign * 0.7 * omega * d0;
+    if (masses == Masses::Pinned)
+      for (double& e : vc) e = 0;
+    if (gravity) g = {0.3, -9.81, 1.1};
+    std::vector<double> x(6), v(6);
+    for (int e = 0; e < 3; ++e) {
+      x[e] = xi0[e];
+      x[3 + e] = xi0[e] + (l0 + d0) * n[e];
+      v[e] = vc[e] - (wi / W) * rate0 * n[e];
+      v[3 + e] = vc[e] + (wj / W) * rate0 * n[e];
+    }
+    SpringSet s;
+    s.add(0, 1, l0, k, c, SpringClass::Structural);
+    std::vector<double> m{mi, mj};
+    auto mat = std::make_unique<TestSpringMaterial>(s, m);
+    std::vector<Index> pins;
+    if (masses == Masses::Pinned) pins.push_back(1);
+    return make_scene(x, v, m, pins, gravity ? g : std::array<double, 3>{0, 0, 0}, std::move(mat));
+  }
+  std::string label() const {
+    return std::string(name(masses)) + " rate" + (rate_sign > 0 ? "+" : "-") + " theta=" + std::to_string(theta) +
+           " zeta=" + std::to_string(zeta);
+  }
+};
+
+double norm3(const double* a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); }
+
+// One step of the velocity variant: Delta v of both particles equals the exact solution.
+void check_one_step_velocity(SpringCase sc, double tol) {
+  auto scene = sc.build();
+  HoIntegrator ho(HoVariant::Velocity);
+  ho.prepare(*scene, sc.h);
+  const std::vector<double> v0 = scene->state.v;
+  ho.step(*scene, sc.h);
+  const auto ex = exact_axial(sc.d0, sc.rate0, (long double)sc.k * sc.W, sc.beta, sc.h);
+  const long double drate = ex.rate - (long double)sc.rate0;
+  double dvi[3], dvj[3], err_i[3], err_j[3];
+  for (int e = 0; e < 3; ++e) {
+    dvi[e] = static_cast<double>(-(sc.wi / sc.W) * drate * sc.n[e]);
+    dvj[e] = static_cast<double>(+(sc.wj / sc.W) * drate * sc.n[e]);
+    err_i[e] = (scene->state.v[e] - v0[e]) - dvi[e];
+    err_j[e] = (scene->state.v[3 + e] - v0[3 + e]) - dvj[e];
+  }
+  const double scale = std::max(norm3(dvi), norm3(dvj));
+  ASSERT_GT(scale, 0) << sc.label();
+  // v_new - v_old is formed from v ~ 1, so allow the rounding of v on top of the relative tolerance
+  const double vround = 4e-16 * (norm3(v0.data()) + norm3(v0.data() + 3) + scale);
+  EXPECT_LE(norm3(err_i), tol * scale + vround) << sc.label() << " rel " << norm3(err_i) / scale;
+  EXPECT_LE(norm3(err_j), tol * scale + vround) << sc.label() << " rel " << norm3(err_j) / scale;
+  // positions: x += h v_new (pinned j does not move at all)
+  if (sc.masses == Masses::Pinned) {
+    for (int e = 0; e < 3; ++e) EXPECT_EQ(scene->state.v[3 + e], 0.0);
+  }
+}
+
+}  // namespace
+
+TEST(HoOneStep, VelocityChangeIsExactUndamped) {
+  for (Masses m : {Masses::Equal, Masses::OneToFive, Masses::Pinned})
+    for (double sgn : {1.0, -1.0})
+      for (double th : {0.05, 0.5, 2.0, 7.0}) {
+        SpringCase c{m, sgn, th, 0.0};
+        check_one_step_velocity(c, 1e-12);
+      }
+}
+
+TEST(HoOneStep, VelocityChangeIsExactDamped) {
+  for (Masses m : {Masses::Equal, Masses::OneToFive, Masses::Pinned})
+    for (double sgn : {1.0, -1.0})
+      for (double th : {0.05, 0.5, 2.0, 7.0})
+        for (double z : {0.05, 1.0, 4.0}) {
+          SpringCase c{m, sgn, th, z};
+          check_one_step_velocity(c, 1e-12);
+        }
+}
+
+// HO-A reproduces the exact trajectory (both particles, every step) for any h.
+TEST(HoAnalyticPosition, ExactTrajectoryAnyStep) {
+  double worst = 0;
+  for (Masses m : {Masses::Equal, Masses::OneToFive, Masses::Pinned})
+    for (double z : {0.0, 0.05, 1.0, 4.0})
+      for (double th : {0.06, 1.26, 6.3})
+        for (bool grav : {false, true}) {
+          if (grav && (z != 0.05 || m == Masses::Pinned)) continue;   // a pin breaks the uniform field's symmetry
+          SpringCase sc{m, -1.0, th, z, grav};
+          auto scene = sc.build();
+          HoIntegrator ho(HoVariant::AnalyticPosition);
+          ho.prepare(*scene, sc.h);
+          const double T = 1.0;
+          const int steps = std::max(3, static_cast<int>(std::lround(T / sc.h)));
+          const double A0 = std::hypot(sc.d0, sc.rate0 / sc.omega);
+          double cm0[3], vcm[3];
+          const double M = sc.masses == Masses::Pinned ? 0 : sc.mi + sc.mj;
+          for (int e = 0; e < 3; ++e) {
+            if (M > 0) {
+              cm0[e] = (sc.mi * scene->state.x[e] + sc.mj * scene->state.x[3 + e]) / M;
+              vcm[e] = (sc.mi * scene->state.v[e] + sc.mj * scene->state.v[3 + e]) / M;
+            } else {
+              cm0[e] = scene->state.x[3 + e];
+              vcm[e] = 0;
+            }
+          }
+          double err = 0;
+          for (int s = 1; s <= steps; ++s) {
+            ho.step(*scene, sc.h);
+            const double t = s * sc.h;
+            const auto ex = exact_axial(sc.d0, sc.rate0, (long double)sc.k * sc.W, sc.beta, t);
+            const double L = static_cast<double>(sc.l0 + ex.delta);
+            for (int e = 0; e < 3; ++e) {
+              const double gt = (M > 0 ? 0.5 * sc.g[e] * t * t : 0.0);
+              const double cm = cm0[e] + vcm[e] * t + gt;
+              const double xi = cm - (sc.wi / sc.W) * L * sc.n[e];
+              const double xj = cm + (sc.wj / sc.W) * L * sc.n[e];
+              err = std::max({err, std::abs(scene->state.x[e] - xi), std::abs(scene->state.x[3 + e] - xj)});
+            }
+            ASSERT_TRUE(std::isfinite(scene->state.x[0])) << sc.label();
+          }
+          EXPECT_LE(err, 1e-11 * A0 + 1e-13) << sc.label() << (grav ? " gravity" : "");
+          worst = std::max(worst, err / A0);
+        }
+  RecordProperty("worst_relative_error", std::to_string(worst));
+}
+
+// Amplitude 0 and whole numbers of periods: finite for every variant (the published formula
+// is 0/0 there as printed).
+TEST(HoHardCases, ZeroAmplitudeAndWholePeriods) {
+  for (HoVariant var : {HoVariant::Velocity, HoVariant::AnalyticPosition, HoVariant::KangCho2011}) {
+    for (Masses m : {Masses::Equal, Masses::Pinned}) {
+      // amplitude 0: the spring at rest, moving uniformly
+      SpringCase sc{m, 1.0, 0.5, 0.0};
+      sc.d0 = 0;
+      sc.rate_sign = 0;
+      auto scene = sc.build();
+      const std::vector<double> v0 = scene->state.v;
+      HoIntegrator ho(var);
+      ho.prepare(*scene, sc.h);
+      ho.step(*scene, sc.h);
+      for (int e = 0; e < 6; ++e) {
+        ASSERT_TRUE(std::isfinite(scene->state.v[e]));
+        EXPECT_NEAR(scene->state.v[e], v0[e], 1e-13) << to_string(var);   // delta = l - l0 rounds to ~1e-16
+      }
+      // h = 3 periods exactly (kang_cho: H = h mod period = 0)
+      for (double zeta : {0.0, 0.3}) {
+        if (var == HoVariant::KangCho2011 && zeta > 0) continue;
+        SpringCase sp{m, -1.0, 3 * 2 * kPi, zeta};
+        auto sc2 = sp.build();
+        HoIntegrator ho2(var);
+        ho2.prepare(*sc2, sp.h);
+        for (int s = 0; s < 3; ++s) ho2.step(*sc2, sp.h);
+        for (int e = 0; e < 6; ++e) {
+          ASSERT_TRUE(std::isfinite(sc2->state.v[e])) << to_string(var);
+          ASSERT_TRUE(std::isfinite(sc2->state.x[e])) << to_string(var);
+        }
+      }
+    }
+  }
+}
+
+// The three damping regimes join continuously and nothing overflows at huge damping.
+TEST(HoKernel, DampingRegimesContinuousAndNoOverflow) {
+  using kernels::ho_flow;
+  const double om2 = 4000, h = 0.01, om = std::sqrt(om2);
+  for (double eps : {1e-6, 1e-9}) {
+    const auto under = ho_flow(om2, om * (1 - eps), h);
+    const auto crit = ho_flow(om2, om, h);
+    const auto over = ho_flow(om2, om * (1 + eps), h);
+    for (auto [a, b, c] : {std::tuple{under.a_x, crit.a_x, over.a_x}, std::tuple{under.a_v, crit.a_v, over.a_v},
+                           std::tuple{under.b_x, crit.b_x, over.b_x}, std::tuple{under.b_v, crit.b_v, over.b_v}}) {
+      EXPECT_NEAR(a, b, 20 * eps * std::abs(b) + 1e-14);
+      EXPECT_NEAR(c, b, 20 * eps * std::abs(b) + 1e-14);
+    }
+  }
+  // tiny damping joins the undamped closed form
+  const auto und = ho_flow(om2, 0.0, h), tiny = ho_flow(om2, 1e-10, h);
+  EXPECT_NEAR(und.a_x, tiny.a_x, 1e-8 * std::abs(und.a_x));
+  EXPECT_NEAR(und.a_v, tiny.a_v, 1e-8 * std::abs(und.a_v));
+  EXPECT_NEAR(und.b_v, tiny.b_v, 1e-8 * std::abs(und.b_v));
+  // beta h = 1e4 (exp(beta h) would overflow): finite, and the motion is frozen (delta' -> 0)
+  for (double beta : {1e6, 1e8}) {
+    const auto f = ho_flow(om2, beta, h);
+    for (double q : {f.a_x, f.a_v, f.b_x, f.b_v}) ASSERT_TRUE(std::isfinite(q));
+    EXPECT_NEAR(f.a_v, -1.0, 1e-6);   // the relative velocity is damped out
+    const auto ex = exact_axial(0.0, 1.0, om2, beta, h);
+    EXPECT_NEAR(f.b_v, static_cast<double>(ex.delta) - h, 1e-12);
+  }
+  // omega = 0 with damping: pure damper
+  const auto d = ho_flow(0.0, 5.0, h);
+  EXPECT_NEAR(d.a_v, std::expm1(-2 * 5.0 * h), 1e-15);   // delta'' = -2 beta delta'
+  EXPECT_EQ(d.a_x, 0.0);
+  // float instantiation agrees with double
+  const auto cf = kernels::ho_coefficients<float>(2000.f, 3.f, 1.f, 0.2f, 1e-3f);
+  const auto cd = kernels::ho_coefficients<double>(2000., 3., 1., 0.2, 1e-3);
+  EXPECT_NEAR(cf.kx, cd.kx, 1e-5 * cd.kx);
+  EXPECT_NEAR(cf.kv, cd.kv, 1e-5 * cd.kv);
+  EXPECT_NEAR(cf.ev, cd.ev, 1e-4 * std::abs(cd.ev));
+}
+
+// Small theta: the velocity update is symplectic Euler plus a damper k h/2 (NUMERICS 1.2);
+// the published formula gives half the stiffness.
+TEST(HoKernel, SmallStepLimitAndPublishedHalfStiffness) {
+  const double k = 2000, w = 1.0;
+  for (double h : {1e-4, 1e-5}) {
+    const auto c = kernels::ho_coefficients<double>(k, 0.0, w, w, h);
+    EXPECT_NEAR(c.kx / (k * h), 1.0, 2 * k * 2 * w * h * h);   // 1 - theta^2/6
+    EXPECT_NEAR(c.kv / (k * h * h / 2), 1.0, 2 * k * 2 * w * h * h);
+    const auto p = kernels::kang_cho_coefficients<double>(k, w, w, h);
+    EXPECT_NEAR(p.kx / (k * h), 0.5, 2 * k * w * h * h);
+  }
+  // published formula restores (positive stiffness) for both signs of the rate and is finite
+  // at whole periods
+  const double period = 2 * kPi / std::sqrt(k * 2 * w);
+  const auto p3 = kernels::kang_cho_coefficients<double>(k, w, w, 3 * period);
+  EXPECT_TRUE(std::isfinite(p3.kx) && std::isfinite(p3.ka));
+}
+
+// Linear and angular momentum are conserved exactly (to rounding) by the velocity variant on
+// a random damped network with random masses; linear momentum also by the other variants.
+TEST(HoConservation, MomentumOnRandomNetwork) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-1, 1), P(0.2, 2.0);
+  const int n = 40, S = 120;
+  std::vector<double> x(3 * n), v(3 * n), m(n);
+  for (int q = 0; q < n; ++q) {
+    m[q] = P(rng);
+    for (int e = 0; e < 3; ++e) {
+      x[3 * q + e] = U(rng);
+      v[3 * q + e] = U(rng);
+    }
+  }
+  SpringSet s;
+  for (int q = 0; q < S; ++q) {
+    Index a = rng() % n, b = rng() % n;
+    if (a == b) b = (a + 1) % n;
+    double l = 0;
+    for (int e = 0; e < 3; ++e) l += (x[3 * a + e] - x[3 * b + e]) * (x[3 * a + e] - x[3 * b + e]);
+    s.add(a, b, std::sqrt(l) * (0.8 + 0.4 * P(rng) / 2), 500 * P(rng), (q % 3 == 0) ? 0.0 : 2 * P(rng),
+          SpringClass::Structural);
+  }
+  for (HoVariant var : {HoVariant::Velocity, HoVariant::AnalyticPosition, HoVariant::KangCho2011}) {
+    if (var == HoVariant::KangCho2011)
+      for (double& c : s.damping) c = 0;
+    auto scene = make_scene(x, v, m, {}, {0, 0, 0}, std::make_unique<TestSpringMaterial>(s, m));
+    auto momenta = [&](double Pm[3], double Lm[3]) {
+      for (int e = 0; e < 3; ++e) Pm[e] = Lm[e] = 0;
+      const auto& X = scene->state.x;
+      const auto& V = scene->state.v;
+      for (int q = 0; q < n; ++q) {
+        const double* xq = &X[3 * q];
+        const double* vq = &V[3 * q];
+        for (int e = 0; e < 3; ++e) Pm[e] += m[q] * vq[e];
+        Lm[0] += m[q] * (xq[1] * vq[2] - xq[2] * vq[1]);
+        Lm[1] += m[q] * (xq[2] * vq[0] - xq[0] * vq[2]);
+        Lm[2] += m[q] * (xq[0] * vq[1] - xq[1] * vq[0]);
+      }
+    };
+    double P0[3], L0[3], P1[3], L1[3];
+    momenta(P0, L0);
+    HoIntegrator ho(var);
+    const double h = 2e-3;
+    ho.prepare(*scene, h);
+    for (int st = 0; st < 100; ++st) ho.step(*scene, h);
+    momenta(P1, L1);
+    double ke = 0;
+    for (int q = 0; q < n; ++q)
+      for (int e = 0; e < 3; ++e) ke += m[q] * std::abs(scene->state.v[3 * q + e]);
+    for (int e = 0; e < 3; ++e) {
+      EXPECT_NEAR(P1[e], P0[e], 1e-13 * ke) << to_string(var);
+      if (var != HoVariant::AnalyticPosition) {
+        EXPECT_NEAR(L1[e], L0[e], 1e-12 * ke) << to_string(var);
+      }
+    }
+  }
+}
+
+// Pinned vertices stay exactly where they are (bit for bit); free ones move.
+TEST(HoPins, PinnedVerticesExact) {
+  const int nx = 6;
+  std::vector<double> x, v, m;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      x.insert(x.end(), {0.1 * c, 0.0, 0.1 * r});
+      v.insert(v.end(), {0, 0, 0});
+      m.push_back(0.01);
+    }
+  SpringSet s;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      const int a = r * nx + c;
+      if (c + 1 < nx) s.add(a, a + 1, 0.1, 2000, 0.1, SpringClass::Structural);
+      if (r + 1 < nx) s.add(a, a + nx, 0.1, 2000, 0.1, SpringClass::Structural);
+      if (c + 1 < nx && r + 1 < nx) s.add(a, a + nx + 1, 0.1 * std::sqrt(2.0), 2000, 0.0, SpringClass::Shear);
+    }
+  // one spring between two pinned vertices (must be skipped: W = 0)
+  s.add(0, nx - 1, 0.3, 2000, 0.0, SpringClass::Bend);
+  const std::vector<Index> pins{0, nx - 1};
+  for (HoVariant var : {HoVariant::Velocity, HoVariant::AnalyticPosition}) {
+    auto scene = make_scene(x, v, m, pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(s, m));
+    HoIntegrator ho(var);
+    ho.prepare(*scene, 2e-4);
+    for (int st = 0; st < 300; ++st) ho.step(*scene, 2e-4);
+    for (Index p : pins)
+      for (int e = 0; e < 3; ++e) {
+        EXPECT_EQ(scene->state.x[3 * p + e], x[3 * p + e]) << to_string(var);
+        EXPECT_EQ(scene->state.v[3 * p + e], 0.0) << to_string(var);
+      }
+    EXPECT_LT(scene->state.x[3 * (nx * nx - 1) + 1], -1e-3) << "free corner falls";
+    EXPECT_NEAR(scene->state.time, 300 * 2e-4, 1e-15);
+    EXPECT_EQ(scene->state.step, 300);
+  }
+}
+
+TEST(HoInput, RefusesMaterialWithoutSprings) {
+  SpringSet s;
+  s.add(0, 1, 1.0, 100, 0, SpringClass::Structural);
+  std::vector<double> m{1, 1};
+  auto scene = make_scene({0, 0, 0, 1, 0, 0}, {0, 0, 0, 0, 0, 0}, m, {}, {0, 0, 0},
+                          std::make_unique<TestSpringMaterial>(s, m, false));
+  HoIntegrator ho(HoVariant::Velocity);
+  EXPECT_TRUE(ho.needs().springs);
+  try {
+    ho.prepare(*scene, 1e-3);
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("test_no_springs"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("mass_spring"), std::string::npos) << msg;
+  }
+}
+
+TEST(HoInput, VariantParameter) {
+  auto p = Params::from_string("variant: analytic_position\n");
+  HoIntegrator a(p);
+  EXPECT_EQ(a.variant(), HoVariant::AnalyticPosition);
+  EXPECT_NO_THROW(p.check_unused());
+  HoIntegrator d(Params::from_string("{}\n"));
+  EXPECT_EQ(d.variant(), HoVariant::Velocity);
+  EXPECT_THROW(HoIntegrator(Params::from_string("variant: velocty\n")), InputError);
+  // published formula with damping is refused with the fix
+  SpringSet s;
+  s.add(0, 1, 1.0, 100, 0.5, SpringClass::Structural);
+  std::vector<double> m{1, 1};
+  auto scene = make_scene({0, 0, 0, 1, 0, 0}, {0, 0, 0, 0, 0, 0}, m, {}, {0, 0, 0},
+                          std::make_unique<TestSpringMaterial>(s, m));
+  HoIntegrator kc(HoVariant::KangCho2011);
+  EXPECT_THROW(kc.prepare(*scene, 1e-3), InputError);
+}
+
+// The parallel traversal (2 threads) gives bit-for-bit the serial result, for a grid large
+// enough to take the parallel path.
+TEST(HoParallel, TwoThreadsMatchOneThreadBitwise) {
+  const int nx = 100;   // 100 x 100 vertices, ~39k springs (> kHoSerialSprings)
+  std::vector<double> x, v, m;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(-0.01, 0.01);
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      x.insert(x.end(), {0.01 * c + U(rng) / 10, U(rng) / 10, 0.01 * r});
+      v.insert(v.end(), {U(rng), U(rng), U(rng)});
+      m.push_back(1e-4 * (1 + 50 * std::abs(U(rng))));
+    }
+  SpringSet s;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      const int a = r * nx + c;
+      if (c + 1 < nx) s.add(a, a + 1, 0.01, 2000, 0.01, SpringClass::Structural);
+      if (r + 1 < nx) s.add(a + nx, a, 0.01, 2000, 0.0, SpringClass::Structural);
+      if (c + 1 < nx && r + 1 < nx) s.add(a, a + nx + 1, 0.01 * std::sqrt(2.0), 1000, 0.0, SpringClass::Shear);
+      if (c > 0 && r + 1 < nx) s.add(a, a + nx - 1, 0.01 * std::sqrt(2.0), 1000, 0.0, SpringClass::Shear);
+    }
+  ASSERT_GT(s.size(), kHoSerialSprings);
+  for (HoVariant var : {HoVariant::Velocity, HoVariant::AnalyticPosition}) {
+    std::vector<double> res[2];
+    for (int threads : {1, 2}) {
+      omp_set_num_threads(threads);
+      auto scene = make_scene(x, v, m, {0, nx - 1}, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(s, m));
+      HoIntegrator ho(var);
+      ho.prepare(*scene, 1e-4);
+      for (int st = 0; st < 10; ++st) ho.step(*scene, 1e-4);
+      res[threads - 1] = scene->state.x;
+      res[threads - 1].insert(res[threads - 1].end(), scene->state.v.begin(), scene->state.v.end());
+    }
+    omp_set_num_threads(2);
+    ASSERT_EQ(res[0].size(), res[1].size());
+    for (std::size_t q = 0; q < res[0].size(); ++q) ASSERT_EQ(res[0][q], res[1][q]) << to_string(var) << " entry " << q;
+  }
+}
