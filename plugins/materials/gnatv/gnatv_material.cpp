@@ -1,0 +1,325 @@
+#include "gnatv_material.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <numbers>
+#include <stdexcept>
+
+namespace loom::gnatv {
+namespace {
+
+using V3 = std::array<double, 3>;
+V3 sub(const double* a, const double* b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+V3 cross(const V3& a, const V3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+V3 scale(const V3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
+V3 axpy(const V3& a, double s, const V3& b) { return {a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]}; }
+
+std::string resolve_against(const std::string& source, const std::string& path) {
+  namespace fs = std::filesystem;
+  fs::path p(path);
+  if (p.is_absolute()) return path;
+  fs::path base = fs::path(source).parent_path();
+  if (source.empty() || source.front() == '<' || base.empty()) return path;
+  return (base / p).lexically_normal().string();
+}
+
+GnatvOptions read_options(const Params& p) {
+  GnatvOptions o;
+  const std::string file = p.require_string("material_file");
+  o.material_file = resolve_against(p.source(), file);
+  o.interpolation = p.get_choice("interpolation", "monotone_cubic", {"monotone_cubic", "bspline"}) == "bspline"
+                        ? CurveInterpolation::BSpline
+                        : CurveInterpolation::MonotoneCubic;
+  const std::string orient = p.get_choice("orientation", "auto", {"auto", "uv", "x_axis"});
+  o.orientation = orient == "uv"       ? GnatvOptions::Orientation::UV
+                  : orient == "x_axis" ? GnatvOptions::Orientation::XAxis
+                                       : GnatvOptions::Orientation::Auto;
+  o.weft_angle = p.get_in_range("weft_angle", 0.0, -2 * std::numbers::pi, 2 * std::numbers::pi);
+  o.density = p.has("density") ? p.get_positive("density", 1.0) : 0.0;
+  o.stress_scale = p.get_positive("stress_scale", 1.0);
+  o.psd_projection = p.get("psd_projection", true);
+  return o;
+}
+
+MaterialData read_data(const GnatvOptions& o) {
+  return read_material_file(o.material_file, o.interpolation, o.stress_scale);
+}
+
+}  // namespace
+
+GnatvMaterial::GnatvMaterial(const Params& p, const Mesh& mesh)
+    : GnatvMaterial(read_options(p), MaterialData{}, mesh) {}
+
+GnatvMaterial::GnatvMaterial(const GnatvOptions& opt, MaterialData data, const Mesh& mesh)
+    : opt_(opt), data_(std::move(data)) {
+  if (data_.weft.size() == 0) data_ = read_data(opt_);
+  views_ = {data_.weft.view(), data_.warp.view(), data_.shear.view()};
+  density_ = opt_.density > 0 ? opt_.density : data_.areal_density;
+  setup(mesh);
+}
+
+void GnatvMaterial::setup(const Mesh& mesh) {
+  n_ = mesh.num_vertices();
+  const Index nt = mesh.num_triangles();
+  if (nt == 0) throw InputError("gnatv: mesh " + mesh.source + " has no triangles");
+  const bool has_uv = mesh.uvs.size() == 2 * static_cast<std::size_t>(n_);
+  GnatvOptions::Orientation orient = opt_.orientation;
+  if (orient == GnatvOptions::Orientation::UV && !has_uv)
+    throw InputError("gnatv: orientation: uv needs texture coordinates, but mesh " + mesh.source +
+                     " has none; use orientation: x_axis (weft = the x axis projected onto each triangle)");
+  if (orient == GnatvOptions::Orientation::Auto)
+    orient = has_uv ? GnatvOptions::Orientation::UV : GnatvOptions::Orientation::XAxis;
+  const double ca = std::cos(opt_.weft_angle), sa = std::sin(opt_.weft_angle);
+
+  std::vector<RestTriangle<double>> rest(nt);
+  for (Index t = 0; t < nt; ++t) {
+    const Index* tv = &mesh.triangles[3 * static_cast<std::size_t>(t)];
+    for (int k = 0; k < 3; ++k)
+      if (tv[k] < 0 || tv[k] >= n_)
+        throw InputError("gnatv: triangle " + std::to_string(t) + " of " + mesh.source + " has vertex index " +
+                         std::to_string(tv[k]) + " outside 0.." + std::to_string(n_ - 1));
+    const double* P0 = &mesh.positions[3 * static_cast<std::size_t>(tv[0])];
+    const double* P1 = &mesh.positions[3 * static_cast<std::size_t>(tv[1])];
+    const double* P2 = &mesh.positions[3 * static_cast<std::size_t>(tv[2])];
+    const V3 ea = sub(P1, P0), eb = sub(P2, P0), ec = sub(P2, P1);
+    const V3 nrm = cross(ea, eb);
+    const double len2 = std::max({dot(ea, ea), dot(eb, eb), dot(ec, ec)});
+    const double nn = std::sqrt(dot(nrm, nrm));
+    if (!(nn > 1e-12 * len2) || !std::isfinite(nn))
+      throw InputError("gnatv: triangle " + std::to_string(t) + " (vertices " + std::to_string(tv[0]) + ", " +
+                       std::to_string(tv[1]) + ", " + std::to_string(tv[2]) + ") of " + mesh.source +
+                       " has zero rest area; remove degenerate triangles from the mesh");
+    const V3 nh = scale(nrm, 1.0 / nn);
+    // Reference weft direction in 3D.
+    V3 ref{1.0, 0.0, 0.0};
+    if (orient == GnatvOptions::Orientation::UV) {
+      const double* w0 = &mesh.uvs[2 * static_cast<std::size_t>(tv[0])];
+      const double* w1 = &mesh.uvs[2 * static_cast<std::size_t>(tv[1])];
+      const double* w2 = &mesh.uvs[2 * static_cast<std::size_t>(tv[2])];
+      const double d1u = w1[0] - w0[0], d1v = w1[1] - w0[1], d2u = w2[0] - w0[0], d2v = w2[1] - w0[1];
+      const double det = d1u * d2v - d2u * d1v;
+      const double uvlen2 = std::max({d1u * d1u + d1v * d1v, d2u * d2u + d2v * d2v});
+      if (!(std::fabs(det) > 1e-12 * uvlen2))
+        throw InputError("gnatv: triangle " + std::to_string(t) + " of " + mesh.source +
+                         " has degenerate texture coordinates, so its weft direction is undefined; fix the UVs "
+                         "or use orientation: x_axis");
+      // dP/du = (ea d2v - eb d1v) / det
+      ref = scale(axpy(scale(ea, d2v), -d1v, eb), 1.0 / det);
+    }
+    V3 e1 = axpy(ref, -dot(ref, nh), nh);
+    double l1 = std::sqrt(dot(e1, e1));
+    if (orient == GnatvOptions::Orientation::XAxis && !(l1 > 1e-6)) {  // triangle normal along x
+      ref = {0.0, 1.0, 0.0};
+      e1 = axpy(ref, -dot(ref, nh), nh);
+      l1 = std::sqrt(dot(e1, e1));
+    }
+    if (!(l1 > 0))
+      throw InputError("gnatv: cannot define the weft direction of triangle " + std::to_string(t));
+    e1 = scale(e1, 1.0 / l1);
+    const V3 e2 = cross(nh, e1);
+    const V3 w1 = axpy(scale(e1, ca), sa, e2);   // weft
+    const V3 w2 = axpy(scale(e2, ca), -sa, e1);  // warp
+    const double a[2] = {0.0, 0.0};
+    const double b[2] = {dot(ea, w1), dot(ea, w2)};
+    const double c[2] = {dot(eb, w1), dot(eb, w2)};
+    if (!rest_from_2d(a, b, c, rest[t], 0.0))
+      throw InputError("gnatv: triangle " + std::to_string(t) + " of " + mesh.source + " has zero rest area");
+  }
+
+  // Lumped masses rho s / 3 (NUMERICS.md 2.5).
+  mass_.assign(n_, 0.0);
+  for (Index t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) mass_[mesh.triangles[3 * t + k]] += density_ * rest[t].area / 3.0;
+  for (Index i = 0; i < n_; ++i)
+    if (!(mass_[i] > 0))
+      throw InputError("gnatv: vertex " + std::to_string(i) + " of " + mesh.source +
+                       " belongs to no triangle, so it has no mass; remove unreferenced vertices");
+
+  // Greedy triangle colouring: no two triangles of one colour share a vertex, so the
+  // scatter of forces and Jacobian blocks is race free without atomics.
+  std::vector<Index> vt_start(n_ + 1, 0), vt_list(3 * static_cast<std::size_t>(nt));
+  for (Index t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) ++vt_start[mesh.triangles[3 * t + k] + 1];
+  for (Index i = 0; i < n_; ++i) vt_start[i + 1] += vt_start[i];
+  {
+    std::vector<Index> fill(vt_start.begin(), vt_start.end() - 1);
+    for (Index t = 0; t < nt; ++t)
+      for (int k = 0; k < 3; ++k) vt_list[fill[mesh.triangles[3 * t + k]]++] = t;
+  }
+  std::vector<int> colour(nt, -1);
+  std::vector<char> used;
+  int ncol = 0;
+  for (Index t = 0; t < nt; ++t) {
+    used.assign(static_cast<std::size_t>(ncol) + 1, 0);
+    for (int k = 0; k < 3; ++k) {
+      const Index v = mesh.triangles[3 * t + k];
+      for (Index q = vt_start[v]; q < vt_start[v + 1]; ++q) {
+        const int c = colour[vt_list[q]];
+        if (c >= 0) used[c] = 1;
+      }
+    }
+    int c = 0;
+    while (used[c]) ++c;
+    colour[t] = c;
+    ncol = std::max(ncol, c + 1);
+  }
+  colour_start_.assign(ncol + 1, 0);
+  for (Index t = 0; t < nt; ++t) ++colour_start_[colour[t] + 1];
+  for (int c = 0; c < ncol; ++c) colour_start_[c + 1] += colour_start_[c];
+  std::vector<Index> fill(colour_start_.begin(), colour_start_.end() - 1);
+  tri_.resize(nt);
+  rest_.resize(nt);
+  original_index_.resize(nt);
+  for (Index t = 0; t < nt; ++t) {
+    const Index pos = fill[colour[t]]++;
+    tri_[pos] = {mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]};
+    rest_[pos] = rest[t];
+    original_index_[pos] = t;
+  }
+}
+
+void GnatvMaterial::compute_masses(std::span<double> mass) const {
+  std::copy(mass_.begin(), mass_.end(), mass.begin());
+}
+
+void GnatvMaterial::compute_forces(std::span<const double> x, std::span<const double>, std::span<double> f) const {
+  const double* X = x.data();
+  double* Fo = f.data();
+  const std::size_t n3 = 3 * static_cast<std::size_t>(n_);
+  const int ncol = num_colours();
+#pragma omp parallel
+  {
+#pragma omp for schedule(static)
+    for (std::size_t i = 0; i < n3; ++i) Fo[i] = 0.0;
+    for (int c = 0; c < ncol; ++c) {
+#pragma omp for schedule(static)
+      for (Index t = colour_start_[c]; t < colour_start_[c + 1]; ++t) {
+        const auto& tv = tri_[t];
+        double P[3][3], F[3][3];
+        for (int j = 0; j < 3; ++j)
+          for (int k = 0; k < 3; ++k) P[j][k] = X[3 * tv[j] + k];
+        forces(rest_[t], views_, P, F);
+        for (int j = 0; j < 3; ++j)
+          for (int k = 0; k < 3; ++k) Fo[3 * tv[j] + k] += F[j][k];
+      }
+    }
+  }
+}
+
+double GnatvMaterial::elastic_energy(std::span<const double> x) const {
+  const double* X = x.data();
+  const Index nt = num_triangles();
+  double E = 0;
+#pragma omp parallel for schedule(static) reduction(+ : E)
+  for (Index t = 0; t < nt; ++t) {
+    const auto& tv = tri_[t];
+    double P[3][3];
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) P[j][k] = X[3 * tv[j] + k];
+    E += energy(rest_[t], views_, P);
+  }
+  return E;
+}
+
+double GnatvMaterial::max_strain(std::span<const double> x) const {
+  const double* X = x.data();
+  const Index nt = num_triangles();
+  double m = 0;
+#pragma omp parallel for schedule(static) reduction(max : m)
+  for (Index t = 0; t < nt; ++t) {
+    const auto& tv = tri_[t];
+    double P[3][3];
+    for (int j = 0; j < 3; ++j)
+      for (int k = 0; k < 3; ++k) P[j][k] = X[3 * tv[j] + k];
+    const double s = max_principal_strain(rest_[t], P);
+    if (!(s <= m)) m = s;  // NaN propagates as "larger"
+  }
+  return m;
+}
+
+std::vector<std::pair<std::string, std::string>> GnatvMaterial::describe() const {
+  auto fmt = [](double v) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.6g", v);
+    return std::string(b);
+  };
+  return {{"triangles", std::to_string(num_triangles())},
+          {"colours", std::to_string(num_colours())},
+          {"material file", data_.path},
+          {"interpolation", opt_.interpolation == CurveInterpolation::BSpline ? "bspline" : "monotone_cubic"},
+          {"areal density (kg/m^2)", fmt(density_)},
+          {"weft angle (rad)", fmt(opt_.weft_angle)},
+          {"min curve slope weft/warp/shear (N/m)",
+           fmt(data_.weft.min_stiffness()) + " / " + fmt(data_.warp.min_stiffness()) + " / " +
+               fmt(data_.shear.min_stiffness())},
+          {"psd projection", opt_.psd_projection ? "on" : "off"}};
+}
+
+void GnatvMaterial::jacobian_pairs(std::vector<std::array<Index, 2>>& pairs) const {
+  pairs.reserve(pairs.size() + 3 * tri_.size());
+  for (const auto& tv : tri_) {
+    pairs.push_back({tv[0], tv[1]});
+    pairs.push_back({tv[1], tv[2]});
+    pairs.push_back({tv[2], tv[0]});
+  }
+}
+
+void GnatvMaterial::bind_pattern(const BsrPattern& pattern) {
+  if (pattern.n != n_)
+    throw std::logic_error("gnatv: Jacobian pattern has " + std::to_string(pattern.n) + " block rows, mesh has " +
+                           std::to_string(n_) + " vertices");
+  scatter_.resize(9 * tri_.size());
+  for (std::size_t t = 0; t < tri_.size(); ++t)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) {
+        const Index k = pattern.find(tri_[t][j], tri_[t][i]);
+        if (k < 0)
+          throw std::logic_error("gnatv: Jacobian pattern lacks block (" + std::to_string(tri_[t][j]) + ", " +
+                                 std::to_string(tri_[t][i]) + "); build it from jacobian_pairs()");
+        scatter_[9 * t + 3 * j + i] = k;
+      }
+  bound_ = &pattern;
+}
+
+void GnatvMaterial::compute_jacobians(std::span<const double> x, std::span<const double>, BsrMatrix& dfdx,
+                                      BsrMatrix* dfdv) const {
+  if (bound_ == nullptr || dfdx.rows() != n_ || dfdx.pattern().nnz_blocks() != bound_->nnz_blocks())
+    throw std::logic_error("gnatv: compute_jacobians called before bind_pattern or with another pattern");
+  const double* X = x.data();
+  double* A = dfdx.values().data();
+  const std::size_t nv = dfdx.values().size();
+  double* D = dfdv ? dfdv->values().data() : nullptr;
+  const std::size_t nd = dfdv ? dfdv->values().size() : 0;
+  const int ncol = num_colours();
+  const bool psd = opt_.psd_projection;
+#pragma omp parallel
+  {
+#pragma omp for schedule(static) nowait
+    for (std::size_t i = 0; i < nd; ++i) D[i] = 0.0;  // no material damping: df/dv = 0
+#pragma omp for schedule(static)
+    for (std::size_t i = 0; i < nv; ++i) A[i] = 0.0;
+    for (int c = 0; c < ncol; ++c) {
+#pragma omp for schedule(static)
+      for (Index t = colour_start_[c]; t < colour_start_[c + 1]; ++t) {
+        const auto& tv = tri_[t];
+        double P[3][3], J[3][3][9];
+        for (int j = 0; j < 3; ++j)
+          for (int k = 0; k < 3; ++k) P[j][k] = X[3 * tv[j] + k];
+        jacobian(rest_[t], views_, P, psd, J);
+        const Index* sc = &scatter_[9 * static_cast<std::size_t>(t)];
+        for (int b = 0; b < 9; ++b) {
+          double* dst = A + 9 * static_cast<std::size_t>(sc[b]);
+          const double* src = J[b / 3][b % 3];
+          for (int q = 0; q < 9; ++q) dst[q] += src[q];
+        }
+      }
+    }
+  }
+}
+
+}  // namespace loom::gnatv

@@ -1,0 +1,310 @@
+// The gnatv material plugin on whole meshes: masses, rest state, global force/energy/
+// Jacobian consistency, parallel determinism, orientation, material files and errors.
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "gnatv_material.hpp"
+#include "loom/bsr.hpp"
+#include "loom/mesh.hpp"
+#include "loom/params.hpp"
+
+namespace fs = std::filesystem;
+using loom::gnatv::GnatvMaterial;
+
+namespace {
+
+const std::string kWool = std::string(LOOM_SOURCE_DIR) + "/materials/wool.yaml";
+
+std::unique_ptr<GnatvMaterial> make(const loom::Mesh& mesh, const std::string& extra = "") {
+  auto p = loom::Params::from_string("material_file: " + kWool + "\n" + extra, "<test>");
+  auto m = std::make_unique<GnatvMaterial>(p, mesh);
+  p.check_unused();
+  return m;
+}
+
+std::vector<double> perturbed(const loom::Mesh& mesh, double amp, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> U(-1, 1);
+  std::vector<double> x = mesh.positions;
+  for (double& c : x) c += amp * U(rng);
+  return x;
+}
+
+struct TempDir {
+  fs::path dir;
+  TempDir() {
+    dir = fs::temp_directory_path() / ("loom_gnatv_" + std::to_string(::getpid()) + "_" +
+                                       std::to_string(std::random_device{}()));
+    fs::create_directories(dir);
+  }
+  ~TempDir() { std::error_code ec; fs::remove_all(dir, ec); }
+  std::string write(const std::string& name, const std::string& text) const {
+    std::ofstream(dir / name) << text;
+    return (dir / name).string();
+  }
+};
+
+std::string good_file(const std::string& weft_curve) {
+  return "areal_density: 0.2\n"
+         "curves:\n"
+         "  weft: " + weft_curve + "\n"
+         "  warp: {start: 0.0, step: 0.01, stress: [0, 10, 30]}\n"
+         "  shear: {strain: [-0.1, 0.0, 0.1], stress: [-5, 0, 5]}\n";
+}
+
+}  // namespace
+
+TEST(GnatvMaterial, LumpedMassesSumToDensityTimesArea) {
+  const loom::Mesh mesh = loom::make_grid(9, 7, 2.0, 1.5, loom::GridPlane::XZ);
+  auto m = make(mesh);
+  std::vector<double> mass(mesh.num_vertices());
+  m->compute_masses(mass);
+  double total = 0;
+  for (double v : mass) { EXPECT_GT(v, 0); total += v; }
+  EXPECT_NEAR(total, 0.15 * 2.0 * 1.5, 1e-12);
+  auto m2 = make(mesh, "density: 0.4\n");
+  m2->compute_masses(mass);
+  total = 0;
+  for (double v : mass) total += v;
+  EXPECT_NEAR(total, 0.4 * 3.0, 1e-12);
+}
+
+TEST(GnatvMaterial, RestStateIsForceFreeOnBothTriangulations) {
+  for (bool alt : {true, false})
+    for (auto plane : {loom::GridPlane::XY, loom::GridPlane::XZ}) {
+      const loom::Mesh mesh = loom::make_grid(8, 6, 10.0, 7.0, plane, alt);
+      auto m = make(mesh, "weft_angle: 0.3\n");
+      std::vector<double> f(mesh.positions.size(), 1.0), v(mesh.positions.size(), 0.0);
+      m->compute_forces(mesh.positions, v, f);
+      for (double c : f) EXPECT_NEAR(c, 0.0, 1e-9);
+      EXPECT_NEAR(m->elastic_energy(mesh.positions), 0.0, 1e-12);
+      EXPECT_LT(m->max_strain(mesh.positions), 1e-12);
+    }
+}
+
+TEST(GnatvMaterial, ColouringIsRaceFree) {
+  const loom::Mesh mesh = loom::make_grid(17, 13, 1.0, 1.0);
+  auto m = make(mesh);
+  const auto& cs = m->colour_start();
+  EXPECT_EQ(cs.back(), mesh.num_triangles());
+  EXPECT_LE(m->num_colours(), 16);
+  for (int c = 0; c < m->num_colours(); ++c) {
+    std::vector<int> seen(mesh.num_vertices(), 0);
+    for (loom::Index t = cs[c]; t < cs[c + 1]; ++t)
+      for (loom::Index v : m->triangles()[t]) EXPECT_EQ(seen[v]++, 0) << "colour " << c << " vertex " << v;
+  }
+}
+
+TEST(GnatvMaterial, ForceIsMinusGradientOfTotalEnergy) {
+  const loom::Mesh mesh = loom::make_grid(6, 5, 1.0, 0.8);
+  auto m = make(mesh);
+  const std::vector<double> x = perturbed(mesh, 0.02, 3);
+  std::vector<double> f(x.size()), v(x.size(), 0.0);
+  m->compute_forces(x, v, f);
+  double scale = 0, worst = 0;
+  for (double c : f) scale = std::max(scale, std::fabs(c));
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    std::vector<double> xp = x, xm = x;
+    const double h = 1e-7;
+    xp[i] += h;
+    xm[i] -= h;
+    const double g = (m->elastic_energy(xp) - m->elastic_energy(xm)) / (2 * h);
+    worst = std::max(worst, std::fabs(f[i] + g) / scale);
+  }
+  EXPECT_LT(worst, 1e-5);
+}
+
+TEST(GnatvMaterial, AssembledJacobianIsSymmetricAndMatchesFiniteDifferences) {
+  const loom::Mesh mesh = loom::make_grid(6, 5, 1.0, 0.8);
+  auto m = make(mesh, "psd_projection: false\n");
+  std::vector<std::array<loom::Index, 2>> pairs;
+  m->jacobian_pairs(pairs);
+  const loom::BsrPattern pat = loom::BsrPattern::from_pairs(mesh.num_vertices(), pairs);
+  m->bind_pattern(pat);
+  loom::BsrMatrix J(&pat), D(&pat);
+  const std::vector<double> x = perturbed(mesh, 0.02, 5);
+  std::vector<double> v(x.size(), 0.0);
+  std::fill(D.values().begin(), D.values().end(), 7.0);
+  m->compute_jacobians(x, v, J, &D);
+  for (double d : D.values()) EXPECT_EQ(d, 0.0);  // no material damping
+  EXPECT_EQ(J.asymmetry(), 0.0);
+  const std::vector<double> dense = J.to_dense();
+  const std::size_t n3 = x.size();
+  double scale = 0, worst = 0;
+  for (double c : dense) scale = std::max(scale, std::fabs(c));
+  std::vector<double> fp(n3), fm(n3);
+  for (std::size_t i = 0; i < n3; ++i) {
+    std::vector<double> xp = x, xm = x;
+    const double h = 1e-9;
+    xp[i] += h;
+    xm[i] -= h;
+    m->compute_forces(xp, v, fp);
+    m->compute_forces(xm, v, fm);
+    for (std::size_t r = 0; r < n3; ++r)
+      worst = std::max(worst, std::fabs(dense[r * n3 + i] - (fp[r] - fm[r]) / (2 * h)) / scale);
+  }
+  EXPECT_LT(worst, 1e-6);
+  // With the projection on, the compressed cloth's -J is still symmetric.
+  m->set_psd_projection(true);
+  std::vector<double> xc = mesh.positions;
+  for (std::size_t i = 0; i < xc.size(); i += 3) xc[i] *= 0.8;
+  m->compute_jacobians(xc, v, J, nullptr);
+  EXPECT_EQ(J.asymmetry(), 0.0);
+}
+
+TEST(GnatvMaterial, ParallelResultsEqualSerialBitForBit) {
+  const loom::Mesh mesh = loom::make_grid(20, 20, 10.0, 10.0);
+  auto m = make(mesh);
+  std::vector<std::array<loom::Index, 2>> pairs;
+  m->jacobian_pairs(pairs);
+  const loom::BsrPattern pat = loom::BsrPattern::from_pairs(mesh.num_vertices(), pairs);
+  m->bind_pattern(pat);
+  const std::vector<double> x = perturbed(mesh, 0.05, 9);
+  std::vector<double> v(x.size(), 0.0), f1(x.size()), f2(x.size());
+  loom::BsrMatrix J1(&pat), J2(&pat);
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  m->compute_forces(x, v, f1);
+  m->compute_jacobians(x, v, J1, nullptr);
+  const double e1 = m->elastic_energy(x);
+  omp_set_num_threads(2);
+  m->compute_forces(x, v, f2);
+  m->compute_jacobians(x, v, J2, nullptr);
+  const double e2 = m->elastic_energy(x);
+  omp_set_num_threads(saved);
+  EXPECT_EQ(f1, f2);
+  EXPECT_EQ(J1.values(), J2.values());
+  EXPECT_NEAR(e1, e2, 1e-12 * std::fabs(e1));
+}
+
+TEST(GnatvMaterial, WeftAngleSelectsTheCurve) {
+  // A homogeneous stretch along x of a flat cloth: energy = area * W_weft(e) with the weft
+  // along x, and area * W_warp(e) after turning the weft by 90 degrees.
+  const loom::Mesh mesh = loom::make_grid(7, 5, 2.0, 1.0, loom::GridPlane::XY);
+  std::vector<double> x = mesh.positions;
+  const double lam = 1.01, e = 0.5 * (lam * lam - 1);
+  for (std::size_t i = 0; i < x.size(); i += 3) x[i] *= lam;
+  auto m0 = make(mesh);
+  auto m90 = make(mesh, "weft_angle: 1.5707963267948966\n");
+  auto mx = make(mesh, "orientation: x_axis\n");
+  const double Ww = m0->data().weft.energy(e), Wv = m0->data().warp.energy(e);
+  EXPECT_GT(std::fabs(Ww - Wv), 0.1 * Ww);
+  EXPECT_NEAR(m0->elastic_energy(x), 2.0 * Ww, 1e-10 * Ww);
+  EXPECT_NEAR(mx->elastic_energy(x), 2.0 * Ww, 1e-10 * Ww);
+  EXPECT_NEAR(m90->elastic_energy(x), 2.0 * Wv, 1e-10 * Wv);
+  // Shear: a 45-degree weft sees the x stretch partly as shear.
+  auto m45 = make(mesh, "weft_angle: 0.7853981633974483\n");
+  EXPECT_GT(std::fabs(m45->elastic_energy(x) - 2.0 * Ww), 1e-3 * Ww);
+}
+
+TEST(GnatvMaterial, UvOrientationFollowsTheTextureCoordinates) {
+  // Rotate the grid's UVs by 90 degrees: the weft follows u, i.e. the mesh's y axis.
+  loom::Mesh mesh = loom::make_grid(5, 5, 1.0, 1.0, loom::GridPlane::XY);
+  ASSERT_EQ(mesh.uvs.size(), 2u * mesh.num_vertices());
+  for (std::size_t i = 0; i < mesh.uvs.size(); i += 2) {
+    const double u = mesh.uvs[i], v = mesh.uvs[i + 1];
+    mesh.uvs[i] = v;
+    mesh.uvs[i + 1] = -u;
+  }
+  std::vector<double> x = mesh.positions;
+  const double lam = 1.01, e = 0.5 * (lam * lam - 1);
+  for (std::size_t i = 0; i < x.size(); i += 3) x[i] *= lam;
+  auto uv = make(mesh, "orientation: uv\n");
+  EXPECT_NEAR(uv->elastic_energy(x), uv->data().warp.energy(e), 1e-10 * uv->data().warp.energy(e));
+  mesh.uvs.clear();
+  EXPECT_THROW(make(mesh, "orientation: uv\n"), loom::InputError);
+}
+
+TEST(GnatvMaterial, DegenerateRestTriangleIsAClearError) {
+  loom::Mesh mesh;
+  mesh.positions = {0, 0, 0, 1, 0, 0, 2, 0, 0, 0, 1, 0};
+  mesh.triangles = {0, 1, 3, 0, 1, 2};
+  mesh.source = "collinear.obj";
+  try {
+    make(mesh);
+    FAIL() << "no error";
+  } catch (const loom::InputError& e) {
+    const std::string w = e.what();
+    EXPECT_NE(w.find("triangle 1"), std::string::npos) << w;
+    EXPECT_NE(w.find("zero rest area"), std::string::npos) << w;
+  }
+}
+
+TEST(GnatvMaterial, MaterialFileResolvesAgainstTheSceneFolder) {
+  const loom::Mesh mesh = loom::make_grid(3, 3, 1.0, 1.0);
+  auto p = loom::Params::from_string("material_file: ../materials/wool.yaml\n",
+                                     std::string(LOOM_SOURCE_DIR) + "/scenes/some_scene.yaml");
+  GnatvMaterial m(p, mesh);
+  EXPECT_EQ(m.data().name, "wool");
+  EXPECT_DOUBLE_EQ(m.density(), 0.15);
+}
+
+TEST(GnatvMaterial, UsersOwnFileWithTheSameShapeWorks) {
+  TempDir td;
+  const std::string f = td.write("mine.yaml", good_file("{start: 0.0, step: 0.02, stress: [0, 5, 12, 30]}"));
+  const loom::Mesh mesh = loom::make_grid(3, 3, 1.0, 1.0);
+  auto p = loom::Params::from_string("material_file: mine.yaml\ninterpolation: bspline\n", f);
+  GnatvMaterial m(p, mesh);
+  EXPECT_DOUBLE_EQ(m.density(), 0.2);
+  EXPECT_NEAR(m.data().weft.stress(0.04), 12.0, 1e-12);
+  EXPECT_NEAR(m.data().shear.stress(0.1), 5.0, 1e-12);
+}
+
+TEST(GnatvMaterial, BadMaterialFilesNameTheFileAndLine) {
+  TempDir td;
+  struct Bad {
+    std::string name, text, expect;
+  };
+  const std::vector<Bad> bad = {
+      {"grid.yaml",
+       good_file("{strain: [0.0, 0.02, 0.01, 0.03], stress: [0, 5, 12, 30]}"), "increasing"},
+      {"step.yaml", good_file("{start: 0.0, step: -0.02, stress: [0, 5, 12, 30]}"), "step"},
+      {"nan.yaml", good_file("{start: 0.0, step: 0.02, stress: [0, 5, .nan, 30]}"), "finite"},
+      {"short.yaml", good_file("{start: 0.0, step: 0.02, stress: [0]}"), "at least 2"},
+      {"missing.yaml",
+       "areal_density: 0.2\ncurves:\n  weft: {start: 0.0, step: 0.01, stress: [0, 10]}\n"
+       "  shear: {start: -0.1, step: 0.1, stress: [-5, 0, 5]}\n",
+       "missing curve 'warp'"},
+      {"rest.yaml", good_file("{start: 0.0, step: 0.02, stress: [1, 5, 12, 30]}"), "stress free"},
+      {"typo.yaml", good_file("{start: 0.0, stepp: 0.02, step: 0.02, stress: [0, 5, 12, 30]}"), "stepp"},
+      {"density.yaml", "areal_density: -1\ncurves: {}\n", "areal_density"},
+  };
+  const loom::Mesh mesh = loom::make_grid(3, 3, 1.0, 1.0);
+  for (const Bad& b : bad) {
+    const std::string f = td.write(b.name, b.text);
+    try {
+      auto p = loom::Params::from_string("material_file: " + f + "\n", "<test>");
+      GnatvMaterial m(p, mesh);
+      ADD_FAILURE() << b.name << ": no error";
+    } catch (const loom::InputError& e) {
+      const std::string w = e.what();
+      EXPECT_NE(w.find(f + ":"), std::string::npos) << b.name << ": " << w;  // file:line
+      EXPECT_NE(w.find(b.expect), std::string::npos) << b.name << ": " << w;
+    }
+  }
+  // A missing file.
+  try {
+    auto p = loom::Params::from_string("material_file: /nonexistent/wool.yaml\n", "<test>");
+    GnatvMaterial m(p, mesh);
+    ADD_FAILURE() << "no error";
+  } catch (const loom::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/wool.yaml"), std::string::npos);
+  }
+}
+
+TEST(GnatvMaterial, UnknownSceneParameterIsReported) {
+  const loom::Mesh mesh = loom::make_grid(3, 3, 1.0, 1.0);
+  auto p = loom::Params::from_string("material_file: " + kWool + "\ninterpolaton: bspline\n", "<test>");
+  GnatvMaterial m(p, mesh);
+  try {
+    p.check_unused();
+    FAIL() << "no error";
+  } catch (const loom::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("interpolation"), std::string::npos) << e.what();
+  }
+}
