@@ -243,6 +243,9 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     sc.gravity = {g[0], g[1], g[2]};
   }
 
+  // ---- colliders (only when declared) ----
+  sc.colliders = ColliderSet::parse(root.child("colliders"));
+
   // ---- integrator ----
   Params integ = root.child("integrator");
   if (!integ.is_map()) root.fail("missing 'integrator' section. Fix: add integrator: {type: symplectic_euler, dt: 0.001, substeps: 10}.");
@@ -352,6 +355,11 @@ std::vector<std::string> Simulation::describe() const {
   double mass = 0;
   for (double mi : sc.state.mass) mass += mi;
   lines.push_back("pins:       " + std::to_string(sc.state.pin_list.size()) + " vertices; total mass " + fmt(mass) + " kg");
+  if (!sc.colliders.empty()) {
+    std::string c = "colliders:  ";
+    for (std::size_t k = 0; k < sc.colliders.size(); ++k) c += (k ? ", " : "") + sc.colliders.colliders()[k].name;
+    lines.push_back(c);
+  }
   lines.push_back("gravity:    [" + fmt(sc.gravity[0]) + ", " + fmt(sc.gravity[1]) + ", " + fmt(sc.gravity[2]) + "]");
   lines.push_back("frames:     " + std::to_string(frames_) + " (" + fmt(frames_ * substeps_ * dt_) + " s simulated)");
   lines.push_back("output:     " + (output_.dir.empty() ? std::string("none") : output_.dir));
@@ -399,6 +407,8 @@ void Simulation::check_state(bool check_strain) {
 void Simulation::step() {
   const auto t0 = std::chrono::steady_clock::now();
   integrator_->step(*scene_, dt_);
+  if (!scene_->colliders.empty() && !integrator_->handles_contacts())
+    scene_->colliders.resolve_contacts(scene_->state, scene_->state.time, dt_);
   step_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ++steps_in_frame_;
   const StepStats s = integrator_->last_step();

@@ -37,6 +37,9 @@ class Integrator {
   /// Advance scene.state by h. Must not allocate. Updates state.time and state.step.
   virtual void step(Scene& scene, double h) = 0;
   virtual StepStats last_step() const { return {}; }
+  /// True when step() honours scene.colliders itself (as constraints, like Baraff-Witkin).
+  /// Otherwise the framework resolves contacts after each step (ColliderSet::resolve_contacts).
+  virtual bool handles_contacts() const { return false; }
 };
 
 /// Shared helper: advance time bookkeeping after a step of size h.

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "loom/bsr.hpp"
+#include "loom/collider.hpp"
 #include "loom/linear_solver.hpp"
 #include "loom/material.hpp"
 #include "loom/mesh.hpp"
@@ -21,6 +22,7 @@ struct Scene {
   std::array<double, 3> gravity{0.0, -9.81, 0.0};
   std::unique_ptr<Material> material;
   std::unique_ptr<LinearSolver> solver;    ///< set only when the integrator needs one
+  ColliderSet colliders;                   ///< empty unless the scene declares colliders
   std::string backend = "cpu";
   int threads = 0;                         ///< 0 = OpenMP default
 };

@@ -36,7 +36,8 @@
 //     any cross spring runs: use it to zero an accumulator (f = 0) in the same pass.
 //     The ranges cover 0..n-1 exactly once.
 //   * call it from outside an OpenMP parallel region: it opens one (the team is
-//     omp_get_max_threads(), or whatever the caller set). Nested inside a parallel region it
+//     omp_get_max_threads(), or whatever the caller set), unless the layout has fewer than
+//     kParallelMin springs: small ones run on the calling thread. Nested inside a parallel region it
 //     runs on that one thread, still correctly. Any thread count is fine: parts are handed
 //     out with schedule(static). No allocation, no virtual call; body is inlined.
 //   * results that are summed per vertex are deterministic for a fixed layout (the order of
@@ -69,6 +70,8 @@ class SpringLayout {
  public:
   /// Cross springs up to this count run on one thread (cheaper than a barrier per colour).
   static constexpr Index kSerialCross = 16384;
+  /// Layouts with fewer springs run on the calling thread (a parallel region costs more).
+  static constexpr Index kParallelMin = 4096;
 
   SpringLayout() = default;
 
@@ -133,7 +136,7 @@ class SpringLayout {
     if (P <= 0) return;
     const bool serial_cross = cross_serial();
     const int C = num_colours();
-#pragma omp parallel
+#pragma omp parallel if (num_springs() >= kParallelMin)
     {
 #pragma omp for schedule(static)
       for (int p = 0; p < P; ++p) {

@@ -1,0 +1,87 @@
+// Analytic colliders (sphere, infinite plane) with rigid motion and Coulomb friction.
+//
+// Colliders are part of the framework rather than a plugin kind: they are a few analytic
+// shapes that every integrator must honour in the same way (explicit integrators through
+// resolve_contacts after each step, Baraff-Witkin through constraints in its filter), so
+// one shared implementation keeps the contact rules identical across integrators.
+// They exist only when a scene declares them.
+#pragma once
+
+#include <array>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "loom/bsr.hpp"
+#include "loom/common.hpp"
+#include "loom/params.hpp"
+#include "loom/state.hpp"
+
+namespace loom {
+
+using Vec3 = std::array<double, 3>;
+
+/// Rigid motion of a collider: a reference point c(t) = c0 + d(t) and a rotation R(t) by
+/// angle(t) about a fixed unit axis through c(t).
+struct RigidMotion {
+  enum class Type { Fixed, Translate, Rotate, Keyframes } type = Type::Fixed;
+  Vec3 velocity{0, 0, 0};          ///< Translate: dc/dt (m/s)
+  Vec3 axis{0, 1, 0};              ///< Rotate/Keyframes: unit rotation axis
+  double angular_velocity = 0;     ///< Rotate: rad/s
+  struct Key {
+    double t;
+    Vec3 translate;
+    double angle;
+  };
+  std::vector<Key> keys;           ///< Keyframes: sorted by t, linear in between, held outside
+
+  Vec3 displacement(double t) const;     ///< d(t)
+  double angle(double t) const;          ///< rotation angle at t
+  Vec3 linear_velocity(double t) const;  ///< dd/dt
+  double spin(double t) const;           ///< d angle/dt
+};
+
+struct Collider {
+  enum class Shape { Sphere, Plane } shape = Shape::Plane;
+  Vec3 point{0, 0, 0};     ///< sphere centre, or a point on the plane (the reference point c0)
+  Vec3 normal{0, 1, 0};    ///< plane normal at t = 0 (unit), pointing to the free side
+  double radius = 0;       ///< sphere radius
+  double thickness = 0;    ///< contact offset: vertices are kept this far outside the surface
+  double mu_static = 0, mu_kinetic = 0;
+  RigidMotion motion;
+  std::string name;        ///< for messages
+
+  struct Contact {
+    double distance;   ///< signed distance to the offset surface (< 0: inside)
+    Vec3 normal;       ///< outward unit normal
+    Vec3 velocity;     ///< velocity of the surface at the contact point
+  };
+  /// Signed distance, normal and surface velocity at position x and time t.
+  Contact query(const double x[3], double t) const;
+};
+
+/// All colliders of a scene.
+class ColliderSet {
+ public:
+  bool empty() const { return colliders_.empty(); }
+  std::size_t size() const { return colliders_.size(); }
+  const std::vector<Collider>& colliders() const { return colliders_; }
+  void add(const Collider& c) { colliders_.push_back(c); }
+
+  /// Parse the scene's `colliders:` list (InputError with file:line on bad input).
+  static ColliderSet parse(const Params& list);
+
+  /// After an explicit step of size h ending at time t: vertices inside a collider are moved
+  /// to its surface and their velocity relative to the surface loses its inward normal part,
+  /// then Coulomb friction acts on the tangential part (static: stick if |v_t| <= mu_s * dv_n,
+  /// kinetic: |v_t| reduced by mu_k * dv_n). The tangential velocity change is also applied to
+  /// the position (h * dv_t), as if the step had moved with the corrected velocity, so that
+  /// a sticking vertex does not creep. Pinned vertices are skipped. Never adds energy
+  /// relative to the surface. Returns the number of vertices in contact.
+  int resolve_contacts(State& s, double t, double h) const;
+
+ private:
+  std::vector<Collider> colliders_;
+};
+
+}  // namespace loom

@@ -1,0 +1,242 @@
+#include "loom/collider.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace loom {
+
+namespace {
+
+Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec3 add(const Vec3& a, const Vec3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+Vec3 scale(const Vec3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
+double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
+
+// Rodrigues rotation of v by angle about unit axis k.
+Vec3 rotate(const Vec3& v, const Vec3& k, double angle) {
+  const double c = std::cos(angle), s = std::sin(angle);
+  const Vec3 kxv = cross(k, v);
+  const double kv = dot(k, v);
+  return {v[0] * c + kxv[0] * s + k[0] * kv * (1 - c), v[1] * c + kxv[1] * s + k[1] * kv * (1 - c),
+          v[2] * c + kxv[2] * s + k[2] * kv * (1 - c)};
+}
+
+// Index of the keyframe interval containing t and the interpolation weight.
+std::pair<std::size_t, double> locate(const std::vector<RigidMotion::Key>& keys, double t) {
+  if (keys.size() == 1 || t <= keys.front().t) return {0, 0.0};
+  if (t >= keys.back().t) return {keys.size() - 2, 1.0};
+  std::size_t k = 0;
+  while (k + 2 < keys.size() && keys[k + 1].t <= t) ++k;
+  return {k, (t - keys[k].t) / (keys[k + 1].t - keys[k].t)};
+}
+
+}  // namespace
+
+Vec3 RigidMotion::displacement(double t) const {
+  switch (type) {
+    case Type::Translate: return scale(velocity, t);
+    case Type::Keyframes: {
+      const auto [k, w] = locate(keys, t);
+      if (keys.size() == 1) return keys[0].translate;
+      return add(scale(keys[k].translate, 1 - w), scale(keys[k + 1].translate, w));
+    }
+    default: return {0, 0, 0};
+  }
+}
+
+double RigidMotion::angle(double t) const {
+  switch (type) {
+    case Type::Rotate: return angular_velocity * t;
+    case Type::Keyframes: {
+      const auto [k, w] = locate(keys, t);
+      if (keys.size() == 1) return keys[0].angle;
+      return (1 - w) * keys[k].angle + w * keys[k + 1].angle;
+    }
+    default: return 0.0;
+  }
+}
+
+Vec3 RigidMotion::linear_velocity(double t) const {
+  switch (type) {
+    case Type::Translate: return velocity;
+    case Type::Keyframes: {
+      if (keys.size() < 2 || t < keys.front().t || t >= keys.back().t) return {0, 0, 0};
+      const auto [k, w] = locate(keys, t);
+      (void)w;
+      return scale(sub(keys[k + 1].translate, keys[k].translate), 1.0 / (keys[k + 1].t - keys[k].t));
+    }
+    default: return {0, 0, 0};
+  }
+}
+
+double RigidMotion::spin(double t) const {
+  switch (type) {
+    case Type::Rotate: return angular_velocity;
+    case Type::Keyframes: {
+      if (keys.size() < 2 || t < keys.front().t || t >= keys.back().t) return 0.0;
+      const auto [k, w] = locate(keys, t);
+      (void)w;
+      return (keys[k + 1].angle - keys[k].angle) / (keys[k + 1].t - keys[k].t);
+    }
+    default: return 0.0;
+  }
+}
+
+Collider::Contact Collider::query(const double xp[3], double t) const {
+  const Vec3 x{xp[0], xp[1], xp[2]};
+  const Vec3 c = add(point, motion.displacement(t));   // reference point now
+  const Vec3 omega = scale(motion.axis, motion.spin(t));
+  const Vec3 vlin = motion.linear_velocity(t);
+  Contact ct{};
+  if (shape == Shape::Sphere) {
+    const Vec3 r = sub(x, c);
+    const double len = norm(r);
+    ct.normal = len > 1e-300 ? scale(r, 1.0 / len) : Vec3{0, 1, 0};
+    ct.distance = len - radius - thickness;
+    const Vec3 surface = add(c, scale(ct.normal, radius));
+    ct.velocity = add(vlin, cross(omega, sub(surface, c)));
+  } else {
+    ct.normal = rotate(normal, motion.axis, motion.angle(t));
+    ct.distance = dot(sub(x, c), ct.normal) - thickness;
+    const Vec3 surface = sub(x, scale(ct.normal, ct.distance + thickness));
+    ct.velocity = add(vlin, cross(omega, sub(surface, c)));
+  }
+  return ct;
+}
+
+int ColliderSet::resolve_contacts(State& s, double t, double h) const {
+  if (colliders_.empty()) return 0;
+  const Index n = s.size();
+  int contacts = 0;
+#pragma omp parallel for reduction(+ : contacts) schedule(static)
+  for (Index i = 0; i < n; ++i) {
+    if (s.pinned[i]) continue;
+    double* x = &s.x[3 * i];
+    double* v = &s.v[3 * i];
+    for (const Collider& col : colliders_) {
+      const Collider::Contact ct = col.query(x, t);
+      if (ct.distance >= 0) continue;
+      ++contacts;
+      for (int k = 0; k < 3; ++k) x[k] -= ct.distance * ct.normal[k];   // onto the offset surface
+      const Vec3 vrel{v[0] - ct.velocity[0], v[1] - ct.velocity[1], v[2] - ct.velocity[2]};
+      const double vn = dot(vrel, ct.normal);
+      if (vn >= 0) continue;                                     // already separating
+      Vec3 vt = sub(vrel, scale(ct.normal, vn));                 // tangential part
+      const double dvn = -vn;                                    // normal velocity removed (>= 0)
+      const double vt_len = norm(vt);
+      if (vt_len <= col.mu_static * dvn) {
+        vt = {0, 0, 0};                                          // static friction: stick
+      } else if (col.mu_kinetic > 0) {
+        vt = scale(vt, std::max(0.0, 1.0 - col.mu_kinetic * dvn / vt_len));
+      }
+      const Vec3 vt_old = sub(vrel, scale(ct.normal, vn));
+      for (int k = 0; k < 3; ++k) {
+        v[k] = ct.velocity[k] + vt[k];
+        x[k] += h * (vt[k] - vt_old[k]);  // move as the corrected tangential velocity would have
+      }
+    }
+  }
+  return contacts;
+}
+
+namespace {
+
+Vec3 read_vec3(const Params& p, const std::string& key, const Vec3& def, bool required = false) {
+  Params c = p.child(key);
+  if (!c.valid()) {
+    if (required) p.fail("missing '" + key + "' (a list of 3 numbers).");
+    return def;
+  }
+  const auto v = c.as_doubles();
+  if (v.size() != 3) c.fail("needs 3 numbers, e.g. [0, 1, 0].");
+  for (double x : v)
+    if (!std::isfinite(x)) c.fail("components must be finite numbers (got NaN or Inf).");
+  return {v[0], v[1], v[2]};
+}
+
+Vec3 unit(const Params& p, const std::string& key, Vec3 v) {
+  const double len = norm(v);
+  if (!(len > 1e-12)) p.child(key).fail("must be a non-zero vector.");
+  return scale(v, 1.0 / len);
+}
+
+}  // namespace
+
+ColliderSet ColliderSet::parse(const Params& list) {
+  ColliderSet set;
+  if (!list.valid()) return set;
+  if (!list.is_sequence()) list.fail("must be a list of colliders, e.g. colliders: [{type: plane, point: [0,0,0], normal: [0,1,0]}].");
+  for (std::size_t k = 0; k < list.size(); ++k) {
+    const Params p = list.at(k);
+    if (!p.is_map()) p.fail("a collider is a mapping with 'type' (sphere or plane).");
+    Collider c;
+    const std::string type = p.get_choice("type", "", {"sphere", "plane"});
+    if (type.empty()) p.fail("missing 'type': sphere or plane.");
+    c.name = p.get("name", type + " " + std::to_string(k));
+    if (type == "sphere") {
+      c.shape = Collider::Shape::Sphere;
+      c.point = read_vec3(p, "center", {0, 0, 0}, true);
+      Params r = p.child("radius");
+      if (!r.valid()) p.fail("a sphere needs 'radius' (m, > 0).");
+      c.radius = r.as_double();
+      if (!std::isfinite(c.radius) || c.radius <= 0) r.fail("radius must be a finite number > 0 (got " + std::to_string(c.radius) + ").");
+    } else {
+      c.shape = Collider::Shape::Plane;
+      c.point = read_vec3(p, "point", {0, 0, 0});
+      c.normal = unit(p, "normal", read_vec3(p, "normal", {0, 1, 0}));
+    }
+    c.thickness = p.get_nonnegative("thickness", 0.0);
+    Params fr = p.child("friction");
+    if (fr.is_scalar()) {
+      c.mu_static = c.mu_kinetic = p.get_nonnegative("friction", 0.0);
+    } else if (fr.is_map()) {
+      c.mu_static = fr.get_nonnegative("static", 0.0);
+      c.mu_kinetic = fr.get_nonnegative("kinetic", c.mu_static);
+      fr.check_unused();
+      if (c.mu_kinetic > c.mu_static)
+        fr.fail("kinetic friction (" + std::to_string(c.mu_kinetic) + ") must not exceed static friction (" +
+                std::to_string(c.mu_static) + ").");
+    } else if (fr.valid()) {
+      fr.fail("friction is a number or {static: mu_s, kinetic: mu_k}.");
+    }
+    Params m = p.child("motion");
+    if (m.valid()) {
+      if (!m.is_map()) m.fail("motion is a mapping with 'type': fixed, translate, rotate or keyframes.");
+      const std::string mt = m.get_choice("type", "fixed", {"fixed", "translate", "rotate", "keyframes"});
+      RigidMotion& mo = c.motion;
+      if (mt == "translate") {
+        mo.type = RigidMotion::Type::Translate;
+        mo.velocity = read_vec3(m, "velocity", {0, 0, 0}, true);
+      } else if (mt == "rotate") {
+        mo.type = RigidMotion::Type::Rotate;
+        mo.axis = unit(m, "axis", read_vec3(m, "axis", {0, 1, 0}));
+        mo.angular_velocity = m.get("angular_velocity", 0.0);
+        if (!std::isfinite(mo.angular_velocity)) m.child("angular_velocity").fail("must be a finite number (rad/s).");
+      } else if (mt == "keyframes") {
+        mo.type = RigidMotion::Type::Keyframes;
+        mo.axis = unit(m, "axis", read_vec3(m, "axis", {0, 1, 0}));
+        Params keys = m.child("keys");
+        if (!keys.is_sequence() || keys.size() == 0)
+          m.fail("keyframes need 'keys': a list of {t, translate: [x,y,z], angle} sorted by t.");
+        for (std::size_t q = 0; q < keys.size(); ++q) {
+          Params kp = keys.at(q);
+          RigidMotion::Key key{kp.require_double("t"), read_vec3(kp, "translate", {0, 0, 0}), kp.get("angle", 0.0)};
+          if (!std::isfinite(key.t) || !std::isfinite(key.angle)) kp.fail("t and angle must be finite numbers.");
+          if (!mo.keys.empty() && !(key.t > mo.keys.back().t)) kp.fail("keyframe times must increase.");
+          kp.check_unused();
+          mo.keys.push_back(key);
+        }
+      }
+      m.check_unused();
+    }
+    p.check_unused();
+    set.add(c);
+  }
+  return set;
+}
+
+}  // namespace loom
