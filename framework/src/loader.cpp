@@ -153,6 +153,25 @@ void PluginLoader::ensure(PluginKind kind, const std::string& name) {
                      "'. Fix: the registered name must match the module file name.");
 }
 
+void PluginLoader::ensure_backend(const std::string& backend) {
+  if (backend == "cpu") return;
+  const std::string file = "loom_backend_" + backend + ".so";
+  for (const auto& dir : search_path_) {
+    std::error_code ec;
+    const fs::path p = fs::path(dir) / file;
+    if (fs::exists(p, ec)) {
+      load_file(p.string());
+      return;
+    }
+  }
+  std::string dirs;
+  for (const auto& d : search_path_) dirs += (dirs.empty() ? "" : ":") + d;
+  throw InputError("backend '" + backend + "' is not in this build: " + file + " was not found in " + dirs +
+                   (backend == "cuda" ? ". It is built only when CMake finds the CUDA toolkit (nvcc); "
+                                        "rebuild with CUDA, or set backend: cpu."
+                                      : ". Fix: set backend: cpu."));
+}
+
 void PluginLoader::load_all(std::vector<std::string>& errors) {
   for (const auto& dir : search_path_) {
     std::error_code ec;

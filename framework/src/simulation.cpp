@@ -185,7 +185,11 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   if (!mat.is_map()) root.fail("missing 'material' section. Fix: add material: {type: mass_spring, ...}.");
   material_name_ = mat.require_string("type");
   loader.ensure(PluginKind::Material, material_name_);
-  sc.material = loader.registry().make_material(material_name_, sc.backend, mat, sc.mesh);
+  loader.ensure_backend(sc.backend);
+  // A material describes the cloth (masses, elements, curves); execution backends read that
+  // description, so a material without a backend-specific version is used as is.
+  const bool material_on_backend = loader.registry().has(PluginKind::Material, material_name_, sc.backend);
+  sc.material = loader.registry().make_material(material_name_, material_on_backend ? sc.backend : "cpu", mat, sc.mesh);
 
   // ---- state ----
   State& st = sc.state;

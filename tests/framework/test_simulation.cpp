@@ -117,6 +117,9 @@ TEST_F(Fixture, BadInputIsOneClearError) {
   EXPECT_NE(e.find("missing 'mesh'"), std::string::npos) << e;
   e = error_of(with("  grid: {nx: 4, ny: 3, width: 1.0, height: 0.5}", "  obj: missing.obj"));
   EXPECT_NE(e.find("not found"), std::string::npos) << e;
+  e = error_of(base + "backend: cuda\n");
+  EXPECT_NE(e.find("backend 'cuda' is not in this build"), std::string::npos) << e;
+  EXPECT_NE(e.find("loom_backend_cuda.so"), std::string::npos) << e;
   e = error_of(base + "backend: gpu\n");
   EXPECT_NE(e.find("cpu, cuda"), std::string::npos) << e;
 }

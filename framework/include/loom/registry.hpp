@@ -96,6 +96,10 @@ class PluginLoader {
   /// InputError naming what is available (with "did you mean") when no module is found,
   /// and a clear error when dlopen fails or the ABI version differs.
   void ensure(PluginKind kind, const std::string& name);
+  /// Load the execution-backend module loom_backend_<backend>.so (for backends other than
+  /// "cpu"), which registers the (kind, name, backend) plugins it implements. Throws
+  /// InputError naming what is missing when the module is not on the path.
+  void ensure_backend(const std::string& backend);
   /// Whether a module for (kind, name) exists on the path (or is already registered).
   bool available(PluginKind kind, const std::string& name) const;
   /// Names of all modules of a kind on the path.
