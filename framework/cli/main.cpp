@@ -13,6 +13,7 @@
 #include "loom/output.hpp"
 #include "loom/registry.hpp"
 #include "loom/simulation.hpp"
+#include "loom/study.hpp"
 #include "render_cmd.hpp"
 
 namespace {
@@ -28,6 +29,10 @@ usage:
   loom render RUN_DIR [--scene SCENE.yaml] [--out DIR] [--set render.key=value]...
       Draw the frames of a run to PNG images (DIR, default RUN_DIR/render) with the
       renderer plugin the scene's render section names (default: gl).
+  loom study SCENE.yaml STUDY.yaml [--out DIR]
+      Work-precision study: run the study's combos over a ladder of steps against a
+      verified RK4 reference; write DIR/study.csv (error, cost, status per combo, step and
+      time), DIR/reference.txt and DIR/study.png (default DIR: out/study_<study name>).
   loom plugins
       List the plugins on the plugin path (kind, name, backend, version, module).
   loom --help | --version
@@ -48,7 +53,7 @@ exit codes: 0 ok, 1 internal error, 2 bad input (scene, mesh, flags), 3 diverged
 )";
 
 struct Args {
-  std::string command, scene, out, render_scene;
+  std::string command, scene, out, render_scene, study;
   int frames = -1;
   bool quiet = false;
   std::vector<std::string> sets;
@@ -71,11 +76,11 @@ Args parse_args(int argc, char** argv) {
     std::cout << "loom " << LOOM_VERSION_STRING << " (plugin ABI " << loom::kPluginAbiVersion << ")\n";
     std::exit(0);
   }
-  const std::vector<std::string> commands = {"run", "validate", "plugins", "render"};
+  const std::vector<std::string> commands = {"run", "validate", "plugins", "render", "study"};
   if (std::find(commands.begin(), commands.end(), a.command) == commands.end()) {
     const std::string hint = loom::closest_match(a.command, commands);
     usage_error("unknown command '" + a.command + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
-                "; commands: run, validate, render, plugins");
+                "; commands: run, validate, study, render, plugins");
   }
   for (int i = 2; i < argc; ++i) {
     const std::string s = argv[i];
@@ -111,10 +116,14 @@ Args parse_args(int argc, char** argv) {
       usage_error("unknown option '" + s + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)"));
     } else if (a.scene.empty()) {
       a.scene = s;
+    } else if (a.command == "study" && a.study.empty()) {
+      a.study = s;
     } else {
       usage_error("unexpected argument '" + s + "' (one scene file per run)");
     }
   }
+  if (a.command == "study" && (a.scene.empty() || a.study.empty()))
+    usage_error("study needs a scene and a study file, e.g. loom study scenes/hanging_10x10.yaml studies/hanging_k2000.yaml");
   if (a.command == "render" && a.scene.empty()) usage_error("render needs the output folder of a run, e.g. loom render out/hanging_cloth");
   if (a.command != "plugins" && a.scene.empty()) usage_error(a.command + " needs a scene file, e.g. loom " + a.command + " scenes/hanging_cloth.yaml");
   if (a.command == "plugins" && !a.scene.empty()) usage_error("plugins takes no scene file");
@@ -151,6 +160,34 @@ int main(int argc, char** argv) {
     if (args.command == "render") {
       loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
       return loom::cli::render_command(r);
+    }
+    if (args.command == "study") {
+      loom::StudyOptions opt;
+      opt.scene = args.scene;
+      opt.study = args.study;
+      opt.out_dir = args.out.empty() ? "out/study_" + stem(args.study) : args.out;
+      const bool tty = ::isatty(STDOUT_FILENO) && !args.quiet;
+      const auto t0 = std::chrono::steady_clock::now();
+      opt.progress = [&](const std::string& what, double frac) {
+        const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        if (tty) {
+          const int width = 30, filled = static_cast<int>(width * frac);
+          std::printf("\r\033[K[%.*s%*s] %3d%%  %.0f s  %s", filled, "##############################", width - filled, "",
+                      static_cast<int>(100 * frac), el, what.c_str());
+          std::fflush(stdout);
+        } else if (!args.quiet) {
+          std::printf("[%3d%%] %.0f s  %s\n", static_cast<int>(100 * frac), el, what.c_str());
+        }
+      };
+      const auto rows = loom::run_study(opt);
+      if (tty) std::printf("\n");
+      int bad = 0;
+      for (const auto& r : rows) bad += r.status != "ok";
+      if (!args.quiet)
+        std::printf("loom: study done in %.1f s: %zu rows (%d not ok: diverged/failed/timeout); wrote %s/study.csv\n",
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), rows.size(), bad,
+                    opt.out_dir.c_str());
+      return 0;
     }
     loom::Registry registry;
     loom::PluginLoader loader(registry);

@@ -413,7 +413,9 @@ void Simulation::step() {
   integrator_->step(*scene_, dt_);
   if (!scene_->colliders.empty() && !integrator_->handles_contacts())
     scene_->colliders.resolve_contacts(scene_->state, scene_->state.time, dt_);
-  step_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  step_seconds_ += secs;
+  step_seconds_total_ += secs;
   ++steps_in_frame_;
   const StepStats s = integrator_->last_step();
   force_evals_ += s.force_evaluations;

@@ -56,6 +56,12 @@ class Simulation {
   /// Folder of the scene file (relative paths in the scene resolve against it).
   const std::string& base_dir() const { return base_dir_; }
 
+  /// Totals since construction (for studies).
+  long long force_evaluations() const { return force_evals_; }
+  long long linear_iterations() const { return linear_iters_; }
+  /// Seconds spent inside Integrator::step since construction.
+  double step_seconds_total() const { return step_seconds_total_; }
+
   /// Lines describing what was built (counts, plugins, backend), for `loom validate`.
   std::vector<std::string> describe() const;
 
@@ -96,6 +102,7 @@ class Simulation {
   GuardOptions guard_;
   long long force_evals_ = 0, linear_iters_ = 0;
   double step_seconds_ = 0;
+  double step_seconds_total_ = 0;
   long long steps_in_frame_ = 0;
 };
 

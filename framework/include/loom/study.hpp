@@ -1,0 +1,45 @@
+// Work-precision studies: run combos over a ladder of steps against a verified reference,
+// and measure error against cost (`loom study SCENE STUDY`).
+#pragma once
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "loom/registry.hpp"
+
+namespace loom {
+
+struct StudyOptions {
+  std::string scene;       ///< scene file
+  std::string study;       ///< study file
+  std::string out_dir;     ///< where study.csv (and the plot) go
+  bool plot = true;        ///< call scripts/plot_study.py when python3 + matplotlib exist
+  std::function<void(const std::string&, double)> progress;  ///< (what, fraction done)
+};
+
+/// One row of study.csv: a combo at one step size, measured at one time.
+struct StudyRow {
+  std::string combo;
+  double h = 0;
+  double time = 0;
+  std::string status;          ///< ok, diverged, solver_failed, timeout
+  double rms_error = 0;        ///< RMS |x - x_ref| over free vertices / cloth size
+  double max_error = 0;        ///< max |x - x_ref| / cloth size
+  double observed_order = 0;   ///< log2(e(2h) / e(h)) against the previous rung (0 if none)
+  double energy_drift = 0;     ///< (E(t) - E(0)) / (M g L)
+  double sag = 0;              ///< lowest free vertex height drop below its start (m)
+  double sag_error = 0;        ///< |sag - sag_ref|
+  double wall_seconds = 0;     ///< time inside the integrator up to this time
+  double wall_per_sim_second = 0;
+  long long force_evaluations = 0;
+  long long linear_iterations = 0;
+  long long steps = 0;
+  std::string note;            ///< the divergence message, etc.
+};
+
+/// Run the study; writes OUT/study.csv, OUT/reference.txt and (if possible) OUT/study.png.
+/// Throws InputError for bad study files.
+std::vector<StudyRow> run_study(const StudyOptions& opt);
+
+}  // namespace loom
