@@ -2,12 +2,52 @@
 // forces divided by mass, pinned vertices follow their prescribed velocity at every stage.
 #pragma once
 
+#include <array>
+#include <cstddef>
 #include <vector>
 
 #include "loom/integrator.hpp"
+#include "loom/kernels/rk4.hpp"
 #include "loom/params.hpp"
 
 namespace loom {
+
+/// Below this many vertices the vertex loops run on the calling thread.
+constexpr Index kRk4SerialVertices = 4096;
+
+/// One RK4 step on raw arrays (3n each; w has n entries). force(xs, vs, f) overwrites f with
+/// the internal forces at (xs, vs). Work arrays xs, vs, f, ax, av (3n each) are the caller's.
+template <class T, class Force>
+void rk4_step_arrays(Index n, T* x, T* v, const T* w, const std::array<T, 3>& g, T h, T* xs, T* vs, T* f, T* ax,
+                     T* av, Force&& force) {
+  using namespace kernels;
+  const T hh = h / T(2);
+  const bool par = n >= kRk4SerialVertices;
+  force(static_cast<const T*>(x), static_cast<const T*>(v), f);
+#pragma omp parallel for schedule(static) if (par)
+  for (Index i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) {
+      const std::size_t d = 3 * static_cast<std::size_t>(i) + a;
+      rk4_first(x[d], v[d], rk4_accel(f[d], w[i], g[a]), xs[d], vs[d], ax[d], av[d], hh);
+    }
+  for (int stage = 2; stage <= 3; ++stage) {
+    force(static_cast<const T*>(xs), static_cast<const T*>(vs), f);
+    const T next = stage == 2 ? hh : h;
+#pragma omp parallel for schedule(static) if (par)
+    for (Index i = 0; i < n; ++i)
+      for (int a = 0; a < 3; ++a) {
+        const std::size_t d = 3 * static_cast<std::size_t>(i) + a;
+        rk4_middle(x[d], v[d], rk4_accel(f[d], w[i], g[a]), xs[d], vs[d], ax[d], av[d], next);
+      }
+  }
+  force(static_cast<const T*>(xs), static_cast<const T*>(vs), f);
+#pragma omp parallel for schedule(static) if (par)
+  for (Index i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) {
+      const std::size_t d = 3 * static_cast<std::size_t>(i) + a;
+      rk4_last(x[d], v[d], rk4_accel(f[d], w[i], g[a]), vs[d], ax[d], av[d], h);
+    }
+}
 
 class Rk4Integrator final : public Integrator {
  public:
