@@ -29,10 +29,12 @@ usage:
   loom render RUN_DIR [--scene SCENE.yaml] [--out DIR] [--set render.key=value]...
       Draw the frames of a run to PNG images (DIR, default RUN_DIR/render) with the
       renderer plugin the scene's render section names (default: gl).
-  loom study SCENE.yaml STUDY.yaml [--out DIR]
+  loom study SCENE.yaml STUDY.yaml [--out DIR] [--stability]
       Work-precision study: run the study's combos over a ladder of steps against a
       verified RK4 reference; write DIR/study.csv (error, cost, status per combo, step and
       time), DIR/reference.txt and DIR/study.png (default DIR: out/study_<study name>).
+      --stability: instead, the study's stability atlas: the largest stable step of each
+      combo by bisection, over a swept key (stiffness, mass, ...): DIR/stability.csv.
   loom plugins
       List the plugins on the plugin path (kind, name, backend, version, module).
   loom --help | --version
@@ -56,6 +58,7 @@ struct Args {
   std::string command, scene, out, render_scene, study;
   int frames = -1;
   bool quiet = false;
+  bool stability = false;
   std::vector<std::string> sets;
 };
 
@@ -109,6 +112,8 @@ Args parse_args(int argc, char** argv) {
       a.sets.push_back(kv);
     } else if (a.command == "render" && (s == "--scene" || s.rfind("--scene=", 0) == 0)) {
       a.render_scene = value("--scene");
+    } else if (a.command == "study" && s == "--stability") {
+      a.stability = true;
     } else if (s == "--quiet" || s == "-q") {
       a.quiet = true;
     } else if (!s.empty() && s[0] == '-') {
@@ -179,6 +184,18 @@ int main(int argc, char** argv) {
           std::printf("[%3d%%] %.0f s  %s\n", static_cast<int>(100 * frac), el, what.c_str());
         }
       };
+      if (args.stability) {
+        const auto rows = loom::run_stability(opt);
+        if (tty) std::printf("\n");
+        if (!args.quiet) {
+          std::printf("%-28s %-22s %-12s %-12s %s\n", "COMBO", "VALUE", "H_STABLE", "H_UNSTABLE", "FAILURE");
+          for (const auto& r : rows)
+            std::printf("%-28s %-22s %-12.4g %-12.4g %s\n", r.combo.c_str(), r.value.c_str(), r.h_stable, r.h_unstable,
+                        r.failure.c_str());
+          std::printf("loom: wrote %s/stability.csv\n", opt.out_dir.c_str());
+        }
+        return 0;
+      }
       const auto rows = loom::run_study(opt);
       if (tty) std::printf("\n");
       int bad = 0;

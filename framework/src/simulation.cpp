@@ -107,6 +107,11 @@ std::vector<Index> pin_group(const Mesh& mesh, const std::string& group, const P
 
 }  // namespace
 
+namespace {
+bool g_notes = true;
+}
+void Simulation::set_notes(bool on) { g_notes = on; }
+
 Simulation::Simulation() = default;
 Simulation::~Simulation() = default;
 
@@ -295,7 +300,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
                 (hint.empty() ? "" : " (did you mean '" + hint + "'?)") + ". Available: " +
                 (avail.empty() ? "none" : join(avail)) + ".");
     }
-    if (!skipped.empty() && is_output_rank())
+    if (!skipped.empty() && is_output_rank() && g_notes)
       std::cerr << "loom: solver " << join(skipped) << " not available in this build; using " << chosen << "\n";
     solver_name_ = chosen;
     loader.ensure(PluginKind::Solver, chosen);
@@ -309,7 +314,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     if (solver.is_map())
       for (const auto& k : solver.keys()) solver.mark_used(k);
     solver_name_ = "";
-    if (is_output_rank())
+    if (is_output_rank() && g_notes)
       std::cerr << "loom: note: the 'solver' section is ignored: integrator '" << integrator_name_
                 << "' is explicit and solves no linear system.\n";
   }

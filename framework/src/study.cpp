@@ -203,6 +203,7 @@ std::string find_plot_script() {
 }  // namespace
 
 std::vector<StudyRow> run_study(const StudyOptions& opt) {
+  Simulation::set_notes(false);
   Params study = Params::from_file(opt.study);
   if (!study.is_map()) study.fail("a study file is a mapping with times, steps, combos (and reference).");
   study.child("description");
@@ -357,6 +358,135 @@ std::vector<StudyRow> run_study(const StudyOptions& opt) {
     }
   }
   (void)ref_change;
+  return rows;
+}
+
+std::vector<StabilityRow> run_stability(const StudyOptions& opt) {
+  Simulation::set_notes(false);
+  Params study = Params::from_file(opt.study);
+  for (const auto& k : study.keys()) study.mark_used(k);
+  Params st = study.child("stability");
+  if (!st.is_map())
+    study.fail("no 'stability' section. Fix: add stability: {combos: [...], sweep: {key: material.stiffness, "
+               "values: [2e3, 2e5]}, horizon: 0.5, h_min: 1e-7, h_max: 0.05}.");
+  const double horizon = st.get_positive("horizon", 0.5);
+  const double h_min = st.get_positive("h_min", 1e-7);
+  const double h_max = st.get_positive("h_max", 0.05);
+  if (!(h_min < h_max)) st.fail("h_min must be smaller than h_max.");
+  const int bisections = st.get("bisections", 10);
+  if (bisections < 1 || bisections > 40) st.child("bisections").fail("bisections must be in [1, 40].");
+  const double max_strain = st.get_positive("max_strain", 1.0);
+  const double max_seconds = st.get_positive("max_seconds_per_run", 60.0);
+  std::vector<Combo> combos;
+  Params cp = st.child("combos");
+  if (!cp.is_sequence() || cp.size() == 0) st.fail("missing 'combos': a list of {name, set: {integrator.type: ...}}.");
+  for (std::size_t k = 0; k < cp.size(); ++k) {
+    Params c = cp.at(k);
+    Combo combo;
+    combo.name = c.require_string("name");
+    Params s = c.child("set");
+    if (s.valid())
+      for (const auto& key : s.keys()) combo.sets.push_back(key + "=" + yaml_scalar(s.child(key)));
+    c.check_unused();
+    combos.push_back(combo);
+  }
+  std::string key;
+  std::vector<std::string> values{""};
+  Params sw = st.child("sweep");
+  if (sw.valid()) {
+    key = sw.require_string("key");
+    Params vs = sw.child("values");
+    if (!vs.is_sequence() || vs.size() == 0) sw.fail("'values' is a non-empty list.");
+    values.clear();
+    for (std::size_t k = 0; k < vs.size(); ++k) values.push_back(yaml_scalar(vs.at(k)));
+    sw.check_unused();
+  }
+  st.check_unused();
+
+  Registry registry;
+  PluginLoader loader(registry);
+  prepare_output_dir(opt.out_dir);
+  std::ofstream csv(fs::path(opt.out_dir) / "stability.csv");
+  csv << "combo,key,value,h_stable,h_unstable,runs,failure\n";
+  csv.precision(6);
+  std::vector<StabilityRow> rows;
+  const std::size_t total = combos.size() * values.size();
+  std::size_t done = 0;
+
+  // true = stable to the horizon
+  auto try_step = [&](const std::vector<std::string>& sets, double h, std::string& why) {
+    std::vector<std::string> all = sets;
+    all.push_back("integrator.dt=" + Runner::fmt_exact(h));
+    Simulation sim(opt.scene, all, loader);
+    const long long n = static_cast<long long>(std::ceil(horizon / h));
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      for (long long k = 0; k < n; ++k) {
+        sim.step();
+        if ((k & 255) == 255 || k == n - 1) {
+          const double s = sim.scene().material->max_strain(sim.scene().state.x);
+          if (!(s <= max_strain)) {
+            why = "strain " + fmt(s) + " > " + fmt(max_strain) + " at t = " + fmt(sim.scene().state.time);
+            return false;
+          }
+          if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > max_seconds) {
+            why = "timeout";
+            return true;  // did not fail within the time budget: count as stable, noted
+          }
+        }
+      }
+    } catch (const DivergenceError&) {
+      why = "diverged";
+      return false;
+    } catch (const SolverError&) {
+      why = "solver failed";
+      return false;
+    }
+    return true;
+  };
+
+  for (const Combo& combo : combos) {
+    for (const std::string& value : values) {
+      if (opt.progress) opt.progress(combo.name + (key.empty() ? "" : ", " + key + " = " + value), double(done) / total);
+      std::vector<std::string> sets = combo.sets;
+      if (!key.empty()) sets.push_back(key + "=" + value);
+      StabilityRow row;
+      row.combo = combo.name;
+      row.key = key;
+      row.value = value;
+      std::string why;
+      double lo = h_min, hi = h_max;
+      ++row.runs;
+      if (try_step(sets, h_max, why)) {
+        row.h_stable = h_max;
+      } else {
+        row.failure = why;
+        ++row.runs;
+        if (!try_step(sets, h_min, why)) {
+          row.h_unstable = h_min;
+          row.failure = why;
+        } else {
+          for (int b = 0; b < bisections; ++b) {
+            const double mid = std::sqrt(lo * hi);
+            ++row.runs;
+            if (try_step(sets, mid, why)) lo = mid;
+            else {
+              hi = mid;
+              row.failure = why;
+            }
+          }
+          row.h_stable = lo;
+          row.h_unstable = hi;
+        }
+      }
+      csv << csv_escape(row.combo) << ',' << row.key << ',' << csv_escape(row.value) << ',' << row.h_stable << ','
+          << row.h_unstable << ',' << row.runs << ',' << csv_escape(row.failure) << '\n';
+      csv.flush();
+      rows.push_back(row);
+      ++done;
+    }
+  }
+  if (opt.progress) opt.progress("done", 1.0);
   return rows;
 }
 

@@ -37,6 +37,8 @@ class Simulation {
                                                  const std::string& base_dir,
                                                  const std::vector<std::string>& overrides, PluginLoader& loader);
   ~Simulation();
+  /// Print notes (ignored solver section, solver fallback) to stderr while building (default on).
+  static void set_notes(bool on);
 
   Scene& scene() { return *scene_; }
   const Scene& scene() const { return *scene_; }

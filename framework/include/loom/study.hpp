@@ -15,6 +15,7 @@ struct StudyOptions {
   std::string study;       ///< study file
   std::string out_dir;     ///< where study.csv (and the plot) go
   bool plot = true;        ///< call scripts/plot_study.py when python3 + matplotlib exist
+  bool stability = false;  ///< run the study file's `stability:` atlas instead of the work-precision part
   std::function<void(const std::string&, double)> progress;  ///< (what, fraction done)
 };
 
@@ -37,6 +38,22 @@ struct StudyRow {
   long long steps = 0;
   std::string note;            ///< the divergence message, etc.
 };
+
+/// One row of stability.csv: the largest stable step of a combo at one sweep value.
+struct StabilityRow {
+  std::string combo;
+  std::string key;         ///< the swept scene key (e.g. material.stiffness)
+  std::string value;       ///< its value (YAML text)
+  double h_stable = 0;     ///< largest step found stable (0: none in [h_min, h_max])
+  double h_unstable = 0;   ///< smallest step found unstable (0: all stable up to h_max)
+  int runs = 0;
+  std::string failure;     ///< how the smallest unstable step failed
+};
+
+/// Stability atlas: for each combo and each value of the swept key, bisect (in log h) for
+/// the largest step that runs to the horizon without diverging (NaN/Inf, speed bound, strain
+/// above max_strain, failed solve). Writes OUT/stability.csv.
+std::vector<StabilityRow> run_stability(const StudyOptions& opt);
 
 /// Run the study; writes OUT/study.csv, OUT/reference.txt and (if possible) OUT/study.png.
 /// Throws InputError for bad study files.
