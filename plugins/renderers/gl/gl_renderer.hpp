@@ -1,0 +1,121 @@
+// The `gl` renderer: woven-fabric shading (Kang & Cho 2011, section 4) with OpenGL ES 3
+// through a headless EGL context (Mesa llvmpipe on a CPU-only machine), one PNG per frame.
+#pragma once
+
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "loom/kernels/shading.hpp"
+#include "loom/mesh.hpp"
+#include "loom/params.hpp"
+#include "loom/renderer.hpp"
+
+namespace loom::render {
+
+/// Named weave patterns (n_w, n_pi, n_sigma) of section 4.2 / Fig. 10.
+struct WeavePattern {
+  const char* name;
+  int n_w, n_pi, n_sigma;
+};
+const std::vector<WeavePattern>& weave_patterns();
+
+/// Read one fabric mapping (the contents of a materials/fabrics/*.yaml file). Throws
+/// InputError naming file:line for unknown weaves, out-of-range values and unknown keys.
+shading::Fabric parse_fabric(const Params& p);
+shading::Fabric load_fabric_file(const std::string& path);
+/// The fabric used when a scene names none (a plain-woven cotton).
+shading::Fabric default_fabric();
+
+struct CameraSpec {
+  bool has_position = false, has_target = false, has_up = false;
+  glm::vec3 position{0.0f}, target{0.0f}, up{0.0f, 1.0f, 0.0f};
+  float fov_deg = 35.0f;  ///< vertical field of view
+};
+
+struct LightSpec {
+  bool has_direction = false;
+  glm::vec3 direction{0.0f, 0.0f, 1.0f};  ///< towards the light (world space)
+  glm::vec3 color{1.0f};
+  float intensity = 1.0f;
+  float ambient = 0.12f;
+};
+
+/// Everything the renderer reads from a scene's `render:` section.
+struct RenderSettings {
+  int width = 1280, height = 720;
+  int supersample = 2;   ///< render at supersample x the size and box-filter down
+  shading::Fabric fabric = default_fabric();
+  CameraSpec camera;
+  LightSpec light;
+  glm::vec3 background{1.0f, 1.0f, 1.0f};  ///< display-space RGB
+  float exposure = 1.0f;
+};
+
+/// Parse the `render:` section; relative fabric paths are resolved against base_dir.
+RenderSettings parse_render_settings(const Params& render, const std::string& base_dir);
+
+struct Camera {
+  glm::vec3 eye{0.0f}, target{0.0f}, up{0.0f, 1.0f, 0.0f};
+  float fov_deg = 35.0f;
+  int width = 1, height = 1;
+  glm::mat4 view{1.0f}, proj{1.0f};
+  /// Unit direction of the ray through image point (px, py), pixels from the top-left corner.
+  glm::vec3 ray(float px, float py) const;
+};
+
+/// The camera a spec gives for a cloth with the given bounding box: unset position/target
+/// frame the box (looking along its thinnest axis, tilted), the sphere around it filling the view.
+Camera make_camera(const CameraSpec& spec, glm::vec3 box_min, glm::vec3 box_max, int width, int height);
+/// Unit direction towards the light (default: over the viewer's left shoulder).
+glm::vec3 light_direction(const LightSpec& spec, const Camera& cam);
+
+/// Per-vertex area-weighted normals and UV tangents (dP/du) of a triangle mesh, written into
+/// normals/tangents (3n floats each). No allocation.
+void vertex_frames(std::span<const float> x, std::span<const float> uv, std::span<const Index> tris,
+                   std::span<float> normals, std::span<float> tangents);
+/// Texture coordinates: the mesh's if it has them, else planar from the positions (the two
+/// longest bounding-box axes, in the mesh's units, origin at the box corner).
+std::vector<float> texture_coords(const Mesh& mesh);
+
+class EglContext;
+
+class GlRenderer final : public Renderer {
+ public:
+  explicit GlRenderer(RenderSettings settings);
+  ~GlRenderer() override;
+  std::string name() const override { return "gl"; }
+  void begin(const Mesh& mesh) override;
+  void render(std::span<const double> x, const std::string& png_path) override;
+
+  /// Render positions x into the RGB image returned (width*height*3 bytes, top row first).
+  const std::vector<unsigned char>& render_image(std::span<const double> x);
+  const RenderSettings& settings() const { return settings_; }
+  const Camera& camera() const { return camera_; }
+  glm::vec3 light_dir() const { return light_dir_; }
+  /// GL_RENDERER string of the context (e.g. "llvmpipe (LLVM 15.0.6, 256 bits)").
+  std::string gl_renderer() const;
+
+ private:
+  void create_gl_objects();
+  void set_uniforms();
+  RenderSettings settings_;
+  std::unique_ptr<EglContext> egl_;
+  Camera camera_;
+  glm::vec3 light_dir_{0.0f, 0.0f, 1.0f};
+  Index num_vertices_ = 0;
+  std::vector<Index> triangles_;
+  std::vector<float> uv_, pos_, normals_, tangents_;
+  std::vector<unsigned char> readback_, image_;
+  unsigned program_ = 0, vao_ = 0, vbo_[4] = {0, 0, 0, 0}, ebo_ = 0, fbo_ = 0, rb_color_ = 0, rb_depth_ = 0;
+  bool begun_ = false;
+};
+
+/// PNG I/O (stb): RGB, 8 bit, top row first.
+void write_png(const std::string& path, int width, int height, const unsigned char* rgb);
+std::vector<unsigned char> read_png(const std::string& path, int& width, int& height);
+
+}  // namespace loom::render
