@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -66,6 +67,23 @@ int render_command(const RenderArgs& args) {
   }
   Params render = root.child("render");
   const std::string type = render.valid() ? render.get("type", std::string("gl")) : std::string("gl");
+  // MP4 of the frames through ffmpeg: auto (when ffmpeg is on the PATH), on, off.
+  std::string video = "auto";
+  double fps = 30.0;
+  if (render.valid()) {
+    Params v = render.child("video");
+    if (v.valid()) {
+      const std::string s = v.as_string();
+      if (s == "auto") video = "auto";
+      else if (s == "on" || s == "true" || s == "yes") video = "on";
+      else if (s == "off" || s == "false" || s == "no") video = "off";
+      else v.fail("unknown value '" + s + "'. Choose one of: auto, on, off.");
+    }
+    fps = render.get_positive("fps", fps);
+  }
+  const bool have_ffmpeg = std::system("command -v ffmpeg > /dev/null 2>&1") == 0;
+  if (video == "on" && !have_ffmpeg)
+    throw InputError("render.video is on but ffmpeg is not installed. Fix: apt-get install ffmpeg, or set render.video: off.");
 
   Registry registry;
   PluginLoader loader(registry);
@@ -94,6 +112,22 @@ int render_command(const RenderArgs& args) {
     }
   }
   if (!args.quiet) std::printf("\nloom: wrote %d images to %s\n", k, out_dir.string().c_str());
+  if (video != "off" && have_ffmpeg) {
+    const std::string mp4 = (out_dir / "render.mp4").string();
+    char rate[32];
+    std::snprintf(rate, sizeof(rate), "%g", fps);
+    auto quote = [](const std::string& t) {
+      std::string q = "'";
+      for (char c : t) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+      return q + "'";
+    };
+    const std::string cmd = "ffmpeg -y -loglevel error -framerate " + std::string(rate) + " -pattern_type glob -i " +
+                            quote((out_dir / "frame_*.png").string()) +
+                            " -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' -pix_fmt yuv420p -c:v libx264 " + quote(mp4);
+    if (std::system(cmd.c_str()) != 0)
+      throw std::runtime_error("ffmpeg failed to write " + mp4 + " (command: " + cmd + ")");
+    if (!args.quiet) std::printf("loom: wrote %s\n", mp4.c_str());
+  }
   return 0;
 }
 

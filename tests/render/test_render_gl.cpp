@@ -391,3 +391,13 @@ TEST(GlRendererCli, MissingEglDriverNamesThePackage) {
   EXPECT_EQ(std::count(out.begin(), out.end(), '\n'), 1) << "one clear error line: " << out;
   fs::remove_all(dir);
 }
+
+TEST(GlRendererCli, VideoOnWithoutFfmpegIsBadInput) {
+  if (std::system("command -v ffmpeg > /dev/null 2>&1") == 0) GTEST_SKIP() << "ffmpeg is installed here";
+  const std::string dir = make_run_dir("video");
+  std::string out;
+  EXPECT_EQ(run(std::string(LOOM_EXE) + " render " + dir + " --set render.video=on", out), kExitBadInput) << out;
+  EXPECT_NE(out.find("apt-get install ffmpeg"), std::string::npos) << out;
+  EXPECT_EQ(run(std::string(LOOM_EXE) + " render " + dir + " --set render.video=maybe", out), kExitBadInput) << out;
+  fs::remove_all(dir);
+}
