@@ -6,6 +6,7 @@
 #include <Eigen/Dense>
 #include <cmath>
 #include <complex>
+#include <iostream>
 #include <random>
 
 #include "loom/kernels/gnatv.hpp"
@@ -134,6 +135,8 @@ TEST(GnatvKernel, ForceIsMinusTheEnergyGradient) {
           worst_fd = std::max(worst_fd, std::fabs(F[j][d] + fd) / scale);
         }
     }
+    std::cout << "[ measured ] kind " << int(kind) << ": force vs -grad energy, complex step " << worst
+              << ", central FD " << worst_fd << " (relative to max |F|)\n";
     EXPECT_LT(worst, 1e-12) << "kind " << int(kind);
     EXPECT_LT(worst_fd, 1e-5) << "kind " << int(kind);
   }
@@ -180,6 +183,8 @@ TEST(GnatvKernel, ExactJacobianMatchesDerivativeOfForce) {
             for (int q = 0; q < 3; ++q)
               worst_sym = std::max(worst_sym, std::fabs(J[j][i][3 * r + q] - J[i][j][3 * q + r]));
     }
+    std::cout << "[ measured ] kind " << int(kind) << ": exact Jacobian vs complex step " << worst_cs
+              << ", vs central FD " << worst_fd << " (relative to max |J|)\n";
     EXPECT_LT(worst_cs, 1e-10) << "kind " << int(kind);  // rounding in the formula at 30% stretch
     EXPECT_LT(worst_fd, 1e-6) << "kind " << int(kind);
     EXPECT_EQ(worst_sym, 0.0);  // J_ij = J_ji^T exactly (G3)
