@@ -1,0 +1,69 @@
+// `petsc` linear solver: PETSc KSP (CG by default) on a block (bs = 3) BAIJ matrix of the
+// projected system A~ = S A S + (I - S) (NUMERICS.md 3.4), serially or under mpirun -n N:
+// each rank owns a contiguous range of block rows, assembles only those rows, KSP solves the
+// distributed system and the solution is gathered to every rank.
+#pragma once
+
+#include <mpi.h>
+
+#include <memory>
+#include <string>
+
+#include "loom/linear_solver.hpp"
+#include "loom/params.hpp"
+
+namespace loom {
+
+struct PetscSolverOptions {
+  std::string ksp = "cg";          ///< KSP type (cg, cr, minres, gmres, ...)
+  std::string pc = "bjacobi";      ///< jacobi | bjacobi | gamg | none | ... (any PC type name)
+  double tolerance = 1e-8;         ///< relative residual |S(b - A dv)| / |S(b - A z)|
+  int max_iterations = 10000;
+  int reuse_preconditioner_steps = 1;  ///< rebuild the PC every N factorize() calls
+  std::string options;             ///< PETSc options, e.g. "-ksp_type cg -pc_type gamg"
+  std::string matrix = "auto";     ///< auto (BAIJ, AIJ for gamg/hypre) | baij | aij
+  static PetscSolverOptions from_params(const Params& p);
+};
+
+class PetscSolver final : public LinearSolver {
+ public:
+  /// comm: the communicator the solve is distributed over (MPI_COMM_WORLD by default;
+  /// MPI_COMM_SELF for a serial solve on each rank).
+  explicit PetscSolver(const PetscSolverOptions& options = {}, MPI_Comm comm = MPI_COMM_WORLD);
+  explicit PetscSolver(const Params& p) : PetscSolver(PetscSolverOptions::from_params(p)) {}
+  ~PetscSolver() override;
+  PetscSolver(const PetscSolver&) = delete;
+  PetscSolver& operator=(const PetscSolver&) = delete;
+
+  std::string name() const override { return "petsc"; }
+  void analyze_pattern(const BsrMatrix& A, const Filter& S) override;
+  bool factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) override;
+  SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
+                    std::span<const double> z, std::span<double> dv) override;
+
+  int rank() const;
+  int ranks() const;
+  /// Block rows [begin, end) owned by this rank.
+  Index row_begin() const;
+  Index row_end() const;
+  double assemble_seconds() const;    ///< projection + MatSetValuesBlocked + assembly, last factorize
+  double setup_seconds() const;       ///< KSPSetUp (preconditioner), last factorize
+  std::string ksp_type() const;       ///< after options were applied
+  std::string pc_type() const;
+  int preconditioner_setups() const;
+  std::string matrix_type() const;    ///< seqbaij, mpibaij, seqaij or mpiaij
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// Initialise PETSc (and MPI, when not yet initialised) once per process; finalised at exit.
+/// Safe to call more than once. Throws SolverError when PETSc cannot start.
+void petsc_ensure_initialized();
+/// Rank of this process in MPI_COMM_WORLD from the launcher's environment
+/// (OMPI_COMM_WORLD_RANK, PMI_RANK, PMIX_RANK), 0 when not launched by mpirun. Does not
+/// need MPI. Only rank 0 should write output.
+int launcher_rank();
+
+}  // namespace loom

@@ -1,0 +1,11 @@
+#include <loom/plugin.hpp>
+
+#include "petsc_solver.hpp"
+
+static void register_petsc(loom::Registry& r) {
+  r.add_solver({loom::PluginKind::Solver, "petsc", "cpu", "1.0",
+                "PETSc KSP (CG + block Jacobi/Jacobi/GAMG) on a bs=3 BAIJ matrix; runs under mpirun", ""},
+               [](const loom::Params& p) { return std::make_unique<loom::PetscSolver>(p); });
+}
+
+LOOM_PLUGIN(register_petsc)
