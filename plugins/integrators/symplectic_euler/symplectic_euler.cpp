@@ -1,0 +1,61 @@
+#include "symplectic_euler.hpp"
+
+#include <stdexcept>
+
+#include "loom/material.hpp"
+
+namespace loom::symplectic_euler {
+
+SymplecticEuler::SymplecticEuler(const Params& p) {
+  // No parameters of its own: dt and substeps are the framework's.
+  if (p.valid() && p.has("type")) p.mark_used("type");
+  stats_.force_evaluations = 1;
+}
+
+void SymplecticEuler::prepare(Scene& scene, double h) {
+  if (!scene.material)
+    throw InputError(scene.source + ": symplectic_euler needs a material; add a material: section to the scene");
+  if (!(h > 0)) throw InputError(scene.source + ": symplectic_euler needs dt > 0");
+  const State& s = scene.state;
+  const std::size_t n = static_cast<std::size_t>(s.size());
+  if (s.x.size() != 3 * n || s.v.size() != 3 * n || s.inv_mass.size() != n)
+    throw std::logic_error("symplectic_euler: state arrays have inconsistent sizes");
+  f_.assign(3 * n, 0.0);
+}
+
+void SymplecticEuler::step(Scene& scene, double h) {
+  State& s = scene.state;
+  const Index n = s.size();
+  if (f_.size() != 3 * static_cast<std::size_t>(n))
+    throw std::logic_error("symplectic_euler: step() before prepare(), or the vertex count changed");
+  scene.material->compute_forces(s.x, s.v, f_);
+  double* x = s.x.data();
+  double* v = s.v.data();
+  const double* f = f_.data();
+  const double* w = s.inv_mass.data();
+  const double g0 = scene.gravity[0], g1 = scene.gravity[1], g2 = scene.gravity[2];
+#pragma omp parallel for schedule(static) if (n >= 2048)
+  for (Index i = 0; i < n; ++i) {
+    const double wi = w[i];
+    double* xi = x + 3 * i;
+    double* vi = v + 3 * i;
+    if (wi != 0.0) {
+      const double* fi = f + 3 * i;
+      vi[0] += h * (wi * fi[0] + g0);
+      vi[1] += h * (wi * fi[1] + g1);
+      vi[2] += h * (wi * fi[2] + g2);
+      xi[0] += h * vi[0];
+      xi[1] += h * vi[1];
+      xi[2] += h * vi[2];
+    } else {
+      // Pinned: prescribed velocity; a fixed pin (v = 0) is not touched at all, bit for bit.
+      for (int c = 0; c < 3; ++c)
+        if (vi[c] != 0.0) xi[c] += h * vi[c];
+    }
+  }
+  stats_ = StepStats{};
+  stats_.force_evaluations = 1;
+  finish_step(s, h);
+}
+
+}  // namespace loom::symplectic_euler

@@ -1,0 +1,26 @@
+// symplectic_euler: v += h (w f(x, v) + g) for free vertices, then x += h v (all vertices;
+// pinned ones move with their prescribed velocity). One force evaluation per step.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "loom/integrator.hpp"
+#include "loom/params.hpp"
+
+namespace loom::symplectic_euler {
+
+class SymplecticEuler final : public Integrator {
+ public:
+  explicit SymplecticEuler(const Params& p);
+  std::string name() const override { return "symplectic_euler"; }
+  void prepare(Scene& scene, double h) override;
+  void step(Scene& scene, double h) override;
+  StepStats last_step() const override { return stats_; }
+
+ private:
+  std::vector<double> f_;
+  StepStats stats_;
+};
+
+}  // namespace loom::symplectic_euler
