@@ -1,0 +1,75 @@
+// baraff_witkin: one linearised backward-Euler step per call (Baraff & Witkin 1998,
+// NUMERICS.md 3.1), with the consistent Kang-Cho damping of 3.2, optional Rayleigh damping,
+// and the constraint filter S / prescribed velocity changes z for pins and plane
+// constraints, solved by the scene's LinearSolver.
+//
+//   A = (1 + h alpha) M - h df/dv - (h^2 + h beta) df/dx + h c_d L
+//   b = h ( f0 - alpha M v0 + (h + beta) df/dx v0 - c_d L v0 ),   f0 = f(x0, v0) + M g
+//   v1 = v0 + dv,   x1 = x0 + h v1
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "loom/bsr.hpp"
+#include "loom/integrator.hpp"
+#include "loom/params.hpp"
+
+namespace loom {
+
+struct BaraffWitkinOptions {
+  double kang_cho_damping = 0;   ///< c_d (N s/m) of the graph-Laplacian damper
+  double rayleigh_alpha = 0;     ///< mass-proportional damping (1/s)
+  double rayleigh_beta = 0;      ///< stiffness-proportional damping (s)
+  enum class OnFailure { Stop, HalveStep } on_failure = OnFailure::Stop;
+  int max_halvings = 3;          ///< nesting depth of halve_step retries
+  bool warm_start = true;        ///< start each solve from the previous step's dv
+};
+
+/// Reads kang_cho_damping, rayleigh {alpha, beta}, on_solver_failure (stop | halve_step),
+/// max_halvings and warm_start.
+BaraffWitkinOptions parse_baraff_witkin_options(const Params& p);
+
+class BaraffWitkin final : public Integrator {
+ public:
+  /// Extra constraints, called at the start of every solve after the pins are in place:
+  /// add constraints to S (Filter::constrain_direction / constrain_all) and write the
+  /// prescribed velocity changes of the constrained DOFs into z (zero elsewhere), so that
+  /// (I - S) z = z. h is the (sub)step being taken.
+  using ConstraintHook = std::function<void(const State& state, double h, Filter& S, std::span<double> z)>;
+
+  explicit BaraffWitkin(BaraffWitkinOptions options = {});
+  std::string name() const override { return "baraff_witkin"; }
+  IntegratorNeeds needs() const override { return {false, true, true}; }
+  void prepare(Scene& scene, double h) override;
+  void step(Scene& scene, double h) override;
+  StepStats last_step() const override { return last_; }
+
+  void set_constraint_hook(ConstraintHook hook) { hook_ = std::move(hook); }
+  const BaraffWitkinOptions& options() const { return options_; }
+  const BsrPattern& pattern() const { return *pattern_; }
+  const BsrMatrix& system_matrix() const { return A_; }
+  std::span<const double> rhs() const { return b_; }
+  const Filter& filter() const { return S_; }
+
+ private:
+  bool attempt(Scene& scene, double h, StepStats& st, SolveReport& rep);
+  void advance(Scene& scene, double h, int depth, StepStats& st);
+  void assemble(const Scene& scene, double h);
+  void set_constraints(const State& state, double h);
+
+  BaraffWitkinOptions options_;
+  ConstraintHook hook_;
+  std::unique_ptr<BsrPattern> pattern_;
+  BsrMatrix dfdx_, dfdv_, A_;
+  Filter S_;
+  std::vector<double> degree_;           // graph-Laplacian diagonal n_i
+  std::vector<double> f_, b_, z_, dv_;
+  Index n_ = -1;
+  StepStats last_;
+};
+
+}  // namespace loom
