@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -89,15 +90,31 @@ TEST(GnatvMaterial, RestStateIsForceFreeOnBothTriangulations) {
 }
 
 TEST(GnatvMaterial, ColouringIsRaceFree) {
-  const loom::Mesh mesh = loom::make_grid(17, 13, 1.0, 1.0);
-  auto m = make(mesh);
-  const auto& cs = m->colour_start();
-  EXPECT_EQ(cs.back(), mesh.num_triangles());
-  EXPECT_LE(m->num_colours(), 16);
-  for (int c = 0; c < m->num_colours(); ++c) {
-    std::vector<int> seen(mesh.num_vertices(), 0);
-    for (loom::Index t = cs[c]; t < cs[c + 1]; ++t)
-      for (loom::Index v : m->triangles()[t]) EXPECT_EQ(seen[v]++, 0) << "colour " << c << " vertex " << v;
+  for (int n : {5, 17, 64}) {
+    const loom::Mesh mesh = loom::make_grid(n, n + 3, 1.0, 1.0);
+    auto m = make(mesh);
+    const auto& cs = m->colour_start();
+    const auto& ks = m->chunk_start();
+    EXPECT_EQ(ks.back(), mesh.num_triangles());
+    EXPECT_EQ(cs.back() + 1, static_cast<loom::Index>(ks.size()));
+    EXPECT_LE(m->num_colours(), 12);
+    std::vector<int> seen_tri(mesh.num_triangles(), 0);
+    for (int c = 0; c < m->num_colours(); ++c) {
+      std::vector<loom::Index> owner(mesh.num_vertices(), -1);  // chunk that touched the vertex
+      for (loom::Index q = cs[c]; q < cs[c + 1]; ++q)
+        for (loom::Index t = ks[q]; t < ks[q + 1]; ++t)
+          for (loom::Index v : m->triangles()[t]) {
+            EXPECT_TRUE(owner[v] == -1 || owner[v] == q) << "colour " << c << " vertex " << v;
+            owner[v] = q;
+          }
+    }
+    // Every mesh triangle is stored exactly once.
+    std::vector<std::array<loom::Index, 3>> a(m->triangles()), b;
+    for (loom::Index t = 0; t < mesh.num_triangles(); ++t)
+      b.push_back({mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]});
+    std::sort(a.begin(), a.end());
+    std::sort(b.begin(), b.end());
+    EXPECT_EQ(a, b);
   }
 }
 

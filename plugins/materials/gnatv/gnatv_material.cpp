@@ -140,47 +140,58 @@ void GnatvMaterial::setup(const Mesh& mesh) {
       throw InputError("gnatv: vertex " + std::to_string(i) + " of " + mesh.source +
                        " belongs to no triangle, so it has no mass; remove unreferenced vertices");
 
-  // Greedy triangle colouring: no two triangles of one colour share a vertex, so the
-  // scatter of forces and Jacobian blocks is race free without atomics.
-  std::vector<Index> vt_start(n_ + 1, 0), vt_list(3 * static_cast<std::size_t>(nt));
+  // Race-free parallel scatter without atomics: triangles are cut into chunks of
+  // consecutive mesh triangles (spatially coherent on grids and most meshes) and the
+  // chunks are greedily coloured so that two chunks of one colour share no vertex. A
+  // thread processes whole chunks, so its writes stay local in memory; colours run one
+  // after the other. Storage is sorted by colour, then chunk.
+  const Index chunk = std::clamp<Index>((nt + 127) / 128, 8, 256);
+  const Index nchunks = (nt + chunk - 1) / chunk;
+  std::vector<std::vector<Index>> vchunks(n_);  // chunks touching each vertex (built once)
   for (Index t = 0; t < nt; ++t)
-    for (int k = 0; k < 3; ++k) ++vt_start[mesh.triangles[3 * t + k] + 1];
-  for (Index i = 0; i < n_; ++i) vt_start[i + 1] += vt_start[i];
-  {
-    std::vector<Index> fill(vt_start.begin(), vt_start.end() - 1);
-    for (Index t = 0; t < nt; ++t)
-      for (int k = 0; k < 3; ++k) vt_list[fill[mesh.triangles[3 * t + k]]++] = t;
-  }
-  std::vector<int> colour(nt, -1);
+    for (int k = 0; k < 3; ++k) {
+      auto& l = vchunks[mesh.triangles[3 * t + k]];
+      const Index ch = t / chunk;
+      if (l.empty() || l.back() != ch) l.push_back(ch);
+    }
+  std::vector<int> colour(nchunks, -1);
   std::vector<char> used;
   int ncol = 0;
-  for (Index t = 0; t < nt; ++t) {
+  for (Index ch = 0; ch < nchunks; ++ch) {
     used.assign(static_cast<std::size_t>(ncol) + 1, 0);
-    for (int k = 0; k < 3; ++k) {
-      const Index v = mesh.triangles[3 * t + k];
-      for (Index q = vt_start[v]; q < vt_start[v + 1]; ++q) {
-        const int c = colour[vt_list[q]];
-        if (c >= 0) used[c] = 1;
-      }
-    }
+    const Index t1 = std::min(nt, (ch + 1) * chunk);
+    for (Index t = ch * chunk; t < t1; ++t)
+      for (int k = 0; k < 3; ++k)
+        for (Index other : vchunks[mesh.triangles[3 * t + k]])
+          if (colour[other] >= 0) used[colour[other]] = 1;
     int c = 0;
     while (used[c]) ++c;
-    colour[t] = c;
+    colour[ch] = c;
     ncol = std::max(ncol, c + 1);
   }
   colour_start_.assign(ncol + 1, 0);
-  for (Index t = 0; t < nt; ++t) ++colour_start_[colour[t] + 1];
+  for (Index ch = 0; ch < nchunks; ++ch) ++colour_start_[colour[ch] + 1];
   for (int c = 0; c < ncol; ++c) colour_start_[c + 1] += colour_start_[c];
-  std::vector<Index> fill(colour_start_.begin(), colour_start_.end() - 1);
+  std::vector<Index> order(nchunks);  // chunks sorted by colour (stable)
+  {
+    std::vector<Index> fill(colour_start_.begin(), colour_start_.end() - 1);
+    for (Index ch = 0; ch < nchunks; ++ch) order[fill[colour[ch]]++] = ch;
+  }
+  chunk_start_.assign(nchunks + 1, 0);
   tri_.resize(nt);
   rest_.resize(nt);
   original_index_.resize(nt);
-  for (Index t = 0; t < nt; ++t) {
-    const Index pos = fill[colour[t]]++;
-    tri_[pos] = {mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]};
-    rest_[pos] = rest[t];
-    original_index_[pos] = t;
+  Index pos = 0;
+  for (Index q = 0; q < nchunks; ++q) {
+    const Index ch = order[q];
+    chunk_start_[q] = pos;
+    for (Index t = ch * chunk; t < std::min(nt, (ch + 1) * chunk); ++t, ++pos) {
+      tri_[pos] = {mesh.triangles[3 * t], mesh.triangles[3 * t + 1], mesh.triangles[3 * t + 2]};
+      rest_[pos] = rest[t];
+      original_index_[pos] = t;
+    }
   }
+  chunk_start_[nchunks] = pos;
 }
 
 void GnatvMaterial::compute_masses(std::span<double> mass) const {
@@ -197,8 +208,9 @@ void GnatvMaterial::compute_forces(std::span<const double> x, std::span<const do
 #pragma omp for schedule(static)
     for (std::size_t i = 0; i < n3; ++i) Fo[i] = 0.0;
     for (int c = 0; c < ncol; ++c) {
-#pragma omp for schedule(static)
-      for (Index t = colour_start_[c]; t < colour_start_[c + 1]; ++t) {
+#pragma omp for schedule(dynamic, 1)
+      for (Index q = colour_start_[c]; q < colour_start_[c + 1]; ++q)
+      for (Index t = chunk_start_[q]; t < chunk_start_[q + 1]; ++t) {
         const auto& tv = tri_[t];
         double P[3][3], F[3][3];
         for (int j = 0; j < 3; ++j)
@@ -249,7 +261,8 @@ std::vector<std::pair<std::string, std::string>> GnatvMaterial::describe() const
     return std::string(b);
   };
   return {{"triangles", std::to_string(num_triangles())},
-          {"colours", std::to_string(num_colours())},
+          {"chunk colours", std::to_string(num_colours())},
+          {"chunks", std::to_string(chunk_start_.size() - 1)},
           {"material file", data_.path},
           {"interpolation", opt_.interpolation == CurveInterpolation::BSpline ? "bspline" : "monotone_cubic"},
           {"areal density (kg/m^2)", fmt(density_)},
@@ -304,8 +317,9 @@ void GnatvMaterial::compute_jacobians(std::span<const double> x, std::span<const
 #pragma omp for schedule(static)
     for (std::size_t i = 0; i < nv; ++i) A[i] = 0.0;
     for (int c = 0; c < ncol; ++c) {
-#pragma omp for schedule(static)
-      for (Index t = colour_start_[c]; t < colour_start_[c + 1]; ++t) {
+#pragma omp for schedule(dynamic, 1)
+      for (Index q = colour_start_[c]; q < colour_start_[c + 1]; ++q)
+      for (Index t = chunk_start_[q]; t < chunk_start_[q + 1]; ++t) {
         const auto& tv = tri_[t];
         double P[3][3], J[3][3][9];
         for (int j = 0; j < 3; ++j)

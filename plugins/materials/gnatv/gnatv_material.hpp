@@ -50,7 +50,11 @@ class GnatvMaterial final : public Material {
   /// Triangles in storage (colour) order: vertices and rest data.
   const std::vector<std::array<Index, 3>>& triangles() const { return tri_; }
   const std::vector<RestTriangle<double>>& rest() const { return rest_; }
+  /// Colour c holds chunks colour_start()[c] .. colour_start()[c+1]-1; chunk q holds the
+  /// stored triangles chunk_start()[q] .. chunk_start()[q+1]-1. Chunks of one colour share
+  /// no vertex.
   const std::vector<Index>& colour_start() const { return colour_start_; }
+  const std::vector<Index>& chunk_start() const { return chunk_start_; }
   const Curves<double>& curves() const { return views_; }
   const MaterialData& data() const { return data_; }
   double density() const { return density_; }
@@ -67,7 +71,8 @@ class GnatvMaterial final : public Material {
   Index n_ = 0;
   std::vector<std::array<Index, 3>> tri_;         // colour-sorted
   std::vector<RestTriangle<double>> rest_;        // same order
-  std::vector<Index> colour_start_;               // colours c: [colour_start_[c], colour_start_[c+1])
+  std::vector<Index> colour_start_;               // colour c: chunks [colour_start_[c], colour_start_[c+1])
+  std::vector<Index> chunk_start_;                // chunk q: triangles [chunk_start_[q], chunk_start_[q+1])
   std::vector<Index> original_index_;             // mesh triangle index of each stored triangle
   std::vector<double> mass_;
   std::vector<Index> scatter_;                    // 9 per triangle: block of (v_j, v_i) at 3j+i
