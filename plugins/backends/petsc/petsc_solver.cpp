@@ -14,7 +14,8 @@
 #include <sstream>
 #include <vector>
 
-#include "loom/kernels/projected_system.hpp"
+#include "loom/kernels/bsr_ops.hpp"
+#include "loom/solver_common.hpp"
 
 namespace loom {
 
@@ -160,9 +161,7 @@ struct PetscSolver::Impl {
   std::vector<double> proj;          // projected blocks of the owned rows
   std::vector<PetscScalar> rowvals;  // one block row in PETSc's row-oriented layout
   std::vector<PetscInt> rowcols;
-  std::vector<unsigned char> cons;
   std::vector<Index> cons_list;
-  std::vector<double> zc;
   bool have_values = false;
   bool have_pc = false;
   int since_setup = 0;
@@ -323,9 +322,7 @@ void PetscSolver::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   LOOM_PETSC(VecScatterCreateToAll(m.x, &m.scatter, &m.xall));
 
 
-  m.cons.assign(P.n, 0);
   m.cons_list.clear();
-  m.zc.assign(3L * P.n, 0.0);
   m.since_setup = 0;
 }
 
@@ -339,25 +336,21 @@ bool PetscSolver::factorize(const BsrMatrix& A, const Filter& S, SolveReport& re
                       std::to_string(m.n));
   const BsrPattern& P = *m.pattern;
   bool s_changed = S.constrained() != m.cons_list;
-  for (Index i : m.cons_list) m.cons[i] = 0;
-  m.cons_list = S.constrained();
-  for (Index i : m.cons_list) m.cons[i] = 1;
+  if (s_changed) m.cons_list = S.constrained();
 
   // Projected owned rows; every value finite, diagonal positive (checked on all ranks).
   const Index* rp = P.row_ptr.data();
   const Index* cl = P.col.data();
   const Index* dg = P.diag.data();
-  const unsigned char* cons = m.cons.data();
   const double* Av = A.values().data();
   const long off = 9L * rp[m.rb];
   double* Pv = m.proj.data() - off;  // indexed by global block position
-  auto proj = [&S](Index j) { return S.projector(j).data(); };
   long bad = -1;
   int nonfinite = 0;
   const Index rb = m.rb, re = m.re;
 #pragma omp parallel for schedule(static) reduction(max : bad) reduction(max : nonfinite)
   for (Index i = rb; i < re; ++i) {
-    kernels::project_row(i, rp[i], rp[i + 1], dg[i], cl, cons, proj, Av, Pv);
+    for (Index k = rp[i]; k < rp[i + 1]; ++k) solver::projected_block(S, i, cl[k], Av + 9L * k, Pv + 9L * k);
     for (long e = 9L * rp[i]; e < 9L * rp[i + 1]; ++e)
       if (!std::isfinite(Pv[e])) nonfinite = 1;
     const double* D = Pv + 9L * dg[i];
@@ -429,17 +422,7 @@ SolveReport PetscSolver::solve(const BsrMatrix& A, const Filter& S, std::span<co
     throw SolverError("petsc: vector sizes differ from 3 x " + std::to_string(m.n));
   const BsrPattern& P = *m.pattern;
 
-  bool z_nonzero = false;
-  double* zc = m.zc.data();
-  for (Index i : m.cons_list) {
-    double t[3] = {z[3L * i], z[3L * i + 1], z[3L * i + 2]};
-    double st[3];
-    kernels::apply_projector(S.projector(i).data(), t, st);
-    for (int r = 0; r < 3; ++r) {
-      zc[3L * i + r] = t[r] - st[r];
-      if (zc[3L * i + r] != 0.0) z_nonzero = true;
-    }
-  }
+  const bool z_zero = solver::prescribed_is_zero(S, z);
 
   // b^ = S (b - A z) and the initial guess y0 = S dv on the owned rows.
   PetscScalar* bl = nullptr;
@@ -448,23 +431,24 @@ SolveReport PetscSolver::solve(const BsrMatrix& A, const Filter& S, std::span<co
   LOOM_PETSC(VecGetArray(m.x, &xl));
   const Index* rp = P.row_ptr.data();
   const Index* cl = P.col.data();
-  const unsigned char* cons = m.cons.data();
   const double* Av = A.values().data();
   const double* bp = b.data();
-  const double* zptr = z_nonzero ? zc : nullptr;
+  const double* zp = z.data();
   const double* dvp = dv.data();
   const Index rb = m.rb, re = m.re;
   double* bh = bl - 3L * rb;  // indexed by global DOF
   double* y0 = xl - 3L * rb;
 #pragma omp parallel for schedule(static)
   for (Index i = rb; i < re; ++i) {
-    const double* Si = cons[i] ? S.projector(i).data() : nullptr;
-    kernels::projected_rhs_row(i, rp[i], rp[i + 1], cl, Si, Av, bp, zptr, bh);
-    if (Si) {
-      kernels::apply_projector(Si, dvp + 3L * i, y0 + 3L * i);
-    } else {
-      for (int r = 0; r < 3; ++r) y0[3L * i + r] = std::isfinite(dvp[3L * i + r]) ? dvp[3L * i + r] : 0.0;
+    double* bi = bh + 3L * i;
+    double az[3] = {0.0, 0.0, 0.0};
+    if (!z_zero) kernels::bsr_row_multiply(rp, cl, Av, zp, i, az);
+    for (int r = 0; r < 3; ++r) {
+      bi[r] = bp[3L * i + r] - az[r];
+      y0[3L * i + r] = std::isfinite(dvp[3L * i + r]) ? dvp[3L * i + r] : 0.0;
     }
+    solver::filter_vertex(S, i, bi);
+    solver::filter_vertex(S, i, y0 + 3L * i);
   }
   LOOM_PETSC(VecRestoreArray(m.x, &xl));
   LOOM_PETSC(VecRestoreArray(m.rhs, &bl));
@@ -523,12 +507,8 @@ SolveReport PetscSolver::solve(const BsrMatrix& A, const Filter& S, std::span<co
   double* d = dv.data();
 #pragma omp parallel for schedule(static)
   for (long i = 0; i < N; ++i) d[i] = ya[i];
-  for (Index i : m.cons_list) {
-    double st[3];
-    kernels::apply_projector(S.projector(i).data(), ya + 3L * i, st);
-    for (int c = 0; c < 3; ++c) d[3L * i + c] = st[c] + zc[3L * i + c];
-  }
   LOOM_PETSC(VecRestoreArrayRead(m.xall, &ya));
+  solver::apply_prescribed(S, z, dv);
   rep.residual = rel;
   rep.solve_seconds = seconds_since(t0);
   return rep;

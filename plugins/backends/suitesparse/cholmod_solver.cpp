@@ -12,7 +12,7 @@
 
 #include <cholmod.h>
 
-#include "loom/kernels/projected_system.hpp"
+#include "loom/solver_common.hpp"
 
 extern "C" {
 // OpenBLAS extensions (the plugin links libopenblas directly, see CMakeLists.txt).
@@ -95,10 +95,9 @@ struct CholmodSolver::Impl {
   long N = 0;
   std::vector<long> src;             // CSC entry -> index into proj.values()
   BsrMatrix proj;                    // A~ (full, both triangles) for residuals
-  std::vector<unsigned char> cons;   // 1 = constrained vertex
   std::vector<Index> cons_list;      // constrained vertices of the last factorize
   std::vector<double> cons_S;        // their projectors (9 each), to detect a change of S
-  std::vector<double> bhat, y, r, p, q, s, zc;
+  std::vector<double> bhat, y, r, p, q, s;
 
   bool have_factor = false;
   bool have_values = false;
@@ -255,10 +254,9 @@ void CholmodSolver::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   if (!m.L) throw SolverError("cholmod: symbolic analysis failed (CHOLMOD status " + std::to_string(m.c.status) + ")");
 
   m.proj = BsrMatrix(&P);
-  m.cons.assign(P.n, 0);
   m.cons_list.clear();
   m.cons_S.clear();
-  for (auto* v : {&m.bhat, &m.y, &m.r, &m.p, &m.q, &m.s, &m.zc}) v->assign(N, 0.0);
+  for (auto* v : {&m.bhat, &m.y, &m.r, &m.p, &m.q, &m.s}) v->assign(N, 0.0);
   m.since_factor = 0;
   m.have_factor = false;
   m.analyze_seconds = seconds_since(t0);
@@ -289,11 +287,9 @@ bool CholmodSolver::factorize(const BsrMatrix& A, const Filter& S, SolveReport& 
     }
   }
   if (s_changed) {
-    for (Index i : m.cons_list) m.cons[i] = 0;
     m.cons_list = S.constrained();
     m.cons_S.resize(9 * m.cons_list.size());
     for (std::size_t t = 0; t < m.cons_list.size(); ++t) {
-      m.cons[m.cons_list[t]] = 1;
       const auto& Si = S.projector(m.cons_list[t]);
       for (int e = 0; e < 9; ++e) m.cons_S[9 * t + e] = Si[e];
     }
@@ -304,15 +300,13 @@ bool CholmodSolver::factorize(const BsrMatrix& A, const Filter& S, SolveReport& 
   const Index* rp = P.row_ptr.data();
   const Index* cl = P.col.data();
   const Index* dg = P.diag.data();
-  const unsigned char* cons = m.cons.data();
   const double* Av = A.values().data();
   double* Pv = m.proj.values().data();
-  auto proj = [&S](Index j) { return S.projector(j).data(); };
   long bad = -1;  // first DOF with a non-positive or non-finite diagonal entry
   bool nonfinite = false;
 #pragma omp parallel for schedule(static) reduction(max : bad) reduction(|| : nonfinite)
   for (Index i = 0; i < n; ++i) {
-    kernels::project_row(i, rp[i], rp[i + 1], dg[i], cl, cons, proj, Av, Pv);
+    for (Index k = rp[i]; k < rp[i + 1]; ++k) solver::projected_block(S, i, cl[k], Av + 9L * k, Pv + 9L * k);
     for (long e = 9L * rp[i]; e < 9L * rp[i + 1]; ++e)
       if (!std::isfinite(Pv[e])) nonfinite = true;
     const double* D = Pv + 9L * dg[i];
@@ -369,35 +363,18 @@ SolveReport CholmodSolver::solve(const BsrMatrix& A, const Filter& S, std::span<
   }
   if (static_cast<long>(b.size()) != N || static_cast<long>(z.size()) != N || static_cast<long>(dv.size()) != N)
     throw SolverError("cholmod: vector sizes differ from 3 x " + std::to_string(m.n));
-  const BsrPattern& P = *m.pattern;
-
-  // zc = (I - S) z restricted to constrained vertices (z is zero elsewhere by contract).
-  bool z_nonzero = false;
-  double* zc = m.zc.data();
-  for (Index i : m.cons_list) {
-    double t[3] = {z[3L * i], z[3L * i + 1], z[3L * i + 2]};
-    double st[3];
-    kernels::apply_projector(S.projector(i).data(), t, st);
-    for (int r = 0; r < 3; ++r) {
-      zc[3L * i + r] = t[r] - st[r];
-      if (zc[3L * i + r] != 0.0) z_nonzero = true;
-    }
-  }
-
-  // b^ = S (b - A z)
-  const Index n = m.n;
-  const Index* rp = P.row_ptr.data();
-  const Index* cl = P.col.data();
-  const unsigned char* cons = m.cons.data();
-  const double* Av = A.values().data();
-  const double* bp = b.data();
+  // b^ = S (b - A z)  (z = (I - S) z by the interface's contract)
   double* bh = m.bhat.data();
-  const double* zptr = z_nonzero ? zc : nullptr;
+  double norm0;
+  if (solver::prescribed_is_zero(S, z)) {
+    const double* bp = b.data();
 #pragma omp parallel for schedule(static)
-  for (Index i = 0; i < n; ++i)
-    kernels::projected_rhs_row(i, rp[i], rp[i + 1], cl, cons[i] ? S.projector(i).data() : nullptr, Av, bp, zptr,
-                               bh);
-  const double norm0 = std::sqrt(dot(bh, bh, N));
+    for (long i = 0; i < N; ++i) bh[i] = bp[i];
+    solver::filter(S, m.bhat);
+    norm0 = std::sqrt(dot(bh, bh, N));
+  } else {
+    norm0 = std::sqrt(solver::filtered_residual(A, S, b, z, m.bhat));
+  }
 
   double* y = m.y.data();
   double* r = m.r.data();
@@ -477,15 +454,11 @@ SolveReport CholmodSolver::solve(const BsrMatrix& A, const Filter& S, std::span<
     }
   }
 
-  // dv = S y + (I - S) z: exact projection on constrained vertices.
+  // dv = S y + z: exact on the constrained vertices.
   double* d = dv.data();
 #pragma omp parallel for schedule(static)
   for (long i = 0; i < N; ++i) d[i] = y[i];
-  for (Index i : m.cons_list) {
-    double st[3];
-    kernels::apply_projector(S.projector(i).data(), y + 3L * i, st);
-    for (int c = 0; c < 3; ++c) d[3L * i + c] = st[c] + zc[3L * i + c];
-  }
+  solver::apply_prescribed(S, z, dv);
   rep.iterations = iterations;
   rep.residual = rel;
   rep.solve_seconds = seconds_since(t0);
