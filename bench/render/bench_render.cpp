@@ -21,6 +21,11 @@ static void BM_RenderFrame(benchmark::State& state) {
   s.supersample = int(state.range(1));
   s.fabric.mode = modes[state.range(0)];
   s.fabric.mdf = state.range(2) ? shading::LOOM_MDF_ASHIKHMIN : shading::LOOM_MDF_WARD;
+  if (state.range(3)) {  // close-up: the cloth covers the whole image (every pixel shaded)
+    s.camera.has_position = s.camera.has_target = true;
+    s.camera.position = glm::vec3(0.5f, 0.5f, 0.55f);
+    s.camera.target = glm::vec3(0.5f, 0.5f, 0.0f);
+  }
   GlRenderer r(s);
   try {
     r.begin(cloth);
@@ -36,12 +41,14 @@ static void BM_RenderFrame(benchmark::State& state) {
   }
   state.SetLabel(r.gl_renderer());
 }
-// Args: mode (0 flat, 1 normal mapping, 2 MDF rotation exact, 3 MDF rotation eq. 17), supersample, mdf (0 Ward, 1 AS).
+// Args: mode (0 flat, 1 normal mapping, 2 MDF rotation exact, 3 MDF rotation eq. 17), supersample,
+// mdf (0 Ward, 1 AS), framing (0 the default camera, 1 close-up: every pixel is cloth).
 BENCHMARK(BM_RenderFrame)
-    ->ArgNames({"mode", "ss", "ashikhmin"})
-    ->Args({0, 1, 0})->Args({1, 1, 0})->Args({2, 1, 0})->Args({3, 1, 0})
-    ->Args({1, 1, 1})->Args({2, 1, 1})
-    ->Args({1, 2, 0})->Args({2, 2, 0})
+    ->ArgNames({"mode", "ss", "ashikhmin", "closeup"})
+    ->Args({0, 1, 0, 0})->Args({1, 1, 0, 0})->Args({2, 1, 0, 0})->Args({3, 1, 0, 0})
+    ->Args({1, 1, 1, 0})->Args({2, 1, 1, 0})
+    ->Args({1, 2, 0, 0})->Args({2, 2, 0, 0})
+    ->Args({0, 1, 0, 1})->Args({1, 1, 0, 1})->Args({2, 1, 0, 1})->Args({3, 1, 0, 1})
     ->Unit(benchmark::kMillisecond)->MinTime(1.0)->UseRealTime();
 
 // The CPU part alone: vertex normals and tangents of the 128x128 cloth.

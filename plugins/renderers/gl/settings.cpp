@@ -284,8 +284,30 @@ Camera make_camera(const CameraSpec& spec, glm::vec3 lo, glm::vec3 hi, int width
   c.target = spec.has_target ? spec.target : center;
   const float half = glm::radians(spec.fov_deg) * 0.5f;
   const float half_min = std::min(half, std::atan(std::tan(half) * float(width) / float(height)));
-  c.eye = spec.has_position ? spec.position : c.target + dir * (1.05f * radius / std::sin(half_min));
   c.up = spec.up;
+  if (spec.has_position) {
+    c.eye = spec.position;
+  } else {
+    // Closest distance along dir at which all 8 box corners fall inside 90% of the view.
+    const glm::vec3 fwd = -dir;
+    glm::vec3 up = c.up;
+    if (glm::length(glm::cross(fwd, up)) < 1e-4f) up = std::abs(fwd.z) < std::abs(fwd.x) ? glm::vec3(0, 0, 1) : glm::vec3(1, 0, 0);
+    const glm::vec3 r = glm::normalize(glm::cross(fwd, up)), u = glm::cross(r, fwd);
+    const float ty = 0.9f * std::tan(half), tx = ty * float(width) / float(height);
+    float d = 1.05f * radius / std::sin(half_min);
+    if (!spec.has_target) {
+      d = 0.0f;
+      for (int k = 0; k < 8; ++k) {
+        const glm::vec3 corner((k & 1) ? hi.x : lo.x, (k & 2) ? hi.y : lo.y, (k & 4) ? hi.z : lo.z);
+        const glm::vec3 o = corner - c.target;
+        const float depth = glm::dot(o, fwd);  // + is further away
+        d = std::max(d, std::abs(glm::dot(o, r)) / tx - depth);
+        d = std::max(d, std::abs(glm::dot(o, u)) / ty - depth);
+      }
+      d = std::max(d, 1.5f * radius);
+    }
+    c.eye = c.target + dir * d;
+  }
   glm::vec3 f = c.target - c.eye;
   if (glm::length(f) < 1e-9f) c.eye = c.target + dir * radius, f = c.target - c.eye;
   if (glm::length(glm::cross(glm::normalize(f), glm::normalize(c.up))) < 1e-4f)
@@ -369,6 +391,7 @@ std::vector<float> texture_coords(const Mesh& mesh) {
 }
 
 void write_png(const std::string& path, int width, int height, const unsigned char* rgb) {
+  stbi_write_png_compression_level = 9;
   if (!stbi_write_png(path.c_str(), width, height, 3, rgb, width * 3))
     throw std::runtime_error(path + ": cannot write PNG (is the folder writable?)");
 }
