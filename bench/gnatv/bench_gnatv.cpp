@@ -75,7 +75,7 @@ void BM_Jacobian(benchmark::State& st) {
 
 }  // namespace
 
-BENCHMARK(BM_Forces)->ArgsProduct({{32, 128, 256}, {1, 2}})->ArgNames({"n", "threads"})->Unit(benchmark::kMicrosecond)->UseRealTime();
-BENCHMARK(BM_Jacobian)->ArgsProduct({{32, 128, 256}, {1, 2}})->ArgNames({"n", "threads"})->Unit(benchmark::kMicrosecond)->UseRealTime();
+BENCHMARK(BM_Forces)->ArgsProduct({{32, 128, 256}, {1, 2}})->ArgNames({"n", "threads"})->Unit(benchmark::kMicrosecond)->UseRealTime()->MeasureProcessCPUTime();
+BENCHMARK(BM_Jacobian)->ArgsProduct({{32, 128, 256}, {1, 2}})->ArgNames({"n", "threads"})->Unit(benchmark::kMicrosecond)->UseRealTime()->MeasureProcessCPUTime();
 
 BENCHMARK_MAIN();

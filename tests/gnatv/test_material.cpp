@@ -142,14 +142,22 @@ TEST(GnatvMaterial, AssembledJacobianIsSymmetricAndMatchesFiniteDifferences) {
   auto m = make(mesh, "psd_projection: false\n");
   std::vector<std::array<loom::Index, 2>> pairs;
   m->jacobian_pairs(pairs);
+  pairs.push_back({0, mesh.num_vertices() - 1});  // a block no triangle writes
   const loom::BsrPattern pat = loom::BsrPattern::from_pairs(mesh.num_vertices(), pairs);
   m->bind_pattern(pat);
   loom::BsrMatrix J(&pat), D(&pat);
   const std::vector<double> x = perturbed(mesh, 0.02, 5);
   std::vector<double> v(x.size(), 0.0);
   std::fill(D.values().begin(), D.values().end(), 7.0);
+  std::fill(J.values().begin(), J.values().end(), std::nan(""));  // every value must be overwritten
   m->compute_jacobians(x, v, J, &D);
   for (double d : D.values()) EXPECT_EQ(d, 0.0);  // no material damping
+  const double* extra = J.block(pat.find(0, mesh.num_vertices() - 1));
+  for (int e = 0; e < 9; ++e) EXPECT_EQ(extra[e], 0.0);
+  // Assembling twice gives the same matrix (assign-then-add scatter).
+  const std::vector<double> first = J.values();
+  m->compute_jacobians(x, v, J, nullptr);
+  EXPECT_EQ(first, J.values());
   EXPECT_EQ(J.asymmetry(), 0.0);
   const std::vector<double> dense = J.to_dense();
   const std::size_t n3 = x.size();

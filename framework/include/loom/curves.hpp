@@ -65,8 +65,9 @@ LOOM_HD inline int curve_segment(const CurveView<R>& c, double e) {
   return lo;
 }
 
-/// Antiderivative P(e) = integral from x_0 to e of sigma, with sigma and sigma'.
-template <class T, class R>
+/// Antiderivative P(e) = integral from x_0 to e of sigma, with sigma and sigma'
+/// (P is left untouched when WithEnergy is false).
+template <bool WithEnergy = true, class T, class R>
 LOOM_HD inline void curve_eval_raw(const CurveView<R>& c, const T& e, T& P, T& s, T& ds) {
   const double er = ScalarReal<T>::get(e);
   const int last = c.n - 1;
@@ -74,14 +75,14 @@ LOOM_HD inline void curve_eval_raw(const CurveView<R>& c, const T& e, T& P, T& s
     const T d = e - T(c.x[0]);
     s = T(c.y[0]) + T(c.left_slope) * d;
     ds = T(c.left_slope);
-    P = T(c.y[0]) * d + T(c.left_slope) * d * d * T(0.5);
+    if constexpr (WithEnergy) P = T(c.y[0]) * d + T(c.left_slope) * d * d * T(0.5);
     return;
   }
   if (er > static_cast<double>(c.x[last])) {
     const T d = e - T(c.x[last]);
     s = T(c.y[last]) + T(c.right_slope) * d;
     ds = T(c.right_slope);
-    P = T(c.cum[last]) + T(c.y[last]) * d + T(c.right_slope) * d * d * T(0.5);
+    if constexpr (WithEnergy) P = T(c.cum[last]) + T(c.y[last]) * d + T(c.right_slope) * d * d * T(0.5);
     return;
   }
   const int k = curve_segment(c, er);
@@ -97,9 +98,11 @@ LOOM_HD inline void curve_eval_raw(const CurveView<R>& c, const T& e, T& P, T& s
   const T d00 = T(6) * t2 - T(6) * t, d10 = T(3) * t2 - T(4) * t + T(1);
   const T d01 = T(-6) * t2 + T(6) * t, d11 = T(3) * t2 - T(2) * t;
   ds = (d00 * y0 + d10 * m0 + d01 * y1 + d11 * m1) / h;
-  const T H00 = t - t3 + T(0.5) * t4, H10 = T(0.5) * t2 - t3 * T(2.0 / 3.0) + T(0.25) * t4;
-  const T H01 = t3 - T(0.5) * t4, H11 = t4 * T(0.25) - t3 * T(1.0 / 3.0);
-  P = T(c.cum[k]) + h * (H00 * y0 + H10 * m0 + H01 * y1 + H11 * m1);
+  if constexpr (WithEnergy) {
+    const T H00 = t - t3 + T(0.5) * t4, H10 = T(0.5) * t2 - t3 * T(2.0 / 3.0) + T(0.25) * t4;
+    const T H01 = t3 - T(0.5) * t4, H11 = t4 * T(0.25) - t3 * T(1.0 / 3.0);
+    P = T(c.cum[k]) + h * (H00 * y0 + H10 * m0 + H01 * y1 + H11 * m1);
+  }
 }
 
 /// Energy density W(e) (W(0) = 0), stress sigma(e) = W'(e) and stiffness sigma'(e).
@@ -113,7 +116,7 @@ LOOM_HD inline void curve_eval(const CurveView<R>& c, const T& e, T& W, T& s, T&
 template <class T, class R>
 LOOM_HD inline void curve_stress(const CurveView<R>& c, const T& e, T& s, T& ds) {
   T P;
-  curve_eval_raw(c, e, P, s, ds);
+  curve_eval_raw<false>(c, e, P, s, ds);
 }
 
 /// Error in a curve's data (the caller adds the file and line).

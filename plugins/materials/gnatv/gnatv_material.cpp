@@ -286,7 +286,12 @@ void GnatvMaterial::bind_pattern(const BsrPattern& pattern) {
   if (pattern.n != n_)
     throw std::logic_error("gnatv: Jacobian pattern has " + std::to_string(pattern.n) + " block rows, mesh has " +
                            std::to_string(n_) + " vertices");
+  // Storage order is execution order (colour, chunk, triangle), so the first triangle to
+  // reach a block can assign it instead of adding: no separate zeroing pass over the
+  // matrix. The first write is stored as ~k (negative). Blocks no triangle reaches (when
+  // the pattern holds more than jacobian_pairs) are zeroed explicitly.
   scatter_.resize(9 * tri_.size());
+  std::vector<char> touched(static_cast<std::size_t>(pattern.nnz_blocks()), 0);
   for (std::size_t t = 0; t < tri_.size(); ++t)
     for (int j = 0; j < 3; ++j)
       for (int i = 0; i < 3; ++i) {
@@ -294,8 +299,12 @@ void GnatvMaterial::bind_pattern(const BsrPattern& pattern) {
         if (k < 0)
           throw std::logic_error("gnatv: Jacobian pattern lacks block (" + std::to_string(tri_[t][j]) + ", " +
                                  std::to_string(tri_[t][i]) + "); build it from jacobian_pairs()");
-        scatter_[9 * t + 3 * j + i] = k;
+        scatter_[9 * t + 3 * j + i] = touched[k] ? k : ~k;
+        touched[k] = 1;
       }
+  untouched_.clear();
+  for (Index k = 0; k < pattern.nnz_blocks(); ++k)
+    if (!touched[k]) untouched_.push_back(k);
   bound_ = &pattern;
 }
 
@@ -305,7 +314,8 @@ void GnatvMaterial::compute_jacobians(std::span<const double> x, std::span<const
     throw std::logic_error("gnatv: compute_jacobians called before bind_pattern or with another pattern");
   const double* X = x.data();
   double* A = dfdx.values().data();
-  const std::size_t nv = dfdx.values().size();
+  const Index* U = untouched_.data();
+  const std::size_t nu = untouched_.size();
   double* D = dfdv ? dfdv->values().data() : nullptr;
   const std::size_t nd = dfdv ? dfdv->values().size() : 0;
   const int ncol = num_colours();
@@ -315,7 +325,8 @@ void GnatvMaterial::compute_jacobians(std::span<const double> x, std::span<const
 #pragma omp for schedule(static) nowait
     for (std::size_t i = 0; i < nd; ++i) D[i] = 0.0;  // no material damping: df/dv = 0
 #pragma omp for schedule(static)
-    for (std::size_t i = 0; i < nv; ++i) A[i] = 0.0;
+    for (std::size_t q = 0; q < nu; ++q)
+      for (int r = 0; r < 9; ++r) A[9 * static_cast<std::size_t>(U[q]) + r] = 0.0;
     for (int c = 0; c < ncol; ++c) {
 #pragma omp for schedule(dynamic, 1)
       for (Index q = colour_start_[c]; q < colour_start_[c + 1]; ++q)
@@ -327,9 +338,14 @@ void GnatvMaterial::compute_jacobians(std::span<const double> x, std::span<const
         jacobian(rest_[t], views_, P, psd, J);
         const Index* sc = &scatter_[9 * static_cast<std::size_t>(t)];
         for (int b = 0; b < 9; ++b) {
-          double* dst = A + 9 * static_cast<std::size_t>(sc[b]);
           const double* src = J[b / 3][b % 3];
-          for (int q = 0; q < 9; ++q) dst[q] += src[q];
+          if (sc[b] < 0) {  // first contribution to this block: assign
+            double* dst = A + 9 * static_cast<std::size_t>(~sc[b]);
+            for (int e = 0; e < 9; ++e) dst[e] = src[e];
+          } else {
+            double* dst = A + 9 * static_cast<std::size_t>(sc[b]);
+            for (int e = 0; e < 9; ++e) dst[e] += src[e];
+          }
         }
       }
     }

@@ -75,7 +75,8 @@ class GnatvMaterial final : public Material {
   std::vector<Index> chunk_start_;                // chunk q: triangles [chunk_start_[q], chunk_start_[q+1])
   std::vector<Index> original_index_;             // mesh triangle index of each stored triangle
   std::vector<double> mass_;
-  std::vector<Index> scatter_;                    // 9 per triangle: block of (v_j, v_i) at 3j+i
+  std::vector<Index> scatter_;                    // 9 per triangle: block of (v_j, v_i) at 3j+i; ~k = first write
+  std::vector<Index> untouched_;                  // pattern blocks no triangle writes
   const BsrPattern* bound_ = nullptr;
 };
 

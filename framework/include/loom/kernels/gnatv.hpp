@@ -133,30 +133,39 @@ LOOM_HD inline void jacobian(const RestTriangle<R>& t, const Curves<R>& c, const
     for (int k = 0; k < 3; ++k)
       if (dsg[k] < T(0)) dsg[k] = T(0);
   }
+  // Expand (r_uj v + r_vj u)(r_ui v + r_vi u)^T so that every block is
+  //   J_ji = a uu^T + b vv^T + c vu^T + d uv^T + geo I
+  // with a = -s (s'_uu r_uj r_ui + s'_uv r_vj r_vi), b = -s (s'_vv r_vj r_vi + s'_uv r_uj r_ui),
+  // c = -s s'_uv r_uj r_vi, d = -s s'_uv r_vj r_ui, geo = -s r_j^T Sigma r_i.
   const T ms = -T(t.area);
+  T UU[9], VV[9], UV[9];  // u u^T, v v^T, u v^T (v u^T = UV^T)
+  for (int r = 0; r < 3; ++r)
+    for (int q = 0; q < 3; ++q) {
+      UU[3 * r + q] = u[r] * u[q];
+      VV[3 * r + q] = v[r] * v[q];
+      UV[3 * r + q] = u[r] * v[q];
+    }
   for (int j = 0; j < 3; ++j) {
     const T uj = T(t.ru[j]), vj = T(t.rv[j]);
-    T gj[3];  // g_uv^j = r_uj v + r_vj u
-    for (int k = 0; k < 3; ++k) gj[k] = uj * v[k] + vj * u[k];
     for (int i = j; i < 3; ++i) {
       const T ui = T(t.ru[i]), vi = T(t.rv[i]);
-      T gi[3];
-      for (int k = 0; k < 3; ++k) gi[k] = ui * v[k] + vi * u[k];
-      const T cuu = ms * dsg[0] * (uj * ui);
-      const T cvv = ms * dsg[1] * (vj * vi);
-      const T cuv = ms * dsg[2];
-      const T geo = ms * (sg[0] * (uj * ui) + sg[1] * (vj * vi) + sg[2] * (uj * vi + vj * ui));
+      const T uu = uj * ui, vv = vj * vi, uvji = uj * vi, vuji = vj * ui;
+      const T a = ms * (dsg[0] * uu + dsg[2] * vv);
+      const T b = ms * (dsg[1] * vv + dsg[2] * uu);
+      const T c = ms * dsg[2] * uvji;
+      const T d = ms * dsg[2] * vuji;
+      const T geo = ms * (sg[0] * uu + sg[1] * vv + sg[2] * (uvji + vuji));
       T* B = J[j][i];
       if (i == j) {  // symmetric block: compute the upper triangle, mirror it exactly
         for (int r = 0; r < 3; ++r)
           for (int q = r; q < 3; ++q) {
-            B[3 * r + q] = cuu * u[r] * u[q] + cvv * v[r] * v[q] + cuv * gj[r] * gi[q];
+            B[3 * r + q] = a * UU[3 * r + q] + b * VV[3 * r + q] + c * UV[3 * q + r] + d * UV[3 * r + q];
             B[3 * q + r] = B[3 * r + q];
           }
       } else {
         for (int r = 0; r < 3; ++r)
           for (int q = 0; q < 3; ++q)
-            B[3 * r + q] = cuu * u[r] * u[q] + cvv * v[r] * v[q] + cuv * gj[r] * gi[q];
+            B[3 * r + q] = a * UU[3 * r + q] + b * VV[3 * r + q] + c * UV[3 * q + r] + d * UV[3 * r + q];
       }
       B[0] += geo;
       B[4] += geo;
