@@ -137,6 +137,52 @@ TEST(GnatvMaterial, ForceIsMinusGradientOfTotalEnergy) {
   EXPECT_LT(worst, 1e-5);
 }
 
+TEST(GnatvMaterial, PatchTestAndMomentumBalance) {
+  // Homogeneous deformation (stretch beyond the data, compression, shear, then a
+  // rotation): every interior vertex is in equilibrium, on both triangulations. For any
+  // deformation the internal forces have zero resultant and zero moment.
+  for (bool alt : {true, false}) {
+    const int nx = 7, ny = 6;
+    const loom::Mesh mesh = loom::make_grid(nx, ny, 1.2, 1.0, loom::GridPlane::XY, alt);
+    auto m = make(mesh, "weft_angle: 0.4\n");
+    const double c = std::cos(0.6), s = std::sin(0.6);
+    std::vector<double> x(mesh.positions.size());
+    for (loom::Index i = 0; i < mesh.num_vertices(); ++i) {
+      const double X = mesh.positions[3 * i], Y = mesh.positions[3 * i + 1];
+      const double px = 1.15 * X + 0.3 * Y, py = 0.92 * Y, pz = 0.05 * X;  // F = [[1.15, .3], [0, .92], [.05, 0]]
+      x[3 * i] = c * px - s * pz;
+      x[3 * i + 1] = py;
+      x[3 * i + 2] = s * px + c * pz;
+    }
+    std::vector<double> f(x.size()), v(x.size(), 0.0);
+    m->compute_forces(x, v, f);
+    double scale = 0;
+    for (double q : f) scale = std::max(scale, std::fabs(q));
+    ASSERT_GT(scale, 1.0);
+    for (int iy = 1; iy + 1 < ny; ++iy)
+      for (int ix = 1; ix + 1 < nx; ++ix)
+        for (int k = 0; k < 3; ++k) EXPECT_NEAR(f[3 * (iy * nx + ix) + k], 0.0, 1e-12 * scale) << ix << "," << iy;
+  }
+  const loom::Mesh mesh = loom::make_grid(9, 8, 1.0, 1.0);
+  auto m = make(mesh);
+  const std::vector<double> x = perturbed(mesh, 0.05, 17);
+  std::vector<double> f(x.size()), v(x.size(), 0.0);
+  m->compute_forces(x, v, f);
+  double R[3] = {0, 0, 0}, T[3] = {0, 0, 0}, scale = 0;
+  for (loom::Index i = 0; i < mesh.num_vertices(); ++i) {
+    const double* p = &x[3 * i];
+    const double* q = &f[3 * i];
+    for (int k = 0; k < 3; ++k) { R[k] += q[k]; scale = std::max(scale, std::fabs(q[k])); }
+    T[0] += p[1] * q[2] - p[2] * q[1];
+    T[1] += p[2] * q[0] - p[0] * q[2];
+    T[2] += p[0] * q[1] - p[1] * q[0];
+  }
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(R[k], 0.0, 1e-11 * scale);
+    EXPECT_NEAR(T[k], 0.0, 1e-11 * scale);
+  }
+}
+
 TEST(GnatvMaterial, AssembledJacobianIsSymmetricAndMatchesFiniteDifferences) {
   const loom::Mesh mesh = loom::make_grid(6, 5, 1.0, 0.8);
   auto m = make(mesh, "psd_projection: false\n");
