@@ -95,6 +95,18 @@ int render_command(const RenderArgs& args) {
 
   // Topology from the first frame (a full, validated OBJ read).
   Mesh mesh = read_obj(frames.front().string(), 0.0);
+  // Frames carry no texture coordinates: take the scene mesh's own (an OBJ with vt) when it
+  // has them for the same vertices; otherwise the renderer derives planar ones.
+  Params mesh_spec = root.child("mesh");
+  if (mesh_spec.valid() && mesh_spec.is_map() && mesh_spec.has("obj")) {
+    fs::path obj = mesh_spec.child("obj").as_string();
+    if (obj.is_relative() && !base_dir.empty()) obj = fs::path(base_dir) / obj;
+    if (fs::exists(obj)) {
+      Mesh source = read_obj(obj.string());
+      if (source.num_vertices() == mesh.num_vertices() && source.uvs.size() == 2 * std::size_t(mesh.num_vertices()))
+        mesh.uvs = std::move(source.uvs);
+    }
+  }
   renderer->begin(mesh);
   std::vector<double> x;
   int k = 0;

@@ -401,3 +401,52 @@ TEST(GlRendererCli, VideoOnWithoutFfmpegIsBadInput) {
   EXPECT_EQ(run(std::string(LOOM_EXE) + " render " + dir + " --set render.video=maybe", out), kExitBadInput) << out;
   fs::remove_all(dir);
 }
+
+TEST(GlRendererCli, UsesTheSceneMeshTextureCoordinates) {
+  // A scene whose OBJ mesh has vt (here u, v = 2x, 2y): the render differs from the planar-UV one.
+  const std::string dir = make_run_dir("uv");
+  const Mesh m = make_grid(8, 8, 1.0, 1.0, GridPlane::XY);
+  {
+    std::ofstream o(dir + "/mesh.obj");
+    for (Index i = 0; i < m.num_vertices(); ++i)
+      o << "v " << m.positions[3 * i] << " " << m.positions[3 * i + 1] << " " << m.positions[3 * i + 2] << "\n";
+    for (Index i = 0; i < m.num_vertices(); ++i) o << "vt " << 2 * m.uvs[2 * i] << " " << 2 * m.uvs[2 * i + 1] << "\n";
+    for (Index t = 0; t < m.num_triangles(); ++t) {
+      o << "f";
+      for (int k = 0; k < 3; ++k) o << " " << m.triangles[3 * t + k] + 1 << "/" << m.triangles[3 * t + k] + 1;
+      o << "\n";
+    }
+  }
+  std::string out;
+  int rc = run(std::string(LOOM_EXE) + " render " + dir + " --quiet --out " + dir + "/planar", out);
+  if (rc != 0 && out.find("EGL") != std::string::npos) GTEST_SKIP() << "no EGL context: " << out;
+  ASSERT_EQ(rc, 0) << out;
+  {
+    std::ofstream s(dir + "/scene2.yaml");
+    s << "mesh: {obj: mesh.obj}\nrender:\n  width: 64\n  height: 48\n  supersample: 1\n  video: off\n"
+      << "  fabric: {weave: twill_2_1, density: 20}\n";
+  }
+  rc = run(std::string(LOOM_EXE) + " render " + dir + " --quiet --scene " + dir + "/scene2.yaml --out " + dir + "/vt", out);
+  ASSERT_EQ(rc, 0) << out;
+  // Same settings, only the UVs differ.
+  int w = 0, h = 0;
+  const auto a = read_png(dir + "/planar/frame_00000.png", w, h);
+  const auto b = read_png(dir + "/vt/frame_00000.png", w, h);
+  EXPECT_NE(a, b);
+  // And with vt equal to the planar UVs the images are identical.
+  {
+    std::ofstream o(dir + "/mesh.obj");
+    for (Index i = 0; i < m.num_vertices(); ++i)
+      o << "v " << m.positions[3 * i] << " " << m.positions[3 * i + 1] << " " << m.positions[3 * i + 2] << "\n";
+    for (Index i = 0; i < m.num_vertices(); ++i) o << "vt " << m.uvs[2 * i] << " " << m.uvs[2 * i + 1] << "\n";
+    for (Index t = 0; t < m.num_triangles(); ++t) {
+      o << "f";
+      for (int k = 0; k < 3; ++k) o << " " << m.triangles[3 * t + k] + 1 << "/" << m.triangles[3 * t + k] + 1;
+      o << "\n";
+    }
+  }
+  rc = run(std::string(LOOM_EXE) + " render " + dir + " --quiet --scene " + dir + "/scene2.yaml --out " + dir + "/vt1", out);
+  ASSERT_EQ(rc, 0) << out;
+  EXPECT_EQ(read_png(dir + "/vt1/frame_00000.png", w, h), a);
+  fs::remove_all(dir);
+}
