@@ -27,17 +27,29 @@ LOOM_HD inline T spring_inv_length(T l2) {
   return l2 > T(0) ? T(1) / sqrt(l2) : T(0);
 }
 
-/// Elastic force on endpoint i (the force on j is -fi). Returns the current length l.
+/// The force on i is s d. Elastic: s = k (1 - l0/l), from l2 = d . d.
+/// (Scalar form for vectorised loops: the caller gathers d itself.)
 template <class T>
-LOOM_HD inline T spring_force(const T* xi, const T* xj, T k, T l0, T* fi) {
-  const T d0 = xj[0] - xi[0], d1 = xj[1] - xi[1], d2 = xj[2] - xi[2];
-  const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+LOOM_HD inline T spring_force_scale(T l2, T k, T l0) {
+  return k * (T(1) - l0 * spring_inv_length(l2));
+}
+
+/// Elastic plus damper: s = k (1 - l0/l) + c (d . u) / l^2, u = v_j - v_i
+/// (the damper force c (n . u) n = c (d . u) d / l^2).
+template <class T>
+LOOM_HD inline T spring_force_scale_damped(T l2, T du, T k, T l0, T c) {
   const T il = spring_inv_length(l2);
-  const T s = k * (T(1) - l0 * il);
+  return k * (T(1) - l0 * il) + c * du * il * il;
+}
+
+/// Elastic force on endpoint i (the force on j is -fi).
+template <class T>
+LOOM_HD inline void spring_force(const T* xi, const T* xj, T k, T l0, T* fi) {
+  const T d0 = xj[0] - xi[0], d1 = xj[1] - xi[1], d2 = xj[2] - xi[2];
+  const T s = spring_force_scale(d0 * d0 + d1 * d1 + d2 * d2, k, l0);
   fi[0] = s * d0;
   fi[1] = s * d1;
   fi[2] = s * d2;
-  return l2 * il;
 }
 
 /// Elastic plus axial damping force on endpoint i (the force on j is -fi).
@@ -45,11 +57,8 @@ template <class T>
 LOOM_HD inline void spring_force_damped(const T* xi, const T* xj, const T* vi, const T* vj, T k,
                                         T l0, T c, T* fi) {
   const T d0 = xj[0] - xi[0], d1 = xj[1] - xi[1], d2 = xj[2] - xi[2];
-  const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
-  const T il = spring_inv_length(l2);
-  // Damper: c (n . u) n = c (d . u) d / l^2.
   const T du = d0 * (vj[0] - vi[0]) + d1 * (vj[1] - vi[1]) + d2 * (vj[2] - vi[2]);
-  const T s = k * (T(1) - l0 * il) + c * du * il * il;
+  const T s = spring_force_scale_damped(d0 * d0 + d1 * d1 + d2 * d2, du, k, l0, c);
   fi[0] = s * d0;
   fi[1] = s * d1;
   fi[2] = s * d2;
