@@ -393,10 +393,11 @@ TEST(GlRendererCli, MissingEglDriverNamesThePackage) {
 }
 
 TEST(GlRendererCli, VideoOnWithoutFfmpegIsBadInput) {
-  if (std::system("command -v ffmpeg > /dev/null 2>&1") == 0) GTEST_SKIP() << "ffmpeg is installed here";
+  // An empty PATH hides ffmpeg whether or not it is installed.
   const std::string dir = make_run_dir("video");
   std::string out;
-  EXPECT_EQ(run(std::string(LOOM_EXE) + " render " + dir + " --set render.video=on", out), kExitBadInput) << out;
+  EXPECT_EQ(run("PATH=/nonexistent " + std::string(LOOM_EXE) + " render " + dir + " --set render.video=on", out),
+            kExitBadInput) << out;
   EXPECT_NE(out.find("apt-get install ffmpeg"), std::string::npos) << out;
   EXPECT_EQ(run(std::string(LOOM_EXE) + " render " + dir + " --set render.video=maybe", out), kExitBadInput) << out;
   fs::remove_all(dir);
@@ -448,5 +449,23 @@ TEST(GlRendererCli, UsesTheSceneMeshTextureCoordinates) {
   rc = run(std::string(LOOM_EXE) + " render " + dir + " --quiet --scene " + dir + "/scene2.yaml --out " + dir + "/vt1", out);
   ASSERT_EQ(rc, 0) << out;
   EXPECT_EQ(read_png(dir + "/vt1/frame_00000.png", w, h), a);
+  fs::remove_all(dir);
+}
+
+TEST(GlRendererCli, VideoWithFfmpegWritesAnMp4) {
+  if (std::system("command -v ffmpeg > /dev/null 2>&1") != 0) GTEST_SKIP() << "ffmpeg is not installed here";
+  const std::string dir = make_run_dir("mp4");
+  std::string out;
+  const int rc = run(std::string(LOOM_EXE) + " render " + dir + " --quiet --set render.video=on --set render.fps=10", out);
+  if (rc != 0 && out.find("EGL") != std::string::npos) GTEST_SKIP() << "no EGL context: " << out;
+  ASSERT_EQ(rc, 0) << out;
+  ASSERT_TRUE(fs::exists(dir + "/render/render.mp4"));
+  EXPECT_GT(fs::file_size(dir + "/render/render.mp4"), 100u);
+  if (std::system("command -v ffprobe > /dev/null 2>&1") == 0) {
+    run("ffprobe -v error -count_frames -select_streams v:0 -show_entries stream=nb_read_frames -of csv=p=0 " + dir +
+            "/render/render.mp4",
+        out);
+    EXPECT_EQ(std::atoi(out.c_str()), 2) << out;  // the two frames of the run
+  }
   fs::remove_all(dir);
 }
