@@ -1,6 +1,7 @@
 #include "ho_integrator.hpp"
 
 #include <algorithm>
+#include <stdexcept>
 #include <utility>
 
 namespace loom {
@@ -23,9 +24,11 @@ const char* to_string(HoVariant v) {
 }
 
 HoIntegrator::HoIntegrator(const Params& p) {
-  if (p.valid())
+  if (p.valid()) {
     variant_ = parse_ho_variant(
         p.get_choice("variant", "velocity", {"velocity", "analytic_position", "kang_cho_2011"}));
+    allow_table_ = p.get_choice("storage", "auto", {"auto", "direct"}) == "auto";
+  }
 }
 
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out) {
@@ -45,6 +48,17 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
     out.k[q] = sorted.stiffness[q];
     out.c[q] = sorted.damping[q];
   }
+  // The sweep needs each part's interior springs sorted by lower endpoint (the layout
+  // guarantees it); check, since the finalisation relies on it.
+  for (int p = 0; p < layout.parts(); ++p)
+    for (Index q = layout.part_spring_begin(p) + 1; q < layout.part_spring_end(p); ++q)
+      if (out.i[q] < out.i[q - 1])
+        throw std::logic_error("harmonic_oscillation: spring layout part not sorted by lower endpoint");
+  out.is_deferred.assign(static_cast<std::size_t>(n), 0);
+  for (Index q = layout.colour_begin(0); q < S; ++q) out.is_deferred[out.i[q]] = out.is_deferred[out.j[q]] = 1;
+  out.deferred.clear();
+  for (Index v = 0; v < n; ++v)
+    if (out.is_deferred[v]) out.deferred.push_back(v);
 }
 
 void HoIntegrator::prepare(Scene& scene, double h) {
@@ -69,40 +83,29 @@ void HoIntegrator::prepare(Scene& scene, double h) {
     build_ho_springs(n, *set, layout_, springs_);
     source_ = set;
   }
-  vnew_.assign(3 * static_cast<std::size_t>(n), 0.0);
-  xnew_.assign(variant_ == HoVariant::AnalyticPosition ? 3 * static_cast<std::size_t>(n) : 0, 0.0);
-  update_ho_coefficients(springs_, variant_, scene.state.inv_mass.data(), h);
+  dv_.assign(3 * static_cast<std::size_t>(n), 0.0);
+  dx_.assign(variant_ == HoVariant::AnalyticPosition ? 3 * static_cast<std::size_t>(n) : 0, 0.0);
+  update_ho_coefficients(springs_, variant_, scene.state.inv_mass.data(), h, allow_table_);
   h_ = h;
 }
 
 void HoIntegrator::step(Scene& scene, double h) {
   State& s = scene.state;
-  if (h != h_ || vnew_.size() != s.x.size()) prepare(scene, h);
+  if (h != h_ || dv_.size() != s.x.size()) prepare(scene, h);
   const std::array<double, 3> g{scene.gravity[0], scene.gravity[1], scene.gravity[2]};
+  double* x = s.x.data();
+  double* v = s.v.data();
+  const double* w = s.inv_mass.data();
   switch (variant_) {
     case HoVariant::Velocity:
-      ho_step_arrays<double, HoVariant::Velocity>(layout_, springs_, s.x.data(), s.v.data(), vnew_.data(),
-                                                  nullptr, s.inv_mass.data(), h, g);
+      ho_step_arrays<double, HoVariant::Velocity>(layout_, springs_, x, v, dv_.data(), nullptr, w, h, g);
       break;
     case HoVariant::KangCho2011:
-      ho_step_arrays<double, HoVariant::KangCho2011>(layout_, springs_, s.x.data(), s.v.data(), vnew_.data(),
-                                                     nullptr, s.inv_mass.data(), h, g);
+      ho_step_arrays<double, HoVariant::KangCho2011>(layout_, springs_, x, v, dv_.data(), nullptr, w, h, g);
       break;
-    case HoVariant::AnalyticPosition: {
-      ho_step_arrays<double, HoVariant::AnalyticPosition>(layout_, springs_, s.x.data(), s.v.data(),
-                                                          vnew_.data(), xnew_.data(), s.inv_mass.data(), h, g);
-      const std::ptrdiff_t m = static_cast<std::ptrdiff_t>(s.x.size());
-      double* x = s.x.data();
-      double* v = s.v.data();
-      const double* xn = xnew_.data();
-      const double* vn = vnew_.data();
-#pragma omp parallel for schedule(static) if (m >= 3 * kHoSerialSprings)
-      for (std::ptrdiff_t d = 0; d < m; ++d) {
-        x[d] = xn[d];
-        v[d] = vn[d];
-      }
+    case HoVariant::AnalyticPosition:
+      ho_step_arrays<double, HoVariant::AnalyticPosition>(layout_, springs_, x, v, dv_.data(), dx_.data(), w, h, g);
       break;
-    }
   }
   finish_step(s, h);
 }

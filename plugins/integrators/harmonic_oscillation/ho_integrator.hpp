@@ -9,8 +9,11 @@
 #pragma once
 
 #include <array>
+#include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "loom/integrator.hpp"
@@ -38,119 +41,333 @@ struct HoSprings {
   std::vector<T> l0, k, c;        ///< rest length, stiffness, axial damper (from the material)
   std::vector<T> kx, kv;          ///< velocity constants (kang_cho_2011: kx, ka)
   std::vector<T> ex, ev;          ///< position constants (analytic_position only)
+  // Table storage: when the springs have few distinct (l0, k, c, w_i + w_j), each spring stores
+  // a 16-bit id into small tables instead of its own l0 and constants (10 instead of 32 bytes
+  // per spring in double); the per-spring kx, kv, ex, ev are then empty.
+  bool table = false;
+  std::vector<std::uint16_t> id;
+  std::vector<T> t_l0, t_kx, t_kv, t_ex, t_ev;
+  // traversal structure (built with the layout; the same for every scalar type)
+  std::vector<std::uint8_t> is_deferred;   ///< per vertex: touched by a cross spring
+  std::vector<Index> deferred;             ///< those vertices
   Index size() const { return static_cast<Index>(i.size()); }
 };
 
-/// Build the traversal layout and the spring arrays from a spring set over n vertices.
+/// Build the traversal layout and the spring arrays from a spring set over n vertices: springs
+/// in traversal order with i < j (HO is symmetric in its endpoints), sorted by i within each
+/// part, and the vertices that cross springs touch.
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out);
+
+/// Copy the structure (endpoints, traversal data) and the material constants to another scalar.
+template <class T, class U>
+void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
+  out.i = in.i;
+  out.j = in.j;
+  out.is_deferred = in.is_deferred;
+  out.deferred = in.deferred;
+  out.l0.assign(in.l0.begin(), in.l0.end());
+  out.k.assign(in.k.begin(), in.k.end());
+  out.c.assign(in.c.begin(), in.c.end());
+  out.table = false;
+}
 
 /// Below this many springs a step runs on the calling thread.
 constexpr Index kHoSerialSprings = 8192;
 
-/// (Re)compute the per-spring constants for step h and inverse masses w.
+/// Largest number of distinct spring parameter sets stored as a table (16-bit ids).
+constexpr std::size_t kHoMaxTable = 65536;
+
+/// Constants of one parameter set (k, c, W = w_i + w_j) in double: kx, kv, ex, ev.
+inline std::array<double, 4> ho_constants(HoVariant variant, double k, double c, double W, double h) {
+  if (variant == HoVariant::KangCho2011) {
+    const auto r = kernels::kang_cho_coefficients<double>(k, W, 0.0, h);
+    return {r.kx, r.ka, 0.0, 0.0};
+  }
+  const auto r = kernels::ho_coefficients<double>(k, c, W, 0.0, h);
+  return {r.kx, r.kv, r.ex, r.ev};
+}
+
+/// (Re)compute the constants for step h and inverse masses w (called by prepare, so whenever h
+/// or a mass changes). allow_table: deduplicate (l0, k, c, W) into tables when there are at
+/// most kHoMaxTable distinct sets; otherwise (or when false) store constants per spring.
 template <class T>
-void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h) {
+void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h, bool allow_table = true) {
   const Index S = s.size();
   const bool pos = variant == HoVariant::AnalyticPosition;
+  const double hd = static_cast<double>(h);
+  s.table = false;
+  if (allow_table) {
+    struct KeyHash {
+      std::size_t operator()(const std::array<double, 4>& a) const {
+        std::size_t x = 0;
+        for (double d : a) x = x * 1000003u ^ std::hash<double>()(d);
+        return x;
+      }
+    };
+    std::unordered_map<std::array<double, 4>, std::uint32_t, KeyHash> map;
+    std::vector<std::array<double, 4>> keys;
+    s.id.resize(S);
+    bool ok = true;
+    for (Index q = 0; q < S && ok; ++q) {
+      const std::array<double, 4> key{static_cast<double>(s.l0[q]), static_cast<double>(s.k[q]),
+                                      static_cast<double>(s.c[q]),
+                                      static_cast<double>(w[s.i[q]]) + static_cast<double>(w[s.j[q]])};
+      auto it = map.find(key);
+      if (it == map.end()) {
+        if (keys.size() >= kHoMaxTable) ok = false;
+        it = map.emplace(key, static_cast<std::uint32_t>(keys.size())).first;
+        keys.push_back(key);
+      }
+      s.id[q] = static_cast<std::uint16_t>(it->second);
+    }
+    if (ok) {
+      s.table = true;
+      const std::size_t m = keys.size();
+      s.t_l0.resize(m);
+      s.t_kx.resize(m);
+      s.t_kv.resize(m);
+      s.t_ex.assign(pos ? m : 0, T(0));
+      s.t_ev.assign(pos ? m : 0, T(0));
+      for (std::size_t t = 0; t < m; ++t) {
+        const auto c = ho_constants(variant, keys[t][1], keys[t][2], keys[t][3], hd);
+        s.t_l0[t] = static_cast<T>(keys[t][0]);
+        s.t_kx[t] = static_cast<T>(c[0]);
+        s.t_kv[t] = static_cast<T>(c[1]);
+        if (pos) {
+          s.t_ex[t] = static_cast<T>(c[2]);
+          s.t_ev[t] = static_cast<T>(c[3]);
+        }
+      }
+      s.kx.clear();
+      s.kv.clear();
+      s.ex.clear();
+      s.ev.clear();
+      return;
+    }
+  }
+  s.id.clear();
   s.kx.resize(S);
   s.kv.resize(S);
   s.ex.resize(pos ? S : 0);
   s.ev.resize(pos ? S : 0);
-  // coefficients are computed in double even for float data
 #pragma omp parallel for schedule(static) if (S >= kHoSerialSprings)
   for (Index q = 0; q < S; ++q) {
-    const double wi = static_cast<double>(w[s.i[q]]), wj = static_cast<double>(w[s.j[q]]);
-    if (variant == HoVariant::KangCho2011) {
-      const auto c = kernels::kang_cho_coefficients<double>(s.k[q], wi, wj, h);
-      s.kx[q] = static_cast<T>(c.kx);
-      s.kv[q] = static_cast<T>(c.ka);
-    } else {
-      const auto c = kernels::ho_coefficients<double>(s.k[q], s.c[q], wi, wj, h);
-      s.kx[q] = static_cast<T>(c.kx);
-      s.kv[q] = static_cast<T>(c.kv);
-      if (pos) {
-        s.ex[q] = static_cast<T>(c.ex);
-        s.ev[q] = static_cast<T>(c.ev);
-      }
+    const double W = static_cast<double>(w[s.i[q]]) + static_cast<double>(w[s.j[q]]);
+    const auto c = ho_constants(variant, static_cast<double>(s.k[q]), static_cast<double>(s.c[q]), W, hd);
+    s.kx[q] = static_cast<T>(c[0]);
+    s.kv[q] = static_cast<T>(c[1]);
+    if (pos) {
+      s.ex[q] = static_cast<T>(c[2]);
+      s.ev[q] = static_cast<T>(c[3]);
     }
   }
 }
 
-/// One HO step on raw arrays (3n positions/velocities, n inverse masses), race free through
-/// the layout, no allocation. vnew and xnew are work arrays of 3n (xnew used by
-/// analytic_position only). On return x and v hold the new state (for analytic_position the
-/// new positions are in xnew and the new velocities in vnew: the caller swaps).
-template <class T, HoVariant V>
-void ho_step_arrays(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v, T* vnew, T* xnew,
-                    const T* w, T h, const std::array<T, 3>& g) {
+/// Where a spring's l0 and constants live: per spring (direct) or in tables indexed by id.
+template <class T>
+struct HoParamView {
+  const T* l0;
+  const T* kx;
+  const T* kv;
+  const T* ex;
+  const T* ev;
+  const std::uint16_t* id;   ///< table mode only
+};
+
+template <class T>
+HoParamView<T> ho_param_view(const HoSprings<T>& s) {
+  if (s.table) return {s.t_l0.data(), s.t_kx.data(), s.t_kv.data(), s.t_ex.data(), s.t_ev.data(), s.id.data()};
+  return {s.l0.data(), s.kx.data(), s.kv.data(), s.ex.data(), s.ev.data(), nullptr};
+}
+
+/// Impulse (and HO-A displacement) per unit inverse mass of spring q: g (and p).
+template <class T, HoVariant V, bool Table>
+inline void ho_one_spring(Index q, const Index* I, const Index* J, const HoParamView<T>& P, const T* x,
+                          const T* v, T g[3], T p[3]) {
+  const std::size_t a = 3 * static_cast<std::size_t>(I[q]);
+  const std::size_t b = 3 * static_cast<std::size_t>(J[q]);
+  const std::size_t c = Table ? static_cast<std::size_t>(P.id[q]) : static_cast<std::size_t>(q);
+  if constexpr (V == HoVariant::AnalyticPosition) {
+    const kernels::HoCoeffs<T> k{P.kx[c], P.kv[c], P.ex[c], P.ev[c]};
+    kernels::ho_spring_velocity_position(x, v, a, b, P.l0[c], k, g, p);
+  } else if constexpr (V == HoVariant::KangCho2011) {
+    kernels::kang_cho_spring_velocity(x, v, a, b, P.l0[c], P.kx[c], P.kv[c], g);
+  } else {
+    kernels::ho_spring_velocity(x, v, a, b, P.l0[c], P.kx[c], P.kv[c], g);
+  }
+}
+
+/// Phase 1 of a block of m springs: G_i = w_i g, G_j = w_j g (and P for analytic_position)
+/// into the block buffers. Plain restrict pointers so that the loop vectorises (gathers only).
+template <class T, HoVariant V, bool Table>
+inline void ho_block_impulses(Index m, const Index* __restrict I, const Index* __restrict J,
+                              const std::uint16_t* __restrict ID, const T* __restrict L0,
+                              const T* __restrict KX, const T* __restrict KV, const T* __restrict EX,
+                              const T* __restrict EV, const T* __restrict x, const T* __restrict v,
+                              const T* __restrict w, T* __restrict Gi, T* __restrict Gj, T* __restrict Pi,
+                              T* __restrict Pj) {
+  for (Index r = 0; r < m; ++r) {
+    const std::size_t a = 3 * static_cast<std::size_t>(I[r]);
+    const std::size_t b = 3 * static_cast<std::size_t>(J[r]);
+    const std::size_t c = Table ? static_cast<std::size_t>(ID[r]) : static_cast<std::size_t>(r);
+    const T wi = w[I[r]], wj = w[J[r]];
+    T gv[3];
+    if constexpr (V == HoVariant::AnalyticPosition) {
+      const kernels::HoCoeffs<T> k{KX[c], KV[c], EX[c], EV[c]};
+      T pv[3];
+      kernels::ho_spring_velocity_position(x, v, a, b, L0[c], k, gv, pv);
+      for (int e = 0; e < 3; ++e) {
+        Pi[3 * r + e] = wi * pv[e];
+        Pj[3 * r + e] = wj * pv[e];
+      }
+    } else if constexpr (V == HoVariant::KangCho2011) {
+      kernels::kang_cho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], gv);
+    } else {
+      kernels::ho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], gv);
+    }
+    for (int e = 0; e < 3; ++e) {
+      Gi[3 * r + e] = wi * gv[e];
+      Gj[3 * r + e] = wj * gv[e];
+    }
+  }
+}
+
+/// Springs per block in the sweep: phase 1 computes the impulses of a block (vectorised,
+/// gathers only), phase 2 scatters them.
+constexpr Index kHoBlock = 128;
+
+/// One HO step on raw arrays (3n positions/velocities, n inverse masses), race free, no
+/// allocation. dv (and dx for analytic_position) are 3n accumulators that must be zero on
+/// entry; they are zero again on return.
+///
+/// Traversal: each part of the layout is swept in order of lower endpoint (s.i). A vertex q
+/// of the part is complete as soon as the sweep has passed every spring with lower endpoint
+/// q (its other springs have a smaller lower endpoint), unless a cross spring touches it
+/// (s.deferred). So the sweep finalises q right away (v += dv + h g, x += h v), while
+/// q's data is still in cache, and clears the accumulator; the deferred vertices are
+/// finalised after the cross springs. One pass over the vertices per step.
+template <class T, HoVariant V, bool Table>
+void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v, T* dv, T* dx, const T* w, T h,
+                  const std::array<T, 3>& g) {
+  constexpr bool kPos = V == HoVariant::AnalyticPosition;
+  constexpr std::size_t kPosBlock = kPos ? 3 * kHoBlock : 1;
   const Index* I = s.i.data();
   const Index* J = s.j.data();
-  const T* L0 = s.l0.data();
-  const T* KX = s.kx.data();
-  const T* KV = s.kv.data();
-  const T* EX = s.ex.data();
-  const T* EV = s.ev.data();
-  const T hg0 = h * g[0], hg1 = h * g[1], hg2 = h * g[2];
+  const HoParamView<T> P = ho_param_view(s);
+  const std::uint8_t* deferred = s.is_deferred.data();
   const T hh2 = h * h / T(2);
-  auto init = [&](Index v0, Index v1) {
-    for (Index q = v0; q < v1; ++q) {
-      const T f = w[q] > T(0) ? T(1) : T(0);
-      const std::size_t d = 3 * static_cast<std::size_t>(q);
-      vnew[d] = v[d] + f * hg0;
-      vnew[d + 1] = v[d + 1] + f * hg1;
-      vnew[d + 2] = v[d + 2] + f * hg2;
-      if constexpr (V == HoVariant::AnalyticPosition) {
-        xnew[d] = x[d] + h * v[d] + f * hh2 * g[0];
-        xnew[d + 1] = x[d + 1] + h * v[d + 1] + f * hh2 * g[1];
-        xnew[d + 2] = x[d + 2] + h * v[d + 2] + f * hh2 * g[2];
+  const T hg[3] = {h * g[0], h * g[1], h * g[2]};
+  const T gg[3] = {hh2 * g[0], hh2 * g[1], hh2 * g[2]};
+
+  auto finalize = [&](Index q) {
+    const T f = w[q] > T(0) ? T(1) : T(0);
+    T* xq = x + 3 * static_cast<std::size_t>(q);
+    T* vq = v + 3 * static_cast<std::size_t>(q);
+    T* dq = dv + 3 * static_cast<std::size_t>(q);
+    for (int e = 0; e < 3; ++e) {
+      if constexpr (kPos) {
+        T* pq = dx + 3 * static_cast<std::size_t>(q);
+        xq[e] += h * vq[e] + f * gg[e] + pq[e];
+        pq[e] = T(0);
       }
+      vq[e] += dq[e] + f * hg[e];
+      dq[e] = T(0);
+      if constexpr (!kPos) xq[e] += h * vq[e];
     }
   };
-  auto body = [&](Index q) {
+  // One spring, computed and scattered directly (cross springs).
+  auto single = [&](Index q) {
     const std::size_t a = 3 * static_cast<std::size_t>(I[q]);
     const std::size_t b = 3 * static_cast<std::size_t>(J[q]);
     const T wi = w[I[q]], wj = w[J[q]];
-    T gv[3];
-    if constexpr (V == HoVariant::AnalyticPosition) {
-      const kernels::HoCoeffs<T> c{KX[q], KV[q], EX[q], EV[q]};
-      T p[3];
-      kernels::ho_spring_velocity_position(x + a, x + b, v + a, v + b, L0[q], c, gv, p);
-      for (int e = 0; e < 3; ++e) {
-        xnew[a + e] += wi * p[e];
-        xnew[b + e] -= wj * p[e];
-      }
-    } else if constexpr (V == HoVariant::KangCho2011) {
-      kernels::kang_cho_spring_velocity(x + a, x + b, v + a, v + b, L0[q], KX[q], KV[q], gv);
-    } else {
-      kernels::ho_spring_velocity(x + a, x + b, v + a, v + b, L0[q], KX[q], KV[q], gv);
-    }
+    T gv[3], pv[3];
+    ho_one_spring<T, V, Table>(q, I, J, P, x, v, gv, pv);
     for (int e = 0; e < 3; ++e) {
-      vnew[a + e] += wi * gv[e];
-      vnew[b + e] -= wj * gv[e];
+      dv[a + e] += wi * gv[e];
+      dv[b + e] -= wj * gv[e];
+      if constexpr (kPos) {
+        dx[a + e] += wi * pv[e];
+        dx[b + e] -= wj * pv[e];
+      }
     }
   };
-  const bool serial = s.size() < kHoSerialSprings || omp_get_max_threads() == 1;
-  if (serial) {
-    // small problems: a parallel region costs more than the work (and far more on a loaded machine)
-    init(0, layout.num_vertices());
-    for (Index q = 0; q < s.size(); ++q) body(q);
-  } else {
-    layout.for_each(init, body);
-  }
-  if constexpr (V != HoVariant::AnalyticPosition) {
-    const std::ptrdiff_t m = 3 * static_cast<std::ptrdiff_t>(layout.num_vertices());
-#pragma omp parallel for schedule(static) if (!serial)
-    for (std::ptrdiff_t d = 0; d < m; ++d) {
-      x[d] += h * vnew[d];
-      v[d] = vnew[d];
+  // Sweep of part p's interior springs, finalising vertices as they complete.
+  auto sweep = [&](int p) {
+    const Index ve = layout.part_vertex_end(p);
+    const Index kend = layout.part_spring_end(p);
+    Index k = layout.part_spring_begin(p);
+    Index qfin = layout.part_vertex_begin(p);
+    alignas(64) T Gi[3 * kHoBlock], Gj[3 * kHoBlock];
+    alignas(64) T Pi[kPosBlock], Pj[kPosBlock];
+    while (k < kend) {
+      const Index k1 = std::min<Index>(k + kHoBlock, kend);
+      const Index m = k1 - k;
+      // phase 1: impulses (times the endpoint's inverse mass), gathers only
+      const std::size_t off = Table ? 0 : static_cast<std::size_t>(k);
+      ho_block_impulses<T, V, Table>(m, I + k, J + k, Table ? P.id + k : nullptr, P.l0 + off, P.kx + off,
+                                     P.kv + off, kPos ? P.ex + off : nullptr, kPos ? P.ev + off : nullptr, x, v,
+                                     w, Gi, Gj, Pi, Pj);
+      // phase 2: scatter
+      for (Index r = 0; r < m; ++r) {
+        const std::size_t a = 3 * static_cast<std::size_t>(I[k + r]);
+        const std::size_t b = 3 * static_cast<std::size_t>(J[k + r]);
+        for (int e = 0; e < 3; ++e) {
+          dv[a + e] += Gi[3 * r + e];
+          dv[b + e] -= Gj[3 * r + e];
+          if constexpr (kPos) {
+            dx[a + e] += Pi[3 * r + e];
+            dx[b + e] -= Pj[3 * r + e];
+          }
+        }
+      }
+      k = k1;
+      const Index done = k < kend ? I[k] : ve;   // every spring with lower endpoint < done is applied
+      for (; qfin < done; ++qfin)
+        if (!deferred[qfin]) finalize(qfin);
     }
+    for (; qfin < ve; ++qfin)
+      if (!deferred[qfin]) finalize(qfin);
+  };
+
+  const int NP = layout.parts();
+  const int C = layout.num_colours();
+  const Index ND = static_cast<Index>(s.deferred.size());
+  const bool serial = s.size() < kHoSerialSprings || omp_get_max_threads() == 1;
+#pragma omp parallel if (!serial)
+  {
+#pragma omp for schedule(static)
+    for (int p = 0; p < NP; ++p) sweep(p);
+    if (C > 0) {
+      if (layout.cross_serial()) {
+#pragma omp single
+        for (Index q = layout.colour_begin(0); q < layout.colour_end(C - 1); ++q) single(q);
+      } else {
+        for (int c = 0; c < C; ++c) {
+#pragma omp for schedule(static)
+          for (Index q = layout.colour_begin(c); q < layout.colour_end(c); ++q) single(q);
+        }
+      }
+    }
+#pragma omp for schedule(static)
+    for (Index r = 0; r < ND; ++r) finalize(s.deferred[r]);
   }
+}
+
+/// One HO step (see ho_step_impl), dispatching on the spring storage.
+template <class T, HoVariant V>
+void ho_step_arrays(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v, T* dv, T* dx, const T* w,
+                    T h, const std::array<T, 3>& g) {
+  if (s.table)
+    ho_step_impl<T, V, true>(layout, s, x, v, dv, dx, w, h, g);
+  else
+    ho_step_impl<T, V, false>(layout, s, x, v, dv, dx, w, h, g);
 }
 
 class HoIntegrator final : public Integrator {
  public:
   explicit HoIntegrator(const Params& p = Params());
-  explicit HoIntegrator(HoVariant variant) : variant_(variant) {}
+  /// allow_table = false forces per-spring constants (parameter storage: direct).
+  explicit HoIntegrator(HoVariant variant, bool allow_table = true) : variant_(variant), allow_table_(allow_table) {}
   std::string name() const override { return "harmonic_oscillation"; }
   IntegratorNeeds needs() const override { return {true, false, false}; }
   void prepare(Scene& scene, double h) override;
@@ -163,9 +380,10 @@ class HoIntegrator final : public Integrator {
 
  private:
   HoVariant variant_ = HoVariant::Velocity;
+  bool allow_table_ = true;
   SpringLayout layout_;
   HoSprings<double> springs_;
-  std::vector<double> vnew_, xnew_;
+  std::vector<double> dv_, dx_;   ///< accumulators, zero between steps
   double h_ = -1;
   const SpringSet* source_ = nullptr;
 };

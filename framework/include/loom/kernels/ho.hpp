@@ -184,12 +184,14 @@ LOOM_HD inline KangChoCoeffs<T> kang_cho_coefficients(T k, T wi, T wj, T h) {
   return r;
 }
 
+// The per-spring functions below read the endpoints as x[a + e], x[b + e] (a = 3 i, b = 3 j):
+// a base pointer plus an index lets a compiler turn a loop over springs into vector gathers.
+
 /// Geometry of one spring: unit axis n (zero for a degenerate spring), delta, delta_dot.
-template <class T>
-LOOM_HD inline void ho_spring_axis(const T* xi, const T* xj, const T* vi, const T* vj, T l0, T n[3],
-                                   T& delta, T& delta_dot) {
+template <class T, class I>
+LOOM_HD inline void ho_spring_axis(const T* x, const T* v, I a, I b, T l0, T n[3], T& delta, T& delta_dot) {
   using std::sqrt;
-  const T d0 = xj[0] - xi[0], d1 = xj[1] - xi[1], d2 = xj[2] - xi[2];
+  const T d0 = x[b] - x[a], d1 = x[b + 1] - x[a + 1], d2 = x[b + 2] - x[a + 2];
   const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
   const T l = sqrt(l2);
   const T inv = l > T(0) ? T(1) / l : T(0);
@@ -197,16 +199,15 @@ LOOM_HD inline void ho_spring_axis(const T* xi, const T* xj, const T* vi, const 
   n[1] = d1 * inv;
   n[2] = d2 * inv;
   delta = l > T(0) ? l - l0 : T(0);
-  delta_dot = n[0] * (vj[0] - vi[0]) + n[1] * (vj[1] - vi[1]) + n[2] * (vj[2] - vi[2]);
+  delta_dot = n[0] * (v[b] - v[a]) + n[1] * (v[b + 1] - v[a + 1]) + n[2] * (v[b + 2] - v[a + 2]);
 }
 
 /// Velocity impulse per unit inverse mass of spring (i, j): returns s n in g, with
 /// Delta v_i = +w_i g and Delta v_j = -w_j g.
-template <class T>
-LOOM_HD inline void ho_spring_velocity(const T* xi, const T* xj, const T* vi, const T* vj, T l0, T kx, T kv,
-                                       T g[3]) {
+template <class T, class I>
+LOOM_HD inline void ho_spring_velocity(const T* x, const T* v, I a, I b, T l0, T kx, T kv, T g[3]) {
   T n[3], delta, delta_dot;
-  ho_spring_axis(xi, xj, vi, vj, l0, n, delta, delta_dot);
+  ho_spring_axis(x, v, a, b, l0, n, delta, delta_dot);
   const T s = kx * delta + kv * delta_dot;
   g[0] = s * n[0];
   g[1] = s * n[1];
@@ -215,26 +216,25 @@ LOOM_HD inline void ho_spring_velocity(const T* xi, const T* xj, const T* vi, co
 
 /// Velocity and analytic-position increments per unit inverse mass (HO-A):
 /// Delta v_i = +w_i g, Delta x_i = +w_i p (on top of h v_old), and minus for j.
-template <class T>
-LOOM_HD inline void ho_spring_velocity_position(const T* xi, const T* xj, const T* vi, const T* vj, T l0,
-                                                const HoCoeffs<T>& c, T g[3], T p[3]) {
+template <class T, class I>
+LOOM_HD inline void ho_spring_velocity_position(const T* x, const T* v, I a, I b, T l0, const HoCoeffs<T>& c,
+                                                T g[3], T p[3]) {
   T n[3], delta, delta_dot;
-  ho_spring_axis(xi, xj, vi, vj, l0, n, delta, delta_dot);
+  ho_spring_axis(x, v, a, b, l0, n, delta, delta_dot);
   const T s = c.kx * delta + c.kv * delta_dot;
   const T e = c.ex * delta + c.ev * delta_dot;
-  for (int a = 0; a < 3; ++a) {
-    g[a] = s * n[a];
-    p[a] = e * n[a];
+  for (int k = 0; k < 3; ++k) {
+    g[k] = s * n[k];
+    p[k] = e * n[k];
   }
 }
 
 /// Published-formula impulse per unit inverse mass (kang_cho_2011 variant).
-template <class T>
-LOOM_HD inline void kang_cho_spring_velocity(const T* xi, const T* xj, const T* vi, const T* vj, T l0, T kx,
-                                             T ka, T g[3]) {
+template <class T, class I>
+LOOM_HD inline void kang_cho_spring_velocity(const T* x, const T* v, I a, I b, T l0, T kx, T ka, T g[3]) {
   using std::abs;
   T n[3], delta, delta_dot;
-  ho_spring_axis(xi, xj, vi, vj, l0, n, delta, delta_dot);
+  ho_spring_axis(x, v, a, b, l0, n, delta, delta_dot);
   const T s = kx * delta + ka * abs(delta_dot);
   g[0] = s * n[0];
   g[1] = s * n[1];

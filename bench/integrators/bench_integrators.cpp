@@ -1,0 +1,266 @@
+// HO and RK4 steps on the Kang & Cho 2011 Table 1 grids (kang_cho_table1 stencil), double and
+// float, 1 and 2 threads, beside the paper's GTX 590 frame rates (one step per frame).
+//
+// Counters: fps (steps per second), paper_fps, ratio = fps / paper_fps, bytes (modelled bytes a
+// step moves to and from memory), GB/s = bytes x fps, bw_frac = GB/s / triad bandwidth of this
+// machine with the same thread count (measured at start-up, best of 5, 3 x 128 MB arrays).
+//
+//   build-ho/bin/bench_integrators --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
+#include <benchmark/benchmark.h>
+
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "ho_integrator.hpp"
+#include "loom/kernels/spring.hpp"
+#include "loom/mesh.hpp"
+#include "loom/params.hpp"
+#include "mass_spring.hpp"
+#include "rk4_integrator.hpp"
+
+using namespace loom;
+
+namespace {
+
+struct Row {
+  int n;
+  long springs;
+  double fps;
+};
+
+std::vector<Row> table1() {
+  std::vector<Row> rows;
+  std::ifstream in(std::string(LOOM_SHARED_DIR) + "/data/table1_kang_cho2011.csv");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line[0] == 'v') continue;
+    std::stringstream ss(line);
+    std::string a, b, c;
+    std::getline(ss, a, ',');
+    std::getline(ss, b, ',');
+    std::getline(ss, c, ',');
+    rows.push_back({static_cast<int>(std::lround(std::sqrt(std::stod(a)))), std::stol(b), std::stod(c)});
+  }
+  if (rows.empty()) {   // the shared data folder is missing: the six rows of the paper
+    rows = {{160, 253128, 68.1}, {176, 306600, 57.1}, {200, 396400, 47.2},
+            {256, 650760, 30.3}, {296, 870840, 23.1}, {336, 1233920, 15.7}};
+  }
+  return rows;
+}
+
+const std::vector<Row>& rows() {
+  static const std::vector<Row> r = table1();
+  return r;
+}
+
+// STREAM-like triad a = b + s c, 24 bytes per element, best of 5.
+double triad_bandwidth(int threads) {
+  static std::map<int, double> cache;
+  if (cache.count(threads)) return cache[threads];
+  const std::size_t m = 16u << 20;   // 16 Mi doubles = 128 MB per array
+  std::vector<double> a(m), b(m, 1.0), c(m, 2.0);
+  omp_set_num_threads(threads);
+  double best = 0;
+  for (int it = 0; it < 6; ++it) {
+    const auto t0 = std::chrono::steady_clock::now();
+#pragma omp parallel for schedule(static)
+    for (std::size_t q = 0; q < m; ++q) a[q] = b[q] + 3.0 * c[q];
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (it > 0) best = std::max(best, 24.0 * m / s);
+  }
+  benchmark::DoNotOptimize(a.data());
+  return cache[threads] = best;
+}
+
+// One Table 1 cloth: 336 x 336 etc., hanging (plane xy), top corners pinned, k = 2000,
+// density 0.1, HO velocity variant. Built once per size.
+struct Cloth {
+  int n = 0;
+  Scene scene;
+  std::vector<double> x0;
+  HoIntegrator ho{HoVariant::Velocity};
+  HoIntegrator ho_direct{HoVariant::Velocity, false};   // per-spring constants (no tables)
+  double h = 1e-6;
+  // float copies
+  HoSprings<float> fs;
+  std::vector<float> fx, fv, fw, fdv, fx0;
+  Index springs() const { return ho.springs().size(); }
+};
+
+Cloth& cloth(int n) {
+  static std::unique_ptr<Cloth> c;
+  if (c && c->n == n) return *c;
+  c.reset();
+  c = std::make_unique<Cloth>();
+  c->n = n;
+  Scene& sc = c->scene;
+  sc.source = "table1";
+  sc.mesh = make_grid(n, n, 1.0, 1.0, GridPlane::XY);
+  const Params p = Params::from_string("stencil: kang_cho_table1\nstiffness: 2000\ndensity: 0.1\n");
+  sc.material = std::make_unique<mass_spring::MassSpringMaterial>(p, sc.mesh);
+  sc.state.resize(sc.mesh.num_vertices());
+  sc.state.x = sc.mesh.positions;
+  sc.material->compute_masses(sc.state.mass);
+  const GridInfo& g = *sc.mesh.grid;
+  sc.state.pin(g.index(0, g.ny - 1));
+  sc.state.pin(g.index(g.nx - 1, g.ny - 1));
+  sc.state.update_inverse_masses();
+  sc.gravity = {0, -9.81, 0};
+  c->x0 = sc.state.x;
+  c->ho.prepare(sc, c->h);
+  c->ho_direct.prepare(sc, c->h);
+  const HoSprings<double>& d = c->ho.springs();
+  convert_ho_springs(d, c->fs);
+  c->fx.assign(sc.state.x.begin(), sc.state.x.end());
+  c->fx0 = c->fx;
+  c->fv.assign(sc.state.x.size(), 0.f);
+  c->fdv.assign(sc.state.x.size(), 0.f);
+  c->fw.assign(sc.state.inv_mass.begin(), sc.state.inv_mass.end());
+  update_ho_coefficients(c->fs, HoVariant::Velocity, c->fw.data(), static_cast<float>(c->h));
+  return *c;
+}
+
+// Modelled memory traffic of one step (T = scalar bytes, N vertices, S springs).
+double ho_bytes(double T, double N, double S, bool table) {
+  if (!table) return (8 + 3 * T) * S + N * (12 * T + T + 6 * T);
+  // springs: i, j (4 + 4) and l0, kx, kv (direct) or a 2-byte table id; vertices: x, v read
+  // and written, inverse mass, the velocity accumulator read and written (deferred flags and
+  // the small tables ignored)
+  return (8 + 2) * S + N * (12 * T + T + 6 * T);
+}
+double rk4_bytes(double T, double N, double S) {
+  // 4 force passes (springs: i, j, k, l0; x, v read, f written) + 4 stage passes over x0, v0,
+  // xs, vs, f, accumulators
+  return 4 * ((8 + 2 * T) * S + N * 9 * T) + 4 * N * 3 * T * 7;
+}
+
+void set_counters(benchmark::State& st, const Row& r, int threads, double bytes) {
+  const double it = static_cast<double>(st.iterations());
+  st.counters["fps"] = benchmark::Counter(it, benchmark::Counter::kIsRate);
+  st.counters["paper_fps"] = r.fps;
+  st.counters["ratio"] = benchmark::Counter(it / r.fps, benchmark::Counter::kIsRate);
+  st.counters["bytes"] = bytes;
+  st.counters["GB/s"] = benchmark::Counter(it * bytes * 1e-9, benchmark::Counter::kIsRate);
+  st.counters["bw_frac"] = benchmark::Counter(it * bytes / triad_bandwidth(threads), benchmark::Counter::kIsRate);
+}
+
+void BM_HoStep_double(benchmark::State& st) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  c.scene.state.x = c.x0;
+  std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  for (auto _ : st) c.ho.step(c.scene, c.h);
+  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), c.ho.springs().table));
+  st.counters["springs"] = c.springs();
+  st.counters["table"] = c.ho.springs().table ? static_cast<double>(c.ho.springs().t_l0.size()) : 0.0;
+}
+
+void BM_HoStep_double_direct(benchmark::State& st) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  c.scene.state.x = c.x0;
+  std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  for (auto _ : st) c.ho_direct.step(c.scene, c.h);
+  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), false));
+}
+
+void BM_HoStep_float(benchmark::State& st) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  c.fx = c.fx0;
+  std::fill(c.fv.begin(), c.fv.end(), 0.f);
+  const std::array<float, 3> g{0.f, -9.81f, 0.f};
+  for (auto _ : st)
+    ho_step_arrays<float, HoVariant::Velocity>(c.ho.layout(), c.fs, c.fx.data(), c.fv.data(), c.fdv.data(),
+                                               nullptr, c.fw.data(), static_cast<float>(c.h), g);
+  set_counters(st, r, threads, ho_bytes(4, c.scene.state.size(), c.springs(), c.fs.table));
+}
+
+void BM_Rk4Step_double(benchmark::State& st) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  c.scene.state.x = c.x0;
+  std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  Rk4Integrator rk;
+  rk.prepare(c.scene, c.h);
+  for (auto _ : st) rk.step(c.scene, c.h);
+  set_counters(st, r, threads, rk4_bytes(8, c.scene.state.size(), c.springs()));
+}
+
+void BM_Rk4Step_float(benchmark::State& st) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  const std::size_t m = c.fx.size();
+  const Index n = static_cast<Index>(m / 3);
+  std::vector<float> x = c.fx0, v(m, 0.f), xs(m), vs(m), f(m), ax(m), av(m);
+  const std::array<float, 3> g{0.f, -9.81f, 0.f};
+  const SpringLayout& layout = c.ho.layout();
+  const Index* I = c.fs.i.data();
+  const Index* J = c.fs.j.data();
+  const float* K = c.fs.k.data();
+  const float* L0 = c.fs.l0.data();
+  auto force = [&](const float* X, const float*, float* F) {
+    layout.for_each([F](Index v0, Index v1) { std::fill(F + 3 * static_cast<std::size_t>(v0), F + 3 * static_cast<std::size_t>(v1), 0.f); },
+                    [=](Index s) {
+                      const Index a = I[s], b = J[s];
+                      float fi[3];
+                      kernels::spring_force(X + 3 * a, X + 3 * b, K[s], L0[s], fi);
+                      for (int e = 0; e < 3; ++e) {
+                        F[3 * a + e] += fi[e];
+                        F[3 * b + e] -= fi[e];
+                      }
+                    });
+  };
+  for (auto _ : st)
+    rk4_step_arrays<float>(n, x.data(), v.data(), c.fw.data(), g, static_cast<float>(c.h), xs.data(), vs.data(),
+                           f.data(), ax.data(), av.data(), force);
+  set_counters(st, r, threads, rk4_bytes(4, n, c.springs()));
+}
+
+void BM_Triad(benchmark::State& st) {
+  const int threads = static_cast<int>(st.range(0));
+  for (auto _ : st) benchmark::DoNotOptimize(triad_bandwidth(threads));
+  st.counters["GB/s"] = triad_bandwidth(threads) * 1e-9;
+}
+
+void rows_args(benchmark::internal::Benchmark* b) {
+  for (int r = 0; r < static_cast<int>(rows().size()); ++r)
+    for (int t : {1, 2}) b->Args({r, t});
+  b->ArgNames({"row", "threads"})->Unit(benchmark::kMillisecond)->UseRealTime();
+}
+
+}  // namespace
+
+BENCHMARK(BM_Triad)->Arg(1)->Arg(2)->Iterations(1);
+BENCHMARK(BM_HoStep_double)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_direct)->Apply(rows_args);
+BENCHMARK(BM_HoStep_float)->Apply(rows_args);
+BENCHMARK(BM_Rk4Step_double)->Apply(rows_args);
+BENCHMARK(BM_Rk4Step_float)->Apply(rows_args);
+
+BENCHMARK_MAIN();
