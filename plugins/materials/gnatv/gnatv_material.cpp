@@ -215,7 +215,7 @@ void GnatvMaterial::compute_forces(std::span<const double> x, std::span<const do
         double P[3][3], F[3][3];
         for (int j = 0; j < 3; ++j)
           for (int k = 0; k < 3; ++k) P[j][k] = X[3 * tv[j] + k];
-        forces(rest_[t], views_, P, F);
+        forces<double, double, false>(rest_[t], views_, P, F);
         for (int j = 0; j < 3; ++j)
           for (int k = 0; k < 3; ++k) Fo[3 * tv[j] + k] += F[j][k];
       }

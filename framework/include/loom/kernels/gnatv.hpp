@@ -78,15 +78,21 @@ LOOM_HD inline T energy(const RestTriangle<R>& t, const Curves<R>& c, const T P[
   return T(t.area) * (W[0] + W[1] + W[2]);
 }
 
-/// Forces F[j] = -d(s W)/dP_j (NUMERICS.md 2.2). Returns the triangle's energy.
-template <class T, class R>
+/// Forces F[j] = -d(s W)/dP_j (NUMERICS.md 2.2). Returns the triangle's energy (0 when
+/// WithEnergy is false, which skips the energy's evaluation).
+template <class T, class R, bool WithEnergy = true>
 LOOM_HD inline T forces(const RestTriangle<R>& t, const Curves<R>& c, const T P[3][3], T F[3][3]) {
-  T u[3], v[3], e[3], W[3], sg[3], ds;
+  T u[3], v[3], e[3], W[3] = {T(0), T(0), T(0)}, sg[3], ds;
   deformation(t, P, u, v);
   strains(u, v, e);
-  curve_eval(c.uu, e[0], W[0], sg[0], ds);
-  curve_eval(c.vv, e[1], W[1], sg[1], ds);
-  curve_eval(c.uv, e[2], W[2], sg[2], ds);
+  curve_eval_raw<WithEnergy>(c.uu, e[0], W[0], sg[0], ds);
+  curve_eval_raw<WithEnergy>(c.vv, e[1], W[1], sg[1], ds);
+  curve_eval_raw<WithEnergy>(c.uv, e[2], W[2], sg[2], ds);
+  if constexpr (WithEnergy) {
+    W[0] = W[0] - T(c.uu.w_offset);
+    W[1] = W[1] - T(c.vv.w_offset);
+    W[2] = W[2] - T(c.uv.w_offset);
+  }
   const T s = T(t.area);
   for (int j = 0; j < 3; ++j) {
     const T a = T(t.ru[j]), b = T(t.rv[j]);
@@ -95,7 +101,8 @@ LOOM_HD inline T forces(const RestTriangle<R>& t, const Curves<R>& c, const T P[
     const T cv = s * (sg[1] * b + sg[2] * a);
     for (int k = 0; k < 3; ++k) F[j][k] = -(cu * u[k] + cv * v[k]);
   }
-  return s * (W[0] + W[1] + W[2]);
+  if constexpr (WithEnergy) return s * (W[0] + W[1] + W[2]);
+  return T(0);
 }
 
 /// PSD projection of the symmetric 2x2 [[a, c], [c, b]] (eigenvalues clamped at 0).
