@@ -28,6 +28,7 @@ struct Snapshot {
   std::vector<double> x;
   double energy = 0;
   double sag = 0;
+  double strain = 0;
 };
 
 struct RunResult {
@@ -118,6 +119,7 @@ class Runner {
       s.x = sim->scene().state.x;
       s.energy = total_energy(*sim);
       s.sag = sag_of(*sim, x0);
+      s.strain = sim->scene().material->max_strain(s.x);
       r.snaps.push_back(std::move(s));
       r.wall.push_back(sim->step_seconds_total());
       r.force_evals.push_back(sim->force_evaluations());
@@ -207,6 +209,7 @@ std::vector<StudyRow> run_study(const StudyOptions& opt) {
   Params study = Params::from_file(opt.study);
   if (!study.is_map()) study.fail("a study file is a mapping with times, steps, combos (and reference).");
   study.child("description");
+  study.child("stability");  // read by loom study --stability
   // times
   Params tp = study.child("times");
   if (!tp.valid()) study.fail("missing 'times': the simulated times (s) at which errors are measured, e.g. [0.1, 0.25].");
@@ -238,6 +241,7 @@ std::vector<StudyRow> run_study(const StudyOptions& opt) {
     rp.check_unused();
   }
   const double max_seconds = study.get_positive("max_seconds_per_run", 300.0);
+  const double max_strain = study.get_positive("max_strain", 1.0);
   // combos
   Params cp = study.child("combos");
   if (!cp.is_sequence() || cp.size() == 0)
@@ -321,6 +325,13 @@ std::vector<StudyRow> run_study(const StudyOptions& opt) {
         row.time = times[k];
         if (k < r.snaps.size()) {
           row.status = "ok";
+          // Bounded but blown up: more energy than the cloth could get by falling its own size,
+          // or strain beyond the study's bound. Marked, not dropped.
+          const double drift = (r.snaps[k].energy - e_start) / scale;
+          if (drift > 1.0 || r.snaps[k].strain > max_strain) {
+            row.status = "unstable";
+            row.note = "energy drift " + fmt(drift) + " (M g L), max strain " + fmt(r.snaps[k].strain);
+          }
           errors_against(r.snaps[k], ref.snaps[k], pinned, size, row.rms_error, row.max_error);
           if (prev_err[k] > 0 && row.rms_error > 0) row.observed_order = std::log2(prev_err[k] / row.rms_error);
           prev_err[k] = row.rms_error;

@@ -24,7 +24,7 @@ namespace loom::solver {
 inline std::size_t dofs(const BsrMatrix& A) { return 3 * static_cast<std::size_t>(A.rows()); }
 
 /// Below this many block rows the helpers run serially (OpenMP start-up costs more).
-constexpr Index kParallelMinRows = 256;
+constexpr Index kParallelMinRows = 2048;
 
 /// y <- S_i y for vertex i (exact zeros for a fully constrained vertex).
 inline void filter_vertex(const Filter& S, Index i, double* y) {

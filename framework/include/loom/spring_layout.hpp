@@ -26,6 +26,7 @@
 //   layout.for_each([&](Index s) { ... });   // s: index into the spring arrays
 //   layout.for_each([&](Index v0, Index v1) { /* vertex init of range [v0, v1) */ },
 //                   [&](Index s) { ... });
+//   layout.for_each_range(init, [&](Index k0, Index k1) { /* springs order()[k], k0 <= k < k1 */ });
 //
 // for_each contract:
 //   * body(s) is called exactly once for every spring s. It may read anything and may write
@@ -128,6 +129,42 @@ class SpringLayout {
   template <class Body>
   void for_each(Body&& body) const {
     for_each([](Index, Index) {}, body);
+  }
+
+  /// Range form, for bodies that keep state along a run of springs (e.g. accumulate the
+  /// force of a shared endpoint in registers): range(k0, k1) must handle the springs
+  /// order()[k], k0 <= k < k1, under the same rules as body(s). Ranges run at the same time
+  /// share no vertex. Each part's interior springs come as one range, the serial cross
+  /// springs as one range, a parallel colour as chunks of kChunk; the ranges do not depend
+  /// on the thread count.
+  static constexpr Index kChunk = 1024;
+  template <class Init, class Range>
+  void for_each_range(Init&& init, Range&& range) const {
+    const int P = parts();
+    if (P <= 0) return;
+    const bool serial_cross = cross_serial();
+    const int C = num_colours();
+#pragma omp parallel if (num_springs() >= kParallelMin)
+    {
+#pragma omp for schedule(static)
+      for (int p = 0; p < P; ++p) {
+        init(vertex_begin_[p], vertex_begin_[p + 1]);
+        range(spring_begin_[p], spring_begin_[p + 1]);
+      }
+      if (C > 0) {
+        if (serial_cross) {
+#pragma omp single
+          range(colour_begin_[0], colour_begin_[C]);
+        } else {
+          for (int c = 0; c < C; ++c) {
+            const Index b = colour_begin_[c], e = colour_begin_[c + 1];
+            const Index chunks = (e - b + kChunk - 1) / kChunk;
+#pragma omp for schedule(static)
+            for (Index q = 0; q < chunks; ++q) range(b + q * kChunk, std::min(e, b + (q + 1) * kChunk));
+          }
+        }
+      }
+    }
   }
 
   template <class Init, class Body>

@@ -24,7 +24,7 @@ struct StudyRow {
   std::string combo;
   double h = 0;
   double time = 0;
-  std::string status;          ///< ok, diverged, solver_failed, timeout
+  std::string status;          ///< ok, unstable (energy gain > M g L or strain > max_strain), diverged, solver_failed, timeout
   double rms_error = 0;        ///< RMS |x - x_ref| over free vertices / cloth size
   double max_error = 0;        ///< max |x - x_ref| / cloth size
   double observed_order = 0;   ///< log2(e(2h) / e(h)) against the previous rung (0 if none)

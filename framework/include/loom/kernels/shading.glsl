@@ -48,9 +48,11 @@ struct Fabric {
 // 1 for a warp element, 0 for a weft element, at integer element indices (i, j): row j holds
 // n_w weft elements then n_pi warp elements, repeating, shifted by n_sigma per row:
 // warp iff mod(i - n_sigma j, n_w + n_pi) >= n_w.
+// (The +0.5 keeps x / period away from whole numbers, so a GPU division that is not correctly
+// rounded cannot push floor() to the wrong side; k is then a whole number +- rounding.)
 LOOM_SFN float weave_is_warp(float i, float j, float n_w, float n_pi, float n_sigma) {
   float period = n_w + n_pi;
-  float k = mod(i - n_sigma * j, period);
+  float k = mod(i - n_sigma * j + 0.5f, period) - 0.5f;
   return k < n_w - 0.5f ? 0.0f : 1.0f;
 }
 

@@ -1,0 +1,133 @@
+// `loom study`: orders measured against the halving-checked reference, unstable runs marked,
+// stability bisection brackets the linear limit.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <sys/wait.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const char* kScene = R"(mesh:
+  grid: {nx: 5, ny: 5, width: 0.4, height: 0.4, plane: xz}
+material: {type: mass_spring, stencil: structural_shear_bend, stiffness: 200, vertex_mass: 0.01}
+integrator: {type: symplectic_euler, dt: 0.001}
+threads: 1
+pins: [top_corners]
+)";
+
+int run(const std::string& args, std::string& out) {
+  const std::string cmd = std::string(LOOM_EXE) + " " + args + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  char buf[4096];
+  while (fgets(buf, sizeof buf, p)) out += buf;
+  const int st = pclose(p);
+  return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+std::vector<std::map<std::string, std::string>> read_csv(const fs::path& p) {
+  std::ifstream in(p);
+  std::string line;
+  std::getline(in, line);
+  std::vector<std::string> head;
+  std::stringstream hs(line);
+  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
+  std::vector<std::map<std::string, std::string>> rows;
+  while (std::getline(in, line)) {
+    std::map<std::string, std::string> r;
+    std::size_t col = 0;
+    std::string cur;
+    bool quoted = false;
+    for (char c : line) {
+      if (c == '"') quoted = !quoted;
+      else if (c == ',' && !quoted) { r[head[col++]] = cur; cur.clear(); }
+      else cur += c;
+    }
+    r[head[col]] = cur;
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+}  // namespace
+
+TEST(Study, MeasuresOrdersAgainstTheReferenceAndMarksUnstableRuns) {
+  const fs::path dir = fs::temp_directory_path() / "loom_test_study";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "scene.yaml") << kScene;
+  std::ofstream(dir / "study.yaml") << R"(times: [0.05]
+steps: {h0: 2.0e-3, levels: 3}
+reference: {integrator: rk4, dt: 1.25e-5}
+combos:
+  - {name: SE, set: {integrator.type: symplectic_euler}}
+  - {name: RK4, set: {integrator.type: rk4}}
+  - {name: SE stiff, set: {integrator.type: symplectic_euler, material.stiffness: 2.0e5}}
+)";
+  std::string out;
+  const int code = run("study " + (dir / "scene.yaml").string() + " " + (dir / "study.yaml").string() + " --out " +
+                           (dir / "out").string(), out);
+  ASSERT_EQ(code, 0) << out;
+  const auto rows = read_csv(dir / "out" / "study.csv");
+  ASSERT_EQ(rows.size(), 9u) << out;
+  // SE: order ~1 between the last rungs; RK4: order ~4
+  EXPECT_NEAR(std::stod(rows[2].at("observed_order")), 1.0, 0.15);
+  EXPECT_NEAR(std::stod(rows[5].at("observed_order")), 4.0, 0.3);
+  EXPECT_LT(std::stod(rows[5].at("rms_error")), 1e-8);
+  for (int k = 0; k < 6; ++k) EXPECT_EQ(rows[k].at("status"), "ok");
+  // k = 2e5 with m = 0.01 at h = 2e-3 is far past symplectic Euler's limit: not "ok", and kept
+  EXPECT_NE(rows[6].at("status"), "ok");
+  EXPECT_GT(std::stoll(rows[2].at("force_evaluations")), 0);
+  std::ifstream ref(dir / "out" / "reference.txt");
+  std::string all((std::istreambuf_iterator<char>(ref)), {});
+  EXPECT_NE(all.find("RMS change on halving"), std::string::npos);
+}
+
+TEST(Study, StabilityBisectionBracketsTheLimit) {
+  const fs::path dir = fs::temp_directory_path() / "loom_test_stability";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "scene.yaml") << kScene;
+  std::ofstream(dir / "study.yaml") << R"(stability:
+  horizon: 0.2
+  h_min: 1.0e-5
+  h_max: 0.05
+  bisections: 10
+  sweep: {key: material.stiffness, values: [200, 2000]}
+  combos: [{name: SE, set: {integrator.type: symplectic_euler}}]
+)";
+  std::string out;
+  const int code = run("study " + (dir / "scene.yaml").string() + " " + (dir / "study.yaml").string() + " --stability --out " +
+                           (dir / "out").string(), out);
+  ASSERT_EQ(code, 0) << out;
+  const auto rows = read_csv(dir / "out" / "stability.csv");
+  ASSERT_EQ(rows.size(), 2u);
+  const double h200 = std::stod(rows[0].at("h_stable")), h2000 = std::stod(rows[1].at("h_stable"));
+  EXPECT_GT(h200, 0.0);
+  EXPECT_LT(h200, std::stod(rows[0].at("h_unstable")));
+  // the limit scales as 1/sqrt(k): ten times the stiffness, sqrt(10) times smaller step
+  EXPECT_NEAR(h200 / h2000, std::sqrt(10.0), 0.35 * std::sqrt(10.0));
+}
+
+TEST(Study, BadStudyFileIsAClearError) {
+  const fs::path dir = fs::temp_directory_path() / "loom_test_study_bad";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::ofstream(dir / "scene.yaml") << kScene;
+  std::ofstream(dir / "study.yaml") << "times: [0.05]\nsteps: {h0: 3.0e-3, levels: 2}\ncombos: [{name: SE}]\n";
+  std::string out;
+  EXPECT_EQ(run("study " + (dir / "scene.yaml").string() + " " + (dir / "study.yaml").string() + " --out " +
+                    (dir / "out").string(), out), 2);
+  EXPECT_NE(out.find("not a whole number of steps"), std::string::npos) << out;
+  out.clear();
+  std::ofstream(dir / "study2.yaml") << "times: [0.05]\nsteps: {h0: 1.0e-3}\ncombos: [{name: X, set: {integrator.type: nope}}]\n";
+  EXPECT_EQ(run("study " + (dir / "scene.yaml").string() + " " + (dir / "study2.yaml").string(), out), 2);
+  EXPECT_NE(out.find("combo 'X' does not build"), std::string::npos) << out;
+  EXPECT_NE(out.find("study2.yaml:3"), std::string::npos) << out;
+}
