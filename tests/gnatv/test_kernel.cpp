@@ -258,3 +258,37 @@ TEST(GnatvKernel, ProjectedJacobianIsNegativeSemidefiniteUnderCompression) {
   }
   EXPECT_GT(indefinite_exact, 100);  // the exact Jacobian really is indefinite in these cases
 }
+
+TEST(GnatvKernel, NegativeCurveSlopeIsClampedInTheProjectedJacobian) {
+  // A B-spline through data with a plateau overshoots: sigma' < 0 between samples. The
+  // exact Jacobian then has a negative material stiffness; the projected one must not.
+  const std::vector<double> x = {-0.1, 0.0, 0.02, 0.04, 0.06, 0.08}, y = {-50, 0, 100, 104, 108, 400};
+  const Curve s = Curve::build(x, y, CurveInterpolation::BSpline);
+  ASSERT_LT(s.min_stiffness(), 0.0);
+  const Curve sh = Curve::build({-0.2, 0.0, 0.2}, {-20, 0, 20}, CurveInterpolation::MonotoneCubic);
+  const g::Curves<double> cv{s.view(), s.view(), sh.view()};
+  // Find the strain of the most negative slope and stretch a right triangle there.
+  double e_neg = 0, d_min = 0;
+  for (int i = 0; i <= 8000; ++i) {
+    const double e = 0.08 * i / 8000.0;
+    if (s.stiffness(e) < d_min) { d_min = s.stiffness(e); e_neg = e; }
+  }
+  ASSERT_LT(d_min, 0.0);
+  const double lam = std::sqrt(1 + 2 * e_neg);  // eps_uu = e_neg
+  const double a[2] = {0, 0}, b[2] = {0.1, 0}, c[2] = {0, 0.1};
+  g::RestTriangle<double> r;
+  ASSERT_TRUE(g::rest_from_2d(a, b, c, r));
+  const double P[3][3] = {{0, 0, 0}, {0.1 * lam, 0, 0}, {0, 0.1, 0}};
+  for (bool psd : {false, true}) {
+    double J[3][3][9];
+    g::jacobian(r, cv, P, psd, J);
+    Eigen::Matrix<double, 9, 9> K;
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i)
+        for (int p = 0; p < 3; ++p)
+          for (int q = 0; q < 3; ++q) K(3 * j + p, 3 * i + q) = -J[j][i][3 * p + q];
+    const double lmin = Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>>(K).eigenvalues().minCoeff();
+    if (psd) EXPECT_GE(lmin, -1e-10);
+    else EXPECT_LT(lmin, -1e-3);
+  }
+}
