@@ -206,7 +206,54 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     if (!(st.mass[i] > 0) || !std::isfinite(st.mass[i]))
       mat.fail("material '" + material_name_ + "' gave vertex " + std::to_string(i) + " the mass " + fmt(st.mass[i]) +
                "; masses must be finite and > 0. Fix: check density / vertex_mass, and that every vertex belongs to a triangle.");
+  // Optional per-vertex mass factors (hard cases: heavy vertices against a light cloth).
+  Params mscale = root.child("mass_scale");
+  if (mscale.valid()) {
+    if (!mscale.is_sequence()) mscale.fail("must be a list like [{vertices: [0, 5], factor: 1.0e6}].");
+    for (std::size_t k = 0; k < mscale.size(); ++k) {
+      Params e = mscale.at(k);
+      if (!e.is_map()) e.fail("an entry is {vertices: [...], factor: f} or {group: name, factor: f}.");
+      const double factor = e.get_positive("factor", 1.0);
+      std::vector<Index> vs;
+      if (e.has("group")) vs = pin_group(sc.mesh, e.child("group").as_string(), e.child("group"));
+      Params list = e.child("vertices");
+      if (list.valid()) {
+        if (!list.is_sequence()) list.fail("must be a list of vertex indices.");
+        for (std::size_t q = 0; q < list.size(); ++q) {
+          const auto idx = list.at(q).as_int();
+          if (idx < 0 || idx >= n) list.at(q).fail("vertex index " + std::to_string(idx) + " is out of range (0.." + std::to_string(n - 1) + ").");
+          vs.push_back(static_cast<Index>(idx));
+        }
+      }
+      if (vs.empty()) e.fail("give 'vertices' or 'group'.");
+      e.check_unused();
+      for (Index i : vs) st.mass[i] *= factor;
+    }
+  }
   st.update_inverse_masses();
+
+  // ---- initial shape: positions scaled about the centroid (rest shape unchanged) ----
+  Params iscale = root.child("initial_scale");
+  if (iscale.valid()) {
+    const double f = iscale.as_double();
+    if (!(f > 0) || !std::isfinite(f)) iscale.fail("must be a finite number > 0 (e.g. 0.5 starts the cloth compressed).");
+    double c[3] = {0, 0, 0};
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) c[k] += st.x[3 * i + k] / n;
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) st.x[3 * i + k] = c[k] + f * (st.x[3 * i + k] - c[k]);
+  }
+
+  // ---- initial velocity ----
+  Params v0 = root.child("initial_velocity");
+  if (v0.valid()) {
+    const auto v = v0.as_doubles();
+    if (v.size() != 3) v0.fail("needs 3 components, e.g. [0, -5, 0] (m/s).");
+    for (double c : v)
+      if (!std::isfinite(c)) v0.fail("components must be finite numbers.");
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) st.v[3 * i + k] = v[k];
+  }
 
   // ---- pins ----
   Params pins = root.child("pins");
