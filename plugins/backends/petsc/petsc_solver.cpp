@@ -348,7 +348,7 @@ bool PetscSolver::factorize(const BsrMatrix& A, const Filter& S, SolveReport& re
   long bad = -1;
   int nonfinite = 0;
   const Index rb = m.rb, re = m.re;
-#pragma omp parallel for schedule(static) reduction(max : bad) reduction(max : nonfinite)
+#pragma omp parallel for schedule(static) reduction(max : bad) reduction(max : nonfinite) if (re - rb >= solver::kParallelMinRows)
   for (Index i = rb; i < re; ++i) {
     for (Index k = rp[i]; k < rp[i + 1]; ++k) solver::projected_block(S, i, cl[k], Av + 9L * k, Pv + 9L * k);
     for (long e = 9L * rp[i]; e < 9L * rp[i + 1]; ++e)
@@ -438,7 +438,7 @@ SolveReport PetscSolver::solve(const BsrMatrix& A, const Filter& S, std::span<co
   const Index rb = m.rb, re = m.re;
   double* bh = bl - 3L * rb;  // indexed by global DOF
   double* y0 = xl - 3L * rb;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (re - rb >= solver::kParallelMinRows)
   for (Index i = rb; i < re; ++i) {
     double* bi = bh + 3L * i;
     double az[3] = {0.0, 0.0, 0.0};
@@ -505,7 +505,7 @@ SolveReport PetscSolver::solve(const BsrMatrix& A, const Filter& S, std::span<co
   const PetscScalar* ya = nullptr;
   LOOM_PETSC(VecGetArrayRead(m.xall, &ya));
   double* d = dv.data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= 16384)
   for (long i = 0; i < N; ++i) d[i] = ya[i];
   LOOM_PETSC(VecRestoreArrayRead(m.xall, &ya));
   solver::apply_prescribed(S, z, dv);

@@ -32,9 +32,14 @@ double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+// Vector loops below this length run on one thread: a parallel region costs more than it
+// saves, and far more when the machine is oversubscribed (a descheduled thread stalls the
+// barrier for a time slice).
+constexpr long kParallelMinDofs = 16384;
+
 double dot(const double* a, const double* b, long n) {
   double s = 0;
-#pragma omp parallel for reduction(+ : s) schedule(static)
+#pragma omp parallel for reduction(+ : s) schedule(static) if (n >= kParallelMinDofs)
   for (long i = 0; i < n; ++i) s += a[i] * b[i];
   return s;
 }
@@ -152,7 +157,7 @@ struct CholmodSolver::Impl {
     if (!cholmod_l_solve2(CHOLMOD_A, L, &B, nullptr, &X, nullptr, &Y, &E, &c)) return false;
     const double* xs = static_cast<const double*>(X->x);
     const long NN = N;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (NN >= kParallelMinDofs)
     for (long i = 0; i < NN; ++i) x[i] = xs[i];
     return true;
   }
@@ -304,7 +309,7 @@ bool CholmodSolver::factorize(const BsrMatrix& A, const Filter& S, SolveReport& 
   double* Pv = m.proj.values().data();
   long bad = -1;  // first DOF with a non-positive or non-finite diagonal entry
   bool nonfinite = false;
-#pragma omp parallel for schedule(static) reduction(max : bad) reduction(|| : nonfinite)
+#pragma omp parallel for schedule(static) reduction(max : bad) reduction(|| : nonfinite) if (n >= solver::kParallelMinRows)
   for (Index i = 0; i < n; ++i) {
     for (Index k = rp[i]; k < rp[i + 1]; ++k) solver::projected_block(S, i, cl[k], Av + 9L * k, Pv + 9L * k);
     for (long e = 9L * rp[i]; e < 9L * rp[i + 1]; ++e)
@@ -335,7 +340,7 @@ bool CholmodSolver::factorize(const BsrMatrix& A, const Filter& S, SolveReport& 
   auto* Ax = static_cast<double*>(m.Acsc->x);
   const long* src = m.src.data();
   const long nnz = static_cast<long>(m.src.size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (nnz >= kParallelMinDofs)
   for (long e = 0; e < nnz; ++e) Ax[e] = Pv[src[e]];
   m.have_values = true;
 
@@ -368,7 +373,7 @@ SolveReport CholmodSolver::solve(const BsrMatrix& A, const Filter& S, std::span<
   double norm0;
   if (solver::prescribed_is_zero(S, z)) {
     const double* bp = b.data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelMinDofs)
     for (long i = 0; i < N; ++i) bh[i] = bp[i];
     solver::filter(S, m.bhat);
     norm0 = std::sqrt(dot(bh, bh, N));
@@ -381,13 +386,13 @@ SolveReport CholmodSolver::solve(const BsrMatrix& A, const Filter& S, std::span<
   double rel = 0.0;
   int iterations = 0;
   if (norm0 == 0.0) {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelMinDofs)
     for (long i = 0; i < N; ++i) y[i] = 0.0;
     rep.converged = true;
   } else {
     auto residual = [&]() {  // r = b^ - A~ y, returns |r| / |b^|
-      m.proj.multiply(m.y, m.r);
-#pragma omp parallel for schedule(static)
+      solver::multiply(m.proj, m.y, m.r);
+#pragma omp parallel for schedule(static) if (N >= kParallelMinDofs)
       for (long i = 0; i < N; ++i) r[i] = bh[i] - r[i];
       return std::sqrt(dot(r, r, N)) / norm0;
     };
@@ -408,14 +413,14 @@ SolveReport CholmodSolver::solve(const BsrMatrix& A, const Filter& S, std::span<
       if (rel > m.opt.tolerance && m.opt.max_iterations > 0) {
         m.factor_solve(r, s);
         double rs = dot(r, s, N);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelMinDofs)
         for (long i = 0; i < N; ++i) p[i] = s[i];
         while (it < m.opt.max_iterations) {
-          m.proj.multiply(m.p, m.q);
+          solver::multiply(m.proj, m.p, m.q);
           const double pq = dot(p, q, N);
           if (!(pq > 0.0)) { indefinite = true; break; }
           const double alpha = rs / pq;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelMinDofs)
           for (long i = 0; i < N; ++i) {
             y[i] += alpha * p[i];
             r[i] -= alpha * q[i];
@@ -427,7 +432,7 @@ SolveReport CholmodSolver::solve(const BsrMatrix& A, const Filter& S, std::span<
           const double rs_new = dot(r, s, N);
           const double beta = rs_new / rs;
           rs = rs_new;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelMinDofs)
           for (long i = 0; i < N; ++i) p[i] = s[i] + beta * p[i];
         }
         iterations += it;
@@ -456,7 +461,7 @@ SolveReport CholmodSolver::solve(const BsrMatrix& A, const Filter& S, std::span<
 
   // dv = S y + z: exact on the constrained vertices.
   double* d = dv.data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelMinDofs)
   for (long i = 0; i < N; ++i) d[i] = y[i];
   solver::apply_prescribed(S, z, dv);
   rep.iterations = iterations;
