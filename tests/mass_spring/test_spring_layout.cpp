@@ -95,6 +95,21 @@ void check_traversal(const Graph& g, const SpringLayout& L, int threads) {
           sum[g.j[s]] += s;
         });
   }
+  // The range form visits the same springs (one more pass).
+  omp_set_num_threads(threads);
+  L.for_each_range(
+      [&](Index, Index) {},
+      [&](Index k0, Index k1) {
+        ASSERT_LE(k0, k1);
+        for (Index k = k0; k < k1; ++k) {
+          const Index s = L.order()[k];
+          ++visits[s];
+          ++deg[g.i[s]];
+          ++deg[g.j[s]];
+          sum[g.i[s]] += s;
+          sum[g.j[s]] += s;
+        }
+      });
   omp_set_num_threads(saved);
   std::vector<long long> d(g.n, 0), su(g.n, 0);
   for (Index s = 0; s < S; ++s) {
@@ -103,10 +118,11 @@ void check_traversal(const Graph& g, const SpringLayout& L, int threads) {
     su[g.i[s]] += s;
     su[g.j[s]] += s;
   }
-  for (Index s = 0; s < S; ++s) ASSERT_EQ(visits[s], 3);
+  // 3 passes of for_each (init zeroes the counters each time), then one of for_each_range.
+  for (Index s = 0; s < S; ++s) ASSERT_EQ(visits[s], 4);
   for (Index v = 0; v < g.n; ++v) {
-    ASSERT_EQ(deg[v], d[v]) << v;
-    ASSERT_EQ(sum[v], su[v]) << v;
+    ASSERT_EQ(deg[v], 2 * d[v]) << v;
+    ASSERT_EQ(sum[v], 2 * su[v]) << v;
   }
 }
 
