@@ -10,6 +10,7 @@
 //   integrator: read f, v, x, w (80N), write v, x (48N)      => 176 N + 24 S bytes.
 #include <benchmark/benchmark.h>
 
+#include <array>
 #include <map>
 #include <memory>
 #include <random>
@@ -18,6 +19,7 @@
 
 #include <omp.h>
 
+#include "loom/bsr.hpp"
 #include "loom/mesh.hpp"
 #include "loom/params.hpp"
 #include "loom/scene.hpp"
@@ -108,6 +110,33 @@ void BM_Forces(benchmark::State& state) {
   state.SetLabel(std::string(kStencils[stencil]) + " " + std::to_string(threads) + "T");
 }
 
+// compute_jacobians (df/dx and df/dv blocks of every spring into the BSR pattern), for the
+// implicit integrators.
+void BM_Jacobian(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const int threads = static_cast<int>(state.range(1));
+  Fixture& f = fixture(n, 0);
+  Material& m = *f.scene->material;
+  static std::map<int, std::unique_ptr<BsrPattern>> patterns;
+  auto& pat = patterns[n];
+  if (!pat) {
+    std::vector<std::array<Index, 2>> pairs;
+    m.jacobian_pairs(pairs);
+    pat = std::make_unique<BsrPattern>(BsrPattern::from_pairs(f.scene->state.size(), pairs));
+  }
+  m.bind_pattern(*pat);
+  BsrMatrix dfdx(pat.get());
+  omp_set_num_threads(threads);
+  for (auto _ : state) {
+    m.compute_jacobians(f.x0, f.v0, dfdx, nullptr);
+    benchmark::ClobberMemory();
+  }
+  const double S = m.springs()->size();
+  state.counters["springs_per_s"] = benchmark::Counter(S, benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["blocks"] = pat->nnz_blocks();
+  state.SetLabel(std::string(kStencils[0]) + " " + std::to_string(threads) + "T");
+}
+
 void StepArgs(benchmark::internal::Benchmark* b) {
   for (int n : {160, 176, 200, 256, 296, 336})
     for (int t : {1, 2}) b->Args({n, t, 0});
@@ -118,5 +147,6 @@ void StepArgs(benchmark::internal::Benchmark* b) {
 
 BENCHMARK(BM_Step)->Apply(StepArgs)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_Forces)->Args({336, 1, 0})->Args({336, 2, 0})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_Jacobian)->Args({256, 1})->Args({256, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 BENCHMARK_MAIN();

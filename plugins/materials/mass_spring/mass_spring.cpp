@@ -6,7 +6,6 @@
 #include <sstream>
 #include <stdexcept>
 #include <tuple>
-#include <type_traits>
 
 #include "loom/kernels/spring.hpp"
 
@@ -184,53 +183,6 @@ ClassValues read_classes(const Params& p, const std::string& key, double def, bo
 
 }  // namespace
 
-namespace {
-
-// Forces of springs k0..k1-1 (positions == indices) added into F. Along a run of springs
-// with the same i endpoint, f_i is accumulated in registers and written once.
-template <bool kDamped>
-void force_range(Index k0, Index k1, const Index* __restrict IJ, const std::uint8_t* __restrict cls,
-                 const double* __restrict ktab, const double* __restrict ctab, const double* __restrict L0,
-                 const double* __restrict X, const double* __restrict V, double* __restrict F) {
-  if (k0 >= k1) return;
-  Index cur = IJ[2 * k0];
-  double ax = 0, ay = 0, az = 0;
-  for (Index s = k0; s < k1; ++s) {
-    const Index ia = IJ[2 * s];
-    const Index a = 3 * ia, b = 3 * IJ[2 * s + 1];
-    const double d0 = X[b] - X[a], d1 = X[b + 1] - X[a + 1], d2 = X[b + 2] - X[a + 2];
-    const double l2 = d0 * d0 + d1 * d1 + d2 * d2;
-    const double k = ktab[cls[s]];
-    double sc;
-    if constexpr (kDamped) {
-      const double c = ctab[cls[s]];
-      const double du = d0 * (V[b] - V[a]) + d1 * (V[b + 1] - V[a + 1]) + d2 * (V[b + 2] - V[a + 2]);
-      sc = kernels::spring_force_scale_damped(l2, du, k, L0[s], c);
-    } else {
-      sc = kernels::spring_force_scale(l2, k, L0[s]);
-    }
-    if (ia != cur) {
-      F[3 * cur] += ax;
-      F[3 * cur + 1] += ay;
-      F[3 * cur + 2] += az;
-      ax = ay = az = 0;
-      cur = ia;
-    }
-    const double f0 = sc * d0, f1 = sc * d1, f2 = sc * d2;
-    ax += f0;
-    ay += f1;
-    az += f2;
-    F[b] -= f0;
-    F[b + 1] -= f1;
-    F[b + 2] -= f2;
-  }
-  F[3 * cur] += ax;
-  F[3 * cur + 1] += ay;
-  F[3 * cur + 2] += az;
-}
-
-}  // namespace
-
 MassSpringMaterial::MassSpringMaterial(const Params& p, const Mesh& mesh) {
   if (p.has("type")) p.mark_used("type");
   // Every supported key counts as known, so check_unused can suggest it for a typo.
@@ -305,27 +257,6 @@ MassSpringMaterial::MassSpringMaterial(const Params& p, const Mesh& mesh) {
   layout_.reorder(springs_);  // from here on, traversal position == spring index
   inv_rest_.resize(springs_.rest_length.size());
   for (std::size_t s = 0; s < inv_rest_.size(); ++s) inv_rest_[s] = 1.0 / springs_.rest_length[s];
-  const std::size_t S = static_cast<std::size_t>(springs_.size());
-  ij_.resize(2 * S);
-  cls_.resize(S);
-  for (std::size_t s = 0; s < S; ++s) {
-    ij_[2 * s] = springs_.i[s];
-    ij_[2 * s + 1] = springs_.j[s];
-    cls_[s] = static_cast<std::uint8_t>(springs_.kind[s]);
-  }
-  // k and c come per class (ClassValues), so a class byte and two 4-entry tables replace
-  // two doubles per spring in the force loop.
-  std::array<bool, 4> seen{false, false, false, false};
-  for (std::size_t s = 0; s < S; ++s) {
-    const int c = cls_[s];
-    if (!seen[c]) {
-      seen[c] = true;
-      k_of_[c] = springs_.stiffness[s];
-      c_of_[c] = springs_.damping[s];
-    } else if (k_of_[c] != springs_.stiffness[s] || c_of_[c] != springs_.damping[s]) {
-      throw std::logic_error("mass_spring: stiffness or damping differs within a spring class");
-    }
-  }
 }
 
 void MassSpringMaterial::check_sizes(std::size_t xs, const char* what) const {
@@ -345,26 +276,35 @@ void MassSpringMaterial::compute_forces(std::span<const double> x, std::span<con
   check_sizes(f.size(), "f");
   const double* X = x.data();
   double* F = f.data();
+  const Index* I = springs_.i.data();
+  const Index* J = springs_.j.data();
+  const double* K = springs_.stiffness.data();
   const double* L0 = springs_.rest_length.data();
   auto zero = [F](Index v0, Index v1) { std::fill(F + 3 * static_cast<std::size_t>(v0), F + 3 * static_cast<std::size_t>(v1), 0.0); };
   // One pass over the springs in traversal order (stored so: position == spring index),
-  // each thread scattering into its own part's vertices (SpringLayout ranges). Springs are
-  // sorted by their i endpoint, so f_i is summed in registers along each run of equal i
-  // and written once; f_j is scattered. A blocked SIMD variant (gathers into a buffer,
-  // then a scatter) was slower on the benchmark machine (docs/benchmarks/springs.md).
-  const double* V = nullptr;
-  if (damped_) {
-    check_sizes(v.size(), "v");
-    V = v.data();
-  }
-  const Index* IJ = ij_.data();
-  const std::uint8_t* CL = cls_.data();
-  const double* KT = k_of_.data();
-  const double* CT = c_of_.data();
-  if (damped_) {
-    layout_.for_each_range(zero, [=](Index k0, Index k1) { force_range<true>(k0, k1, IJ, CL, KT, CT, L0, X, V, F); });
+  // each thread scattering into its own part's vertices (SpringLayout). Variants measured
+  // slower on the benchmark machine (docs/benchmarks/springs.md): a blocked SIMD loop
+  // (gathers into a buffer, then a scatter); f_i summed in registers along runs of equal i
+  // with interleaved endpoints and per-class k tables.
+  if (!damped_) {
+    layout_.for_each(zero, [=](Index s) {
+      const Index a = I[s], b = J[s];
+      double fi[3];
+      kernels::spring_force(X + 3 * a, X + 3 * b, K[s], L0[s], fi);
+      F[3 * a] += fi[0]; F[3 * a + 1] += fi[1]; F[3 * a + 2] += fi[2];
+      F[3 * b] -= fi[0]; F[3 * b + 1] -= fi[1]; F[3 * b + 2] -= fi[2];
+    });
   } else {
-    layout_.for_each_range(zero, [=](Index k0, Index k1) { force_range<false>(k0, k1, IJ, CL, KT, CT, L0, X, V, F); });
+    check_sizes(v.size(), "v");
+    const double* V = v.data();
+    const double* C = springs_.damping.data();
+    layout_.for_each(zero, [=](Index s) {
+      const Index a = I[s], b = J[s];
+      double fi[3];
+      kernels::spring_force_damped(X + 3 * a, X + 3 * b, V + 3 * a, V + 3 * b, K[s], L0[s], C[s], fi);
+      F[3 * a] += fi[0]; F[3 * a + 1] += fi[1]; F[3 * a + 2] += fi[2];
+      F[3 * b] -= fi[0]; F[3 * b + 1] -= fi[1]; F[3 * b + 2] -= fi[2];
+    });
   }
 }
 

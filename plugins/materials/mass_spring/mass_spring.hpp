@@ -3,7 +3,6 @@
 #pragma once
 
 #include <array>
-#include <cstdint>
 #include <span>
 #include <string>
 #include <vector>
@@ -72,11 +71,6 @@ class MassSpringMaterial final : public Material {
   SpringSet springs_;            // stored in layout_ traversal order
   SpringLayout layout_;
   std::vector<double> inv_rest_;  // 1 / l0
-  // Hot-loop copies: interleaved endpoints, and a class byte with per-class k and c tables
-  // instead of two doubles per spring (k and c are set per class).
-  std::vector<Index> ij_;
-  std::vector<std::uint8_t> cls_;
-  std::array<double, 4> k_of_{0, 0, 0, 0}, c_of_{0, 0, 0, 0};
   std::vector<double> mass_;
   std::array<Index, 4> counts_{0, 0, 0, 0};
   bool damped_ = false;
