@@ -1,0 +1,537 @@
+#include "cuda_integrators.hpp"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "loom/kernels/bsr_ops.hpp"
+#include "loom/kernels/ho.hpp"
+#include "loom/kernels/rk4.hpp"
+
+namespace loom::cuda {
+
+Precision parse_precision(const Params& p) {
+  if (!p.valid()) return Precision::Double;
+  return p.get_choice("precision", "double", {"double", "float"}) == "float" ? Precision::Float : Precision::Double;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// Checks shared by the device integrators; throws InputError with the fix.
+void check_device_scene(const Scene& scene, const char* integrator) {
+  seam_require_device(scene.source);
+  if (!scene.colliders.empty())
+    throw InputError(scene.source + ": integrator " + integrator +
+                     " on backend cuda does not handle colliders yet (contacts are resolved on the host state, which "
+                     "the device would not see). Fix: set backend: cpu for scenes with colliders.");
+}
+
+/// Vertex -> incident springs (sign +1 at the spring's i, -1 at its j), springs in order.
+void build_incidence(Index n, const std::vector<Index>& I, const std::vector<Index>& J, std::vector<Index>& ptr,
+                     std::vector<Index>& spring, std::vector<signed char>& sign) {
+  const Index S = static_cast<Index>(I.size());
+  ptr.assign(n + 1, 0);
+  for (Index q = 0; q < S; ++q) {
+    ptr[I[q] + 1]++;
+    ptr[J[q] + 1]++;
+  }
+  for (Index i = 0; i < n; ++i) ptr[i + 1] += ptr[i];
+  spring.resize(2 * static_cast<std::size_t>(S));
+  sign.resize(2 * static_cast<std::size_t>(S));
+  std::vector<Index> pos(ptr.begin(), ptr.end() - 1);
+  for (Index q = 0; q < S; ++q) {
+    spring[pos[I[q]]] = q;
+    sign[pos[I[q]]++] = 1;
+    spring[pos[J[q]]] = q;
+    sign[pos[J[q]]++] = -1;
+  }
+}
+
+// ======================= harmonic oscillation =======================
+
+template <class T, HoVariantD V>
+struct HoSpringKernel {  // per spring: impulse (and HO-A displacement) per unit inverse mass
+  const Index *I, *J;
+  const T *L0, *KX, *KV, *EX, *EV, *x, *v;
+  T *G, *P;
+  LOOM_HD void operator()(Index q) const {
+    const long long a = 3LL * I[q], b = 3LL * J[q];
+    T g[3];
+    if constexpr (V == HoVariantD::AnalyticPosition) {
+      const kernels::HoCoeffs<T> c{KX[q], KV[q], EX[q], EV[q]};
+      T p[3];
+      kernels::ho_spring_velocity_position(x, v, a, b, L0[q], c, g, p);
+      for (int e = 0; e < 3; ++e) P[3LL * q + e] = p[e];
+    } else if constexpr (V == HoVariantD::KangCho2011) {
+      kernels::kang_cho_spring_velocity(x, v, a, b, L0[q], KX[q], KV[q], g);
+    } else {
+      kernels::ho_spring_velocity(x, v, a, b, L0[q], KX[q], KV[q], g);
+    }
+    for (int e = 0; e < 3; ++e) G[3LL * q + e] = g[e];
+  }
+};
+
+template <class T, HoVariantD V>
+struct HoVertexKernel {  // per vertex: gather the impulses, then update x and v in place
+  const Index *ptr, *spring;
+  const signed char* sign;
+  const T *w, *G, *P;
+  T *x, *v;
+  T h, hh2, g0, g1, g2;
+  LOOM_HD void operator()(Index i) const {
+    constexpr bool kPos = V == HoVariantD::AnalyticPosition;
+    const long long d = 3LL * i;
+    const T wi = w[i];
+    const T f = wi > T(0) ? T(1) : T(0);
+    const T g[3] = {g0, g1, g2};
+    T dv[3] = {T(0), T(0), T(0)}, dx[3] = {T(0), T(0), T(0)};
+    for (Index k = ptr[i]; k < ptr[i + 1]; ++k) {
+      const long long q = 3LL * spring[k];
+      for (int e = 0; e < 3; ++e) {
+        if (sign[k] > 0) {
+          dv[e] += wi * G[q + e];
+          if constexpr (kPos) dx[e] += wi * P[q + e];
+        } else {
+          dv[e] -= wi * G[q + e];
+          if constexpr (kPos) dx[e] -= wi * P[q + e];
+        }
+      }
+    }
+    // Same expressions as the CPU plugin's finalisation (x += h v_old + f h^2/2 g + dx for
+    // analytic_position; v += dv + f h g; x += h v_new otherwise).
+    for (int e = 0; e < 3; ++e) {
+      if constexpr (kPos) x[d + e] += h * v[d + e] + f * (hh2 * g[e]) + dx[e];
+      v[d + e] += dv[e] + f * (h * g[e]);
+      if constexpr (!kPos) x[d + e] += h * v[d + e];
+    }
+  }
+};
+
+template <class T>
+class CudaHo final : public Integrator {
+ public:
+  explicit CudaHo(HoVariantD v) : variant_(v) {}
+  std::string name() const override { return "harmonic_oscillation"; }
+  IntegratorNeeds needs() const override { return {true, false, false}; }
+
+  void prepare(Scene& scene, double h) override {
+    check_device_scene(scene, "harmonic_oscillation");
+    const Material* mat = scene.material.get();
+    const SpringSet* set = mat ? mat->springs() : nullptr;
+    if (!set)
+      throw InputError(scene.source + ": integrator harmonic_oscillation needs a spring material, but material '" +
+                       (mat ? mat->name() : std::string("(none)")) +
+                       "' exposes no springs. Fix: use material type mass_spring, or rk4 / baraff_witkin.");
+    for (Index q = 0; q < set->size(); ++q) {
+      if (!(set->stiffness[q] >= 0.0) || !(set->damping[q] >= 0.0))
+        throw InputError(scene.source + ": harmonic_oscillation needs springs with stiffness >= 0 and damping >= 0 "
+                         "(spring " + std::to_string(q) + "). Fix: check the material's stiffness and damping.");
+      if (variant_ == HoVariantD::KangCho2011 && set->damping[q] != 0.0)
+        throw InputError(scene.source + ": harmonic_oscillation variant kang_cho_2011 (the published formula) has "
+                         "no spring damping. Fix: set the material's spring damping to 0, or use variant velocity "
+                         "or analytic_position.");
+    }
+    const Index n = scene.state.size(), S = set->size();
+    hi_.resize(S);
+    hj_.resize(S);
+    for (Index q = 0; q < S; ++q) {
+      hi_[q] = std::min(set->i[q], set->j[q]);  // HO is symmetric in (i, j)
+      hj_[q] = std::max(set->i[q], set->j[q]);
+    }
+    hk_ = set->stiffness;
+    hc_ = set->damping;
+    cuda::upload(hi_, si_);
+    cuda::upload(hj_, sj_);
+    cuda::upload(set->rest_length, l0_);
+    std::vector<Index> ptr, sp;
+    std::vector<signed char> sg;
+    build_incidence(n, hi_, hj_, ptr, sp, sg);
+    cuda::upload(ptr, inc_ptr_);
+    cuda::upload(sp, inc_spring_);
+    cuda::upload(sg, inc_sign_);
+    G_.assign(3 * static_cast<std::size_t>(S), T(0));
+    P_.assign(variant_ == HoVariantD::AnalyticPosition ? 3 * static_cast<std::size_t>(S) : 0, T(0));
+    ds_.upload(scene.state);
+    coefficients(scene.state, h);
+  }
+
+  void step(Scene& scene, double h) override {
+    if (ds_.n != scene.state.size()) prepare(scene, h);
+    if (h != h_) coefficients(scene.state, h);
+    switch (variant_) {
+      case HoVariantD::Velocity: run<HoVariantD::Velocity>(scene, h); break;
+      case HoVariantD::AnalyticPosition: run<HoVariantD::AnalyticPosition>(scene, h); break;
+      case HoVariantD::KangCho2011: run<HoVariantD::KangCho2011>(scene, h); break;
+    }
+    ds_.download(scene.state);
+    finish_step(scene.state, h);
+  }
+
+ private:
+  void coefficients(const State& s, double h) {
+    const Index S = static_cast<Index>(hi_.size());
+    std::vector<T> kx(S), kv(S), ex, ev;
+    const bool pos = variant_ == HoVariantD::AnalyticPosition;
+    if (pos) {
+      ex.resize(S);
+      ev.resize(S);
+    }
+    for (Index q = 0; q < S; ++q) {  // in double, like the CPU plugin
+      const double wi = s.inv_mass[hi_[q]], wj = s.inv_mass[hj_[q]];
+      if (variant_ == HoVariantD::KangCho2011) {
+        const auto c = kernels::kang_cho_coefficients<double>(hk_[q], wi, wj, h);
+        kx[q] = static_cast<T>(c.kx);
+        kv[q] = static_cast<T>(c.ka);
+      } else {
+        const auto c = kernels::ho_coefficients<double>(hk_[q], hc_[q], wi, wj, h);
+        kx[q] = static_cast<T>(c.kx);
+        kv[q] = static_cast<T>(c.kv);
+        if (pos) {
+          ex[q] = static_cast<T>(c.ex);
+          ev[q] = static_cast<T>(c.ev);
+        }
+      }
+    }
+    cuda::upload(kx, kx_);
+    cuda::upload(kv, kv_);
+    cuda::upload(ex, ex_);
+    cuda::upload(ev, ev_);
+    h_ = h;
+  }
+
+  template <HoVariantD V>
+  void run(Scene& scene, double hd) {
+    const T h = static_cast<T>(hd);
+    const Index S = static_cast<Index>(hi_.size());
+    parallel_for(S, HoSpringKernel<T, V>{raw(si_), raw(sj_), raw(l0_), raw(kx_), raw(kv_), raw(ex_), raw(ev_),
+                                          raw(ds_.x), raw(ds_.v), raw(G_), raw(P_)});
+    parallel_for(ds_.n, HoVertexKernel<T, V>{raw(inc_ptr_), raw(inc_spring_), raw(inc_sign_), raw(ds_.w), raw(G_),
+                                              raw(P_), raw(ds_.x), raw(ds_.v), h, h * h / T(2),
+                                              static_cast<T>(scene.gravity[0]), static_cast<T>(scene.gravity[1]),
+                                              static_cast<T>(scene.gravity[2])});
+  }
+
+  HoVariantD variant_;
+  DeviceState<T> ds_;
+  std::vector<Index> hi_, hj_;
+  std::vector<double> hk_, hc_;
+  DVec<Index> si_, sj_, inc_ptr_, inc_spring_;
+  DVec<signed char> inc_sign_;
+  DVec<T> l0_, kx_, kv_, ex_, ev_, G_, P_;
+  double h_ = -1;
+};
+
+// ======================= rk4 =======================
+
+template <class T>
+struct Rk4Stage {  // stage 1 (kind 0), 2-3 (kind 1, next = h/2 or h), 4 (kind 2)
+  int kind;
+  const T *w, *f;
+  T *x, *v, *xs, *vs, *ax, *av;
+  T g0, g1, g2, next, h;
+  LOOM_HD void operator()(Index i) const {
+    const T g[3] = {g0, g1, g2};
+    for (int a = 0; a < 3; ++a) {
+      const long long d = 3LL * i + a;
+      const T acc = kernels::rk4_accel(f[d], w[i], g[a]);
+      if (kind == 0)
+        kernels::rk4_first(x[d], v[d], acc, xs[d], vs[d], ax[d], av[d], next);
+      else if (kind == 1)
+        kernels::rk4_middle(x[d], v[d], acc, xs[d], vs[d], ax[d], av[d], next);
+      else
+        kernels::rk4_last(x[d], v[d], acc, vs[d], ax[d], av[d], h);
+    }
+  }
+};
+
+template <class T>
+class CudaRk4 final : public Integrator {
+ public:
+  std::string name() const override { return "rk4"; }
+  void prepare(Scene& scene, double) override {
+    check_device_scene(scene, "rk4");
+    if (!scene.material) throw InputError(scene.source + ": rk4 needs a material; add a 'material:' section");
+    model_.build(scene, nullptr);
+    ds_.upload(scene.state);
+    const std::size_t m = 3 * static_cast<std::size_t>(ds_.n);
+    xs_.assign(m, T(0));
+    vs_.assign(m, T(0));
+    f_.assign(m, T(0));
+    ax_.assign(m, T(0));
+    av_.assign(m, T(0));
+    stats_ = {};
+    stats_.force_evaluations = 4;
+  }
+  void step(Scene& scene, double hd) override {
+    if (ds_.n != scene.state.size()) prepare(scene, hd);
+    const T h = static_cast<T>(hd), hh = T(0.5) * h;
+    const T g0 = static_cast<T>(scene.gravity[0]), g1 = static_cast<T>(scene.gravity[1]),
+            g2 = static_cast<T>(scene.gravity[2]);
+    auto stage = [&](int kind, T next) {
+      parallel_for(ds_.n, Rk4Stage<T>{kind, raw(ds_.w), raw(f_), raw(ds_.x), raw(ds_.v), raw(xs_), raw(vs_), raw(ax_),
+                                      raw(av_), g0, g1, g2, next, h});
+    };
+    model_.forces(ds_.x, ds_.v, f_);
+    stage(0, hh);
+    model_.forces(xs_, vs_, f_);
+    stage(1, hh);
+    model_.forces(xs_, vs_, f_);
+    stage(1, h);
+    model_.forces(xs_, vs_, f_);
+    stage(2, h);
+    ds_.download(scene.state);
+    finish_step(scene.state, hd);
+  }
+  StepStats last_step() const override { return stats_; }
+
+ private:
+  DeviceState<T> ds_;
+  DeviceForceModel<T> model_;
+  DVec<T> xs_, vs_, f_, ax_, av_;
+  StepStats stats_;
+};
+
+// ======================= baraff_witkin =======================
+
+template <class T>
+struct BwAssemble {  // one block row of A and b (same formula as the CPU plugin)
+  const Index *rp, *col;
+  const T *dfx, *dfv, *v, *f, *mass, *degree;
+  T* a;
+  T* b;
+  T h, cm, cx, cbx, hcd, alpha, cd, g0, g1, g2;
+  LOOM_HD void operator()(Index i) const {
+    const long long o = 3LL * i;
+    T y[3] = {T(0), T(0), T(0)};
+    T sv[3] = {T(0), T(0), T(0)};
+    for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+      const long long kb = 9LL * k;
+      const Index j = col[k];
+      const T* vj = v + 3LL * j;
+      kernels::mat3_mul_add(dfx + kb, vj, y);
+      T* ak = a + kb;
+      for (int e = 0; e < 9; ++e) ak[e] = -h * dfv[kb + e] - cx * dfx[kb + e];
+      if (j == i) {
+        const T d = cm * mass[i] + hcd * degree[i];
+        ak[0] += d;
+        ak[4] += d;
+        ak[8] += d;
+      } else {
+        ak[0] -= hcd;
+        ak[4] -= hcd;
+        ak[8] -= hcd;
+        sv[0] += vj[0];
+        sv[1] += vj[1];
+        sv[2] += vj[2];
+      }
+    }
+    const T m = mass[i], deg = degree[i];
+    const T g[3] = {g0, g1, g2};
+    for (int c = 0; c < 3; ++c) {
+      const T lv = deg * v[o + c] - sv[c];
+      b[o + c] = h * (f[o + c] + m * g[c] - alpha * m * v[o + c] + cbx * y[c] - cd * lv);
+    }
+  }
+};
+
+template <class T>
+struct PinPrescribed {  // z = -v0 on the pinned vertices (fixed pins)
+  const Index* pins;
+  const T* v;
+  T* z;
+  LOOM_HD void operator()(Index k) const {
+    const long long o = 3LL * pins[k];
+    z[o] = -v[o];
+    z[o + 1] = -v[o + 1];
+    z[o + 2] = -v[o + 2];
+  }
+};
+
+template <class T>
+struct BwUpdate {
+  const T* dv;
+  T *x, *v;
+  T h;
+  LOOM_HD void operator()(Index d) const {
+    v[d] += dv[d];
+    x[d] += h * v[d];
+  }
+};
+
+template <class T>
+class CudaBw final : public Integrator {
+ public:
+  explicit CudaBw(BwOptionsD o) : opt_(o) {}
+  std::string name() const override { return "baraff_witkin"; }
+  IntegratorNeeds needs() const override { return {false, true, true}; }
+
+  void prepare(Scene& scene, double h) override {
+    check_device_scene(scene, "baraff_witkin");
+    if (!(h > 0) || !std::isfinite(h))
+      throw InputError("baraff_witkin: the time step must be positive and finite; set integrator.dt");
+    if (!scene.material || !scene.material->has_jacobian())
+      throw InputError(scene.source + ": baraff_witkin needs a material with force Jacobians (mass_spring, gnatv)");
+    const auto* solver = dynamic_cast<const CusparsePcg*>(scene.solver.get());
+    if (!solver)
+      throw InputError(scene.source + ": baraff_witkin on backend cuda solves on the device with cusparse_pcg, but the "
+                       "scene's solver is '" + (scene.solver ? scene.solver->name() : std::string("none")) +
+                       "'. Fix: set solver: {type: cusparse_pcg} (or backend: cpu for the CPU solvers).");
+    pcg_ = DevicePcg<T>(solver->options());
+    State& s = scene.state;
+    const Index n = s.size();
+    std::vector<std::array<Index, 2>> pairs;
+    scene.material->jacobian_pairs(pairs);
+    for (const auto& pr : pairs)
+      if (pr[0] < 0 || pr[1] < 0 || pr[0] >= n || pr[1] >= n)
+        throw InputError("baraff_witkin: material '" + scene.material->name() + "' reported a Jacobian pair outside the mesh");
+    pattern_ = std::make_unique<BsrPattern>(BsrPattern::from_pairs(n, pairs));
+    scene.material->bind_pattern(*pattern_);
+    model_.build(scene, pattern_.get());
+    A_.set_pattern(*pattern_);
+    dfdx_ = A_.values;
+    dfdv_ = A_.values;
+    std::vector<double> degree(n);
+    for (Index i = 0; i < n; ++i) degree[i] = static_cast<double>(pattern_->row_ptr[i + 1] - pattern_->row_ptr[i] - 1);
+    cuda::upload(degree, degree_);
+    const std::size_t N = 3 * static_cast<std::size_t>(n);
+    f_.assign(N, T(0));
+    b_.assign(N, T(0));
+    z_.assign(N, T(0));
+    dv_.assign(N, T(0));
+    Filter S;
+    S.reset(n);
+    for (Index i : s.pin_list) S.constrain_all(i);
+    S_.upload(S);
+    cuda::upload(s.pin_list, pins_);
+    pcg_.analyze(n);
+    ds_.upload(s);
+    last_ = {};
+  }
+
+  void step(Scene& scene, double h) override {
+    if (ds_.n != scene.state.size() || !pattern_) prepare(scene, h);
+    StepStats st;
+    advance(scene, h, 0, st);
+    ds_.download(scene.state);
+    finish_step(scene.state, h);
+    last_ = st;
+  }
+  StepStats last_step() const override { return last_; }
+
+ private:
+  bool attempt(Scene& scene, double hd, StepStats& st, SolveReport& rep) {
+    const auto t0 = Clock::now();
+    const T h = static_cast<T>(hd);
+    model_.forces(ds_.x, ds_.v, f_);
+    st.force_evaluations += 1;
+    model_.jacobians(ds_.x, ds_.v, dfdx_, &dfdv_);
+    const double alpha = opt_.rayleigh_alpha, beta = opt_.rayleigh_beta, cd = opt_.kang_cho_damping;
+    parallel_for(ds_.n, BwAssemble<T>{raw(A_.row_ptr), raw(A_.col), raw(dfdx_), raw(dfdv_), raw(ds_.v), raw(f_),
+                                      raw(ds_.mass), raw(degree_), raw(A_.values), raw(b_), h,
+                                      static_cast<T>(1.0 + hd * alpha), static_cast<T>(hd * hd + hd * beta),
+                                      static_cast<T>(hd + beta), static_cast<T>(hd * cd), static_cast<T>(alpha),
+                                      static_cast<T>(cd), static_cast<T>(scene.gravity[0]),
+                                      static_cast<T>(scene.gravity[1]), static_cast<T>(scene.gravity[2])});
+    parallel_for(static_cast<Index>(pins_.size()), PinPrescribed<T>{raw(pins_), raw(ds_.v), raw(z_)});
+    const auto t1 = Clock::now();
+    st.assemble_seconds += std::chrono::duration<double>(t1 - t0).count();
+    rep = SolveReport{};
+    const bool ok = pcg_.factorize(A_, rep);
+    if (ok) {
+      if (!opt_.warm_start) fill(dv_, T(0));
+      const double fs = rep.factorize_seconds;
+      rep = pcg_.solve(A_, S_, b_, z_, dv_);
+      rep.factorize_seconds = fs;
+      st.linear_iterations += rep.iterations;
+      st.linear_residual = rep.residual;
+    }
+    st.solve_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
+    if (!ok || !rep.converged) {
+      fill(dv_, T(0));
+      return false;
+    }
+    parallel_for(3 * ds_.n, BwUpdate<T>{raw(dv_), raw(ds_.x), raw(ds_.v), h});
+    return true;
+  }
+
+  void advance(Scene& scene, double h, int depth, StepStats& st) {
+    SolveReport rep;
+    if (attempt(scene, h, st, rep)) return;
+    if (opt_.halve_on_failure && depth < opt_.max_halvings) {
+      st.retries += 1;
+      advance(scene, 0.5 * h, depth + 1, st);
+      advance(scene, 0.5 * h, depth + 1, st);
+      return;
+    }
+    char buf[256];
+    std::snprintf(buf, sizeof buf,
+                  "baraff_witkin (cuda): linear solve failed at step %lld (t = %.6g s, h = %.3g s%s): %d iterations, "
+                  "relative residual %.3g: ",
+                  static_cast<long long>(scene.state.step), scene.state.time, h,
+                  depth > 0 ? ", after halving the step" : "", rep.iterations, rep.residual);
+    throw SolverError(buf + (rep.message.empty() ? std::string("the solver reported no reason") : rep.message));
+  }
+
+  BwOptionsD opt_;
+  DeviceState<T> ds_;
+  DeviceForceModel<T> model_;
+  std::unique_ptr<BsrPattern> pattern_;
+  DeviceBsr<T> A_;
+  DVec<T> dfdx_, dfdv_, degree_, f_, b_, z_, dv_;
+  DVec<Index> pins_;
+  DeviceFilter<T> S_;
+  DevicePcg<T> pcg_;
+  StepStats last_;
+};
+
+HoVariantD parse_variant(const Params& p) {
+  if (!p.valid()) return HoVariantD::Velocity;
+  const std::string v = p.get_choice("variant", "velocity", {"velocity", "analytic_position", "kang_cho_2011"});
+  return v == "velocity" ? HoVariantD::Velocity
+         : v == "analytic_position" ? HoVariantD::AnalyticPosition
+                                    : HoVariantD::KangCho2011;
+}
+
+}  // namespace
+
+std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision) {
+  if (precision == Precision::Float) return std::make_unique<CudaHo<float>>(variant);
+  return std::make_unique<CudaHo<double>>(variant);
+}
+std::unique_ptr<Integrator> make_cuda_ho(const Params& p) { return make_cuda_ho(parse_variant(p), parse_precision(p)); }
+
+std::unique_ptr<Integrator> make_cuda_rk4(Precision precision) {
+  if (precision == Precision::Float) return std::make_unique<CudaRk4<float>>();
+  return std::make_unique<CudaRk4<double>>();
+}
+std::unique_ptr<Integrator> make_cuda_rk4(const Params& p) { return make_cuda_rk4(parse_precision(p)); }
+
+std::unique_ptr<Integrator> make_cuda_baraff_witkin(const BwOptionsD& o, Precision precision) {
+  if (precision == Precision::Float) return std::make_unique<CudaBw<float>>(o);
+  return std::make_unique<CudaBw<double>>(o);
+}
+std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p) {
+  BwOptionsD o;
+  if (p.valid()) {
+    o.kang_cho_damping = p.get_nonnegative("kang_cho_damping", 0.0);
+    if (p.has("rayleigh")) {
+      const Params r = p.child("rayleigh");
+      if (!r.is_map()) r.fail("rayleigh must be a mapping {alpha: <1/s>, beta: <s>}");
+      o.rayleigh_alpha = r.get_nonnegative("alpha", 0.0);
+      o.rayleigh_beta = r.get_nonnegative("beta", 0.0);
+      r.check_unused();
+    }
+    o.halve_on_failure = p.get_choice("on_solver_failure", "stop", {"stop", "halve_step"}) == "halve_step";
+    const std::int64_t mh = p.get("max_halvings", static_cast<std::int64_t>(o.max_halvings));
+    if (mh < 1 || mh > 20) p.child("max_halvings").fail("max_halvings must be between 1 and 20");
+    o.max_halvings = static_cast<int>(mh);
+    o.warm_start = p.get("warm_start", o.warm_start);
+  }
+  return make_cuda_baraff_witkin(o, parse_precision(p));
+}
+
+}  // namespace loom::cuda

@@ -1,0 +1,45 @@
+// Integrators of the CUDA backend (registered as (integrator, name, "cuda")): the state lives
+// on the device for the whole run; after every step x and v are copied back into scene.state
+// (the framework's divergence guard, output and stats read it there). Double by default; the
+// `precision: float` parameter runs the device arrays in float (coefficients are still
+// computed in double and rounded once).
+//
+//   harmonic_oscillation  variants velocity | analytic_position | kang_cho_2011, same per-spring
+//                         math as the CPU plugin (loom/kernels/ho.hpp)
+//   rk4                   loom/kernels/rk4.hpp stages; forces from the device force model
+//   baraff_witkin         device assembly of A and b (NUMERICS 3.1/3.2, Kang-Cho and Rayleigh
+//                         damping), pins through the filter S, solved by cusparse_pcg on device
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "device_model.hpp"
+#include "device_pcg.hpp"
+#include "loom/integrator.hpp"
+#include "loom/params.hpp"
+
+namespace loom::cuda {
+
+enum class Precision { Double, Float };
+/// Reads `precision` (double | float).
+Precision parse_precision(const Params& p);
+
+enum class HoVariantD { Velocity = 0, AnalyticPosition = 1, KangCho2011 = 2 };
+
+std::unique_ptr<Integrator> make_cuda_ho(const Params& p);
+std::unique_ptr<Integrator> make_cuda_rk4(const Params& p);
+std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p);
+
+/// Direct construction (tests, benchmarks).
+std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision);
+std::unique_ptr<Integrator> make_cuda_rk4(Precision precision);
+struct BwOptionsD {
+  double kang_cho_damping = 0, rayleigh_alpha = 0, rayleigh_beta = 0;
+  bool halve_on_failure = false;
+  int max_halvings = 3;
+  bool warm_start = true;
+};
+std::unique_ptr<Integrator> make_cuda_baraff_witkin(const BwOptionsD& o, Precision precision);
+
+}  // namespace loom::cuda

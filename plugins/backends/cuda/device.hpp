@@ -1,0 +1,116 @@
+// Thrust glue of the CUDA backend: device vectors, a parallel-for over indices, reductions and
+// host <-> device copies with precision conversion. Compiles for THRUST_DEVICE_SYSTEM CUDA
+// (nvcc, the loom_backend_cuda module) and OMP (g++ -fopenmp, tests/cuda).
+// Functors passed to parallel_for are plain structs with a LOOM_HD operator()(Index).
+#pragma once
+
+#include <thrust/copy.h>
+#include <thrust/device_vector.h>
+#include <thrust/execution_policy.h>
+#include <thrust/fill.h>
+#include <thrust/for_each.h>
+#include <thrust/functional.h>
+#include <thrust/inner_product.h>
+#include <thrust/iterator/counting_iterator.h>
+#include <thrust/transform_reduce.h>
+
+#include <vector>
+
+#include "loom/common.hpp"
+#include "seam.hpp"
+
+namespace loom::cuda {
+
+template <class T>
+using DVec = thrust::device_vector<T>;
+
+template <class T>
+T* raw(DVec<T>& v) {
+  return thrust::raw_pointer_cast(v.data());
+}
+template <class T>
+const T* raw(const DVec<T>& v) {
+  return thrust::raw_pointer_cast(v.data());
+}
+
+#if THRUST_DEVICE_SYSTEM == THRUST_DEVICE_SYSTEM_OMP
+/// OpenMP stand-in only: launches over fewer items than this run on the calling thread (an
+/// OpenMP region costs more than such a loop, and far more on an oversubscribed machine).
+/// Tests set it to 0 to exercise the parallel path.
+inline Index& omp_serial_below() {
+  static Index v = 4096;
+  return v;
+}
+#define LOOM_CUDA_OMP_STANDIN 1
+#endif
+
+/// f(i) for i in [begin, end) on the device.
+template <class F>
+void parallel_for(Index begin, Index end, const F& f) {
+  if (end <= begin) return;
+#ifdef LOOM_CUDA_OMP_STANDIN
+  if (end - begin < omp_serial_below()) {
+    thrust::for_each(thrust::seq, thrust::counting_iterator<Index>(begin), thrust::counting_iterator<Index>(end), f);
+    return;
+  }
+#endif
+  thrust::for_each(thrust::device, thrust::counting_iterator<Index>(begin), thrust::counting_iterator<Index>(end), f);
+}
+template <class F>
+void parallel_for(Index n, const F& f) {
+  parallel_for(Index(0), n, f);
+}
+
+/// sum_i f(i) over [0, n) on the device (f returns T).
+template <class T, class F>
+T reduce_sum(Index n, const F& f) {
+  if (n <= 0) return T(0);
+#ifdef LOOM_CUDA_OMP_STANDIN
+  if (n < omp_serial_below())
+    return thrust::transform_reduce(thrust::seq, thrust::counting_iterator<Index>(0),
+                                    thrust::counting_iterator<Index>(n), f, T(0), thrust::plus<T>());
+#endif
+  return thrust::transform_reduce(thrust::device, thrust::counting_iterator<Index>(0),
+                                  thrust::counting_iterator<Index>(n), f, T(0), thrust::plus<T>());
+}
+
+/// a . b over the whole vectors.
+template <class T>
+T dot(const DVec<T>& a, const DVec<T>& b) {
+#ifdef LOOM_CUDA_OMP_STANDIN
+  if (static_cast<Index>(a.size()) < omp_serial_below())
+    return thrust::inner_product(thrust::seq, a.begin(), a.end(), b.begin(), T(0));
+#endif
+  return thrust::inner_product(thrust::device, a.begin(), a.end(), b.begin(), T(0));
+}
+
+/// Upload host data (any arithmetic type) into a device vector of T, resizing it.
+template <class T, class S>
+void upload(const std::vector<S>& host, DVec<T>& dev) {
+  if constexpr (std::is_same_v<T, S>) {
+    dev.assign(host.begin(), host.end());
+  } else {
+    std::vector<T> tmp(host.begin(), host.end());
+    dev.assign(tmp.begin(), tmp.end());
+  }
+}
+
+/// Download a device vector of T into host doubles (same size), through `stage` for T != double.
+template <class T>
+void download(const DVec<T>& dev, std::vector<double>& host, std::vector<T>& stage) {
+  host.resize(dev.size());
+  if constexpr (std::is_same_v<T, double>) {
+    thrust::copy(dev.begin(), dev.end(), host.begin());
+  } else {
+    stage.resize(dev.size());
+    thrust::copy(dev.begin(), dev.end(), stage.begin());
+    for (std::size_t k = 0; k < stage.size(); ++k) host[k] = static_cast<double>(stage[k]);
+  }
+}
+
+template <class T>
+void fill(DVec<T>& v, T value) {
+  thrust::fill(thrust::device, v.begin(), v.end(), value);
+}
+
+}  // namespace loom::cuda

@@ -1,0 +1,25 @@
+// loom_backend_cuda: registers the CUDA execution backend's plugins under backend "cuda".
+#include <memory>
+
+#include "cuda_integrators.hpp"
+#include "device_pcg.hpp"
+#include "loom/plugin.hpp"
+
+static void register_cuda(loom::Registry& r) {
+  using loom::PluginKind;
+  r.add_integrator({PluginKind::Integrator, "harmonic_oscillation", "cuda", "1.0",
+                    "harmonic-oscillation spring integration on the GPU (variants velocity, analytic_position, "
+                    "kang_cho_2011; precision double | float)", ""},
+                   [](const loom::Params& p) { return loom::cuda::make_cuda_ho(p); });
+  r.add_integrator({PluginKind::Integrator, "rk4", "cuda", "1.0",
+                    "classical RK4 on the GPU (precision double | float)", ""},
+                   [](const loom::Params& p) { return loom::cuda::make_cuda_rk4(p); });
+  r.add_integrator({PluginKind::Integrator, "baraff_witkin", "cuda", "1.0",
+                    "Baraff-Witkin implicit step assembled and solved on the GPU (needs solver cusparse_pcg)", ""},
+                   [](const loom::Params& p) { return loom::cuda::make_cuda_baraff_witkin(p); });
+  r.add_solver({PluginKind::Solver, "cusparse_pcg", "cuda", "1.0",
+                "modified (filtered) PCG on the GPU: cuSPARSE bsrmv, Thrust reductions, (block) Jacobi", ""},
+               [](const loom::Params& p) { return std::make_unique<loom::cuda::CusparsePcg>(p); });
+}
+
+LOOM_PLUGIN(register_cuda)

@@ -1,0 +1,48 @@
+// Seam, Thrust-OpenMP build: the host stands in for the device, a Thrust SpMV stands in
+// for cuSPARSE (same block-row math as the CPU backend: kernels::bsr_row_multiply).
+#include <thrust/execution_policy.h>
+#include <thrust/for_each.h>
+#include <thrust/iterator/counting_iterator.h>
+
+#include "loom/kernels/bsr_ops.hpp"
+#include "seam.hpp"
+
+namespace loom::cuda {
+
+const char* seam_name() { return "thrust-omp"; }
+
+int seam_device_count(std::string& error) {
+  error.clear();
+  return 1;
+}
+
+void seam_require_device(const std::string&) {}
+
+namespace {
+template <class T>
+struct SpmvRow {
+  const Index* rp;
+  const Index* col;
+  const T* val;
+  const T* x;
+  T* y;
+  void operator()(Index i) const { kernels::bsr_row_multiply(rp, col, val, x, i, y + 3 * static_cast<long long>(i)); }
+};
+template <class T>
+void spmv(Index nb, const Index* rp, const Index* col, const T* val, const T* x, T* y) {
+  thrust::for_each(thrust::device, thrust::counting_iterator<Index>(0), thrust::counting_iterator<Index>(nb),
+                   SpmvRow<T>{rp, col, val, x, y});
+}
+}  // namespace
+
+void seam_bsr_spmv(Index nb, Index, const Index* rp, const Index* col, const double* val, const double* x,
+                   double* y) {
+  spmv(nb, rp, col, val, x, y);
+}
+void seam_bsr_spmv(Index nb, Index, const Index* rp, const Index* col, const float* val, const float* x, float* y) {
+  spmv(nb, rp, col, val, x, y);
+}
+
+void seam_synchronize() {}
+
+}  // namespace loom::cuda
