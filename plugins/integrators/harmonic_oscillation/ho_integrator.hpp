@@ -307,17 +307,27 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
       ho_block_impulses<T, V, Table>(m, I + k, J + k, Table ? P.id + k : nullptr, P.l0 + off, P.kx + off,
                                      P.kv + off, kPos ? P.ex + off : nullptr, kPos ? P.ev + off : nullptr, x, v,
                                      w, Gi, Gj, Pi, Pj);
-      // phase 2: scatter
-      for (Index r = 0; r < m; ++r) {
-        const std::size_t a = 3 * static_cast<std::size_t>(I[k + r]);
-        const std::size_t b = 3 * static_cast<std::size_t>(J[k + r]);
-        for (int e = 0; e < 3; ++e) {
-          dv[a + e] += Gi[3 * r + e];
-          dv[b + e] -= Gj[3 * r + e];
-          if constexpr (kPos) {
-            dx[a + e] += Pi[3 * r + e];
-            dx[b + e] -= Pj[3 * r + e];
+      // phase 2: scatter. Consecutive springs mostly share their lower endpoint: its sum is kept
+      // in registers for the run (no store-to-load chain through dv[i]).
+      for (Index r = 0; r < m;) {
+        const Index ia = I[k + r];
+        T si[3] = {T(0), T(0), T(0)}, pi[3] = {T(0), T(0), T(0)};
+        do {
+          const std::size_t b = 3 * static_cast<std::size_t>(J[k + r]);
+          for (int e = 0; e < 3; ++e) {
+            si[e] += Gi[3 * r + e];
+            dv[b + e] -= Gj[3 * r + e];
+            if constexpr (kPos) {
+              pi[e] += Pi[3 * r + e];
+              dx[b + e] -= Pj[3 * r + e];
+            }
           }
+          ++r;
+        } while (r < m && I[k + r] == ia);
+        const std::size_t a = 3 * static_cast<std::size_t>(ia);
+        for (int e = 0; e < 3; ++e) {
+          dv[a + e] += si[e];
+          if constexpr (kPos) dx[a + e] += pi[e];
         }
       }
       k = k1;
