@@ -78,7 +78,7 @@ TEST(Scenes, DtIsLinearlyStableAndShortRunIsBounded) {
   Registry reg;
   PluginLoader loader(reg, {std::string(LOOM_BINARY_DIR) + "/lib/loom/plugins"});
   const int saved_threads = omp_get_max_threads();
-  for (const SceneCase& sc_case : {SceneCase{"hanging_cloth.yaml", 500}, SceneCase{"kang_cho_fig7_se_k2000.yaml", 20},
+  for (const SceneCase& sc_case : {SceneCase{"hanging_cloth.yaml", 10020}, SceneCase{"kang_cho_fig7_se_k2000.yaml", 20},
                                    SceneCase{"kang_cho_fig7_se_k1e6.yaml", 20}}) {
     const std::string path = std::string(LOOM_SOURCE_DIR) + "/scenes/" + sc_case.file;
     // One thread: on a shared, oversubscribed machine every parallel region's barrier can
@@ -94,7 +94,7 @@ TEST(Scenes, DtIsLinearlyStableAndShortRunIsBounded) {
     EXPECT_LE(b.power, b.gershgorin * (1 + 1e-12));
     EXPECT_LT(std::sqrt(b.gershgorin) * dt, 2.0) << sc_case.file;
     const auto t0 = std::chrono::steady_clock::now();
-    for (int k = 0; k < sc_case.steps; ++k) sim.step();  // throws DivergenceError if it blows up
+    for (int k = 0; k < sc_case.steps; ++k) sim.step();  // throws DivergenceError if it blows up (hanging_cloth: all 60 frames)
     std::printf("[ scene    ] %s: %d steps, %.3f ms/step\n", sc_case.file, sc_case.steps,
                 1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / sc_case.steps);
     const auto st = sim.measure(0);
