@@ -143,14 +143,14 @@ TEST(SpringLayout, GridIsAlmostAllInterior) {
 }
 
 TEST(SpringLayout, RandomGraphUsesColours) {
-  for (unsigned seed : {1u, 2u}) {
-    const Graph g = random_graph(5000, 60000, seed);  // almost every spring crosses a cut
+  for (unsigned seed : {1u}) {
+    const Graph g = random_graph(5000, 40000, seed);  // almost every spring crosses a cut
     SpringLayout L(g.n, g.i, g.j, 2);
     check_structure(g, L);
     EXPECT_GT(L.num_cross(), SpringLayout::kSerialCross);
     EXPECT_FALSE(L.cross_serial());
     EXPECT_GT(L.num_colours(), 1);
-    for (int t : {1, 2, 3}) check_traversal(g, L, t);
+    for (int t : {1, 2}) check_traversal(g, L, t);
   }
   // Small random graph: serial cross path.
   const Graph g = random_graph(1000, 6000, 9);
