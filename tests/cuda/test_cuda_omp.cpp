@@ -200,6 +200,29 @@ TEST(CudaHo, ChangingTheStepRecomputesTheCoefficients) {
   EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), 1e-12);
 }
 
+TEST(CudaHo, HostSyncEveryNthStep) {
+  auto a = make_scene(Mat::DampedSprings, 8, 8);
+  auto b = make_scene(Mat::DampedSprings, 8, 8);
+  auto ia = lc::make_cuda_ho(lc::HoVariantD::Velocity, lc::Precision::Double, 1);
+  auto ib = lc::make_cuda_ho(lc::HoVariantD::Velocity, lc::Precision::Double, 5);
+  run(*ia, *a, 1e-4, 5);
+  run(*ib, *b, 1e-4, 5);
+  EXPECT_EQ(a->state.x, b->state.x);  // synced at step 5
+  const std::vector<double> x5 = b->state.x;
+  for (int k = 0; k < 3; ++k) {
+    ia->step(*a, 1e-4);
+    ib->step(*b, 1e-4);
+  }
+  EXPECT_EQ(b->state.x, x5);          // not copied back at step 8 ...
+  EXPECT_EQ(b->state.step, 8);        // ... but the bookkeeping is current
+  for (int k = 0; k < 2; ++k) {
+    ia->step(*a, 1e-4);
+    ib->step(*b, 1e-4);
+  }
+  EXPECT_EQ(a->state.x, b->state.x);  // synced at step 10, same run
+  EXPECT_EQ(a->state.v, b->state.v);
+}
+
 // ---------------------------------------------------------------- RK4
 class CudaRk4Run : public ::testing::TestWithParam<Mat> {};
 

@@ -30,6 +30,20 @@ void check_device_scene(const Scene& scene, const char* integrator) {
                      "the device would not see). Fix: set backend: cpu for scenes with colliders.");
 }
 
+/// Reads host_sync_every (>= 1): copy x, v back into scene.state after every n-th step.
+int parse_sync_every(const Params& p) {
+  if (!p.valid()) return 1;
+  const std::int64_t k = p.get("host_sync_every", static_cast<std::int64_t>(1));
+  if (k < 1 || k > 1000000) p.child("host_sync_every").fail("host_sync_every must be an integer >= 1 (1 = every step)");
+  return static_cast<int>(k);
+}
+
+/// Copy back after the step that makes state.step a multiple of `every` (call before finish_step).
+template <class T>
+void sync_after_step(DeviceState<T>& ds, State& s, int every) {
+  if (every <= 1 || (s.step + 1) % every == 0) ds.download(s);
+}
+
 /// Vertex -> incident springs (sign +1 at the spring's i, -1 at its j), springs in order.
 void build_incidence(Index n, const std::vector<Index>& I, const std::vector<Index>& J, std::vector<Index>& ptr,
                      std::vector<Index>& spring, std::vector<signed char>& sign) {
@@ -114,7 +128,7 @@ struct HoVertexKernel {  // per vertex: gather the impulses, then update x and v
 template <class T>
 class CudaHo final : public Integrator {
  public:
-  explicit CudaHo(HoVariantD v) : variant_(v) {}
+  CudaHo(HoVariantD v, int sync_every) : variant_(v), sync_every_(sync_every) {}
   std::string name() const override { return "harmonic_oscillation"; }
   IntegratorNeeds needs() const override { return {true, false, false}; }
 
@@ -167,7 +181,7 @@ class CudaHo final : public Integrator {
       case HoVariantD::AnalyticPosition: run<HoVariantD::AnalyticPosition>(scene, h); break;
       case HoVariantD::KangCho2011: run<HoVariantD::KangCho2011>(scene, h); break;
     }
-    ds_.download(scene.state);
+    sync_after_step(ds_, scene.state, sync_every_);
     finish_step(scene.state, h);
   }
 
@@ -216,6 +230,7 @@ class CudaHo final : public Integrator {
   }
 
   HoVariantD variant_;
+  int sync_every_ = 1;
   DeviceState<T> ds_;
   std::vector<Index> hi_, hj_;
   std::vector<double> hk_, hc_;
@@ -251,6 +266,7 @@ struct Rk4Stage {  // stage 1 (kind 0), 2-3 (kind 1, next = h/2 or h), 4 (kind 2
 template <class T>
 class CudaRk4 final : public Integrator {
  public:
+  explicit CudaRk4(int sync_every) : sync_every_(sync_every) {}
   std::string name() const override { return "rk4"; }
   void prepare(Scene& scene, double) override {
     check_device_scene(scene, "rk4");
@@ -283,12 +299,13 @@ class CudaRk4 final : public Integrator {
     stage(1, h);
     model_.forces(xs_, vs_, f_);
     stage(2, h);
-    ds_.download(scene.state);
+    sync_after_step(ds_, scene.state, sync_every_);
     finish_step(scene.state, hd);
   }
   StepStats last_step() const override { return stats_; }
 
  private:
+  int sync_every_ = 1;
   DeviceState<T> ds_;
   DeviceForceModel<T> model_;
   DVec<T> xs_, vs_, f_, ax_, av_;
@@ -416,7 +433,7 @@ class CudaBw final : public Integrator {
     if (ds_.n != scene.state.size() || !pattern_) prepare(scene, h);
     StepStats st;
     advance(scene, h, 0, st);
-    ds_.download(scene.state);
+    sync_after_step(ds_, scene.state, opt_.host_sync_every);
     finish_step(scene.state, h);
     last_ = st;
   }
@@ -498,17 +515,21 @@ HoVariantD parse_variant(const Params& p) {
 
 }  // namespace
 
-std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision) {
-  if (precision == Precision::Float) return std::make_unique<CudaHo<float>>(variant);
-  return std::make_unique<CudaHo<double>>(variant);
+std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision, int host_sync_every) {
+  if (precision == Precision::Float) return std::make_unique<CudaHo<float>>(variant, host_sync_every);
+  return std::make_unique<CudaHo<double>>(variant, host_sync_every);
 }
-std::unique_ptr<Integrator> make_cuda_ho(const Params& p) { return make_cuda_ho(parse_variant(p), parse_precision(p)); }
+std::unique_ptr<Integrator> make_cuda_ho(const Params& p) {
+  return make_cuda_ho(parse_variant(p), parse_precision(p), parse_sync_every(p));
+}
 
-std::unique_ptr<Integrator> make_cuda_rk4(Precision precision) {
-  if (precision == Precision::Float) return std::make_unique<CudaRk4<float>>();
-  return std::make_unique<CudaRk4<double>>();
+std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every) {
+  if (precision == Precision::Float) return std::make_unique<CudaRk4<float>>(host_sync_every);
+  return std::make_unique<CudaRk4<double>>(host_sync_every);
 }
-std::unique_ptr<Integrator> make_cuda_rk4(const Params& p) { return make_cuda_rk4(parse_precision(p)); }
+std::unique_ptr<Integrator> make_cuda_rk4(const Params& p) {
+  return make_cuda_rk4(parse_precision(p), parse_sync_every(p));
+}
 
 std::unique_ptr<Integrator> make_cuda_baraff_witkin(const BwOptionsD& o, Precision precision) {
   if (precision == Precision::Float) return std::make_unique<CudaBw<float>>(o);
@@ -530,6 +551,7 @@ std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p) {
     if (mh < 1 || mh > 20) p.child("max_halvings").fail("max_halvings must be between 1 and 20");
     o.max_halvings = static_cast<int>(mh);
     o.warm_start = p.get("warm_start", o.warm_start);
+    o.host_sync_every = parse_sync_every(p);
   }
   return make_cuda_baraff_witkin(o, parse_precision(p));
 }

@@ -1,6 +1,9 @@
 // Integrators of the CUDA backend (registered as (integrator, name, "cuda")): the state lives
-// on the device for the whole run; after every step x and v are copied back into scene.state
-// (the framework's divergence guard, output and stats read it there). Double by default; the
+// on the device for the whole run (uploaded in prepare()); x and v are copied back into
+// scene.state after every step, or after every n-th with `host_sync_every: n` (the framework's
+// divergence guard, output and stats read scene.state: set guard.check_every to the same n and
+// substeps to a multiple of it, otherwise they see a stale state). Host edits of scene.state
+// between steps are not seen by the device. Double by default; the
 // `precision: float` parameter runs the device arrays in float (coefficients are still
 // computed in double and rounded once).
 //
@@ -32,13 +35,14 @@ std::unique_ptr<Integrator> make_cuda_rk4(const Params& p);
 std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p);
 
 /// Direct construction (tests, benchmarks).
-std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision);
-std::unique_ptr<Integrator> make_cuda_rk4(Precision precision);
+std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision, int host_sync_every = 1);
+std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every = 1);
 struct BwOptionsD {
   double kang_cho_damping = 0, rayleigh_alpha = 0, rayleigh_beta = 0;
   bool halve_on_failure = false;
   int max_halvings = 3;
   bool warm_start = true;
+  int host_sync_every = 1;
 };
 std::unique_ptr<Integrator> make_cuda_baraff_witkin(const BwOptionsD& o, Precision precision);
 
