@@ -542,3 +542,31 @@ TEST(MassSpringForces, CollapsedSpringsGiveFiniteValues) {
   EXPECT_TRUE(std::isfinite(m->elastic_energy(x)));
   EXPECT_NEAR(m->max_strain(x), 1.0, 1e-15);  // |0/l0 - 1|
 }
+
+TEST(MassSpringJacobian, PatternWithExtraBlocksIsOverwrittenToo) {
+  // A pattern with a block no spring touches (another element's): it must come out zero,
+  // and the spring blocks must equal those from the material's own pattern.
+  const Mesh mesh = make_grid(5, 5, 1.0, 1.0);
+  auto m = make(mesh, "stencil: radius_sqrt5\ndamping: 0.1");
+  const std::vector<double> x = deformed(mesh, 0.02, 4);
+  const std::vector<double> v = deformed(mesh, 0.1, 5);
+  Jac own = jacobian(*m, x, v, true);
+  const Eigen::MatrixXd A0 = dense(*own.dfdx), B0 = dense(*own.dfdv);
+  std::vector<std::array<Index, 2>> pairs;
+  m->jacobian_pairs(pairs);
+  pairs.push_back({0, 24});  // opposite corners: no spring
+  BsrPattern pat = BsrPattern::from_pairs(m->num_vertices(), pairs);
+  m->bind_pattern(pat);
+  BsrMatrix A(&pat), B(&pat);
+  std::fill(A.values().begin(), A.values().end(), 7.0);
+  std::fill(B.values().begin(), B.values().end(), 7.0);
+  m->compute_jacobians(x, v, A, &B);
+  const Index extra = pat.find(0, 24);
+  ASSERT_GE(extra, 0);
+  for (int q = 0; q < 9; ++q) {
+    EXPECT_EQ(A.block(extra)[q], 0.0);
+    EXPECT_EQ(B.block(extra)[q], 0.0);
+  }
+  EXPECT_EQ((dense(A) - A0).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ((dense(B) - B0).cwiseAbs().maxCoeff(), 0.0);
+}

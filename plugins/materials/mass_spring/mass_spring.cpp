@@ -366,6 +366,20 @@ void MassSpringMaterial::bind_pattern(const BsrPattern& pattern) {
     if (m[0] < 0 || m[1] < 0 || m[2] < 0 || m[3] < 0)
       throw std::invalid_argument("mass_spring: the bound pattern lacks a block of spring " + std::to_string(s));
   }
+  // First writers, in traversal order (== index order). Springs sharing a block share both
+  // endpoints, so they run on the same thread in this order (same part, or colours in turn).
+  first_write_.assign(static_cast<std::size_t>(springs_.size()), 0);
+  std::vector<char> seen(static_cast<std::size_t>(pattern.nnz_blocks()), 0);
+  for (Index s = 0; s < springs_.size(); ++s) {
+    const Index* m = &scatter_[4 * static_cast<std::size_t>(s)];
+    for (int e = 0; e < 2; ++e)
+      if (!seen[m[2 + e]]) {
+        seen[m[2 + e]] = 1;
+        first_write_[s] |= static_cast<std::uint8_t>(1 << e);
+      }
+  }
+  for (Index i = 0; i < n_; ++i) seen[pattern.diag[i]] = 1;
+  assign_offdiag_ = std::all_of(seen.begin(), seen.end(), [](char c) { return c != 0; });
 }
 
 void MassSpringMaterial::compute_jacobians(std::span<const double> x, std::span<const double> v,
@@ -388,11 +402,22 @@ void MassSpringMaterial::compute_jacobians(std::span<const double> x, std::span<
   double* B = with_v ? dfdv->values().data() : nullptr;
   if (dfdv && !damped_) dfdv->set_zero();
   const bool clamp = clamp_;
+  const Index* diag = pattern_->diag.data();
+  const std::uint8_t* first = first_write_.data();
+  const bool assign = assign_offdiag_;
   auto zero = [=](Index v0, Index v1) {
-    std::fill(A + 9 * static_cast<std::size_t>(row_ptr[v0]), A + 9 * static_cast<std::size_t>(row_ptr[v1]), 0.0);
-    if (B) std::fill(B + 9 * static_cast<std::size_t>(row_ptr[v0]), B + 9 * static_cast<std::size_t>(row_ptr[v1]), 0.0);
+    if (assign) {  // off-diagonal blocks are assigned by their first writer
+      for (Index r = v0; r < v1; ++r) {
+        std::fill(A + 9 * static_cast<std::size_t>(diag[r]), A + 9 * static_cast<std::size_t>(diag[r]) + 9, 0.0);
+        if (B) std::fill(B + 9 * static_cast<std::size_t>(diag[r]), B + 9 * static_cast<std::size_t>(diag[r]) + 9, 0.0);
+      }
+    } else {
+      std::fill(A + 9 * static_cast<std::size_t>(row_ptr[v0]), A + 9 * static_cast<std::size_t>(row_ptr[v1]), 0.0);
+      if (B) std::fill(B + 9 * static_cast<std::size_t>(row_ptr[v0]), B + 9 * static_cast<std::size_t>(row_ptr[v1]), 0.0);
+    }
   };
-  auto scatter = [](double* vals, const Index* m, const double* blk) {
+  // blk is symmetric, so block (j,i) = blk^T = blk.
+  auto scatter = [](double* vals, const Index* m, std::uint8_t fw, const double* blk) {
     double* ii = vals + 9 * static_cast<std::size_t>(m[0]);
     double* jj = vals + 9 * static_cast<std::size_t>(m[1]);
     double* ij = vals + 9 * static_cast<std::size_t>(m[2]);
@@ -400,19 +425,28 @@ void MassSpringMaterial::compute_jacobians(std::span<const double> x, std::span<
     for (int q = 0; q < 9; ++q) {
       ii[q] -= blk[q];
       jj[q] -= blk[q];
-      ij[q] += blk[q];
-      ji[q] += blk[q];  // blk is symmetric, so (j,i) = blk^T = blk
+    }
+    if (fw & 1) {
+      for (int q = 0; q < 9; ++q) ij[q] = blk[q];
+    } else {
+      for (int q = 0; q < 9; ++q) ij[q] += blk[q];
+    }
+    if (fw & 2) {
+      for (int q = 0; q < 9; ++q) ji[q] = blk[q];
+    } else {
+      for (int q = 0; q < 9; ++q) ji[q] += blk[q];
     }
   };
   layout_.for_each(zero, [=](Index s) {
     const Index a = I[s], b = J[s];
     const Index* m = M + 4 * static_cast<std::size_t>(s);
+    const std::uint8_t fw = assign ? first[s] : 0;
     double blk[9];
     kernels::spring_stiffness_block(X + 3 * a, X + 3 * b, Ks[s], L0[s], clamp, blk);
-    scatter(A, m, blk);
+    scatter(A, m, fw, blk);
     if (B) {
       kernels::spring_damping_block(X + 3 * a, X + 3 * b, C[s], blk);
-      scatter(B, m, blk);
+      scatter(B, m, fw, blk);
     }
   });
 }

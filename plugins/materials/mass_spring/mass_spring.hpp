@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <span>
 #include <string>
 #include <vector>
@@ -78,6 +79,11 @@ class MassSpringMaterial final : public Material {
   // Jacobian scatter map: per spring, positions of blocks (i,i), (j,j), (i,j), (j,i).
   const BsrPattern* pattern_ = nullptr;
   std::vector<Index> scatter_;
+  // Per spring: bit 0 / bit 1 set when it is the first (in traversal order) to write block
+  // (i,j) / (j,i); the first writer assigns, later ones add. Set when every off-diagonal
+  // block of the pattern belongs to some spring, so only diagonal blocks need zeroing.
+  std::vector<std::uint8_t> first_write_;
+  bool assign_offdiag_ = false;
 };
 
 }  // namespace loom::mass_spring
