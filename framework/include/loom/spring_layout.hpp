@@ -38,9 +38,9 @@
 //     The ranges cover 0..n-1 exactly once.
 //   * call it from outside an OpenMP parallel region: it opens one (the team is
 //     omp_get_max_threads(), or whatever the caller set), unless the layout has fewer than
-//     kParallelMin springs: small ones run on the calling thread. Nested inside a parallel region it
-//     runs on that one thread, still correctly. Any thread count is fine: parts are handed
-//     out with schedule(static). No allocation, no virtual call; body is inlined.
+//     kParallelMin springs: small ones run on the calling thread. Nested inside a parallel
+//     region it runs on that one thread, still correctly. Any thread count is fine: parts
+//     are handed out with schedule(static). No allocation, no virtual call; body is inlined.
 //   * results that are summed per vertex are deterministic for a fixed layout (the order of
 //     additions into each vertex does not depend on the thread count).
 //
