@@ -2,9 +2,11 @@
 // spring), pins bit for bit, plane constraints through the filter, stiff springs, the
 // order of the consistent Kang-Cho damping on a 1D chain, the failure policy, errors.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <Eigen/Dense>
 #include <unsupported/Eigen/MatrixFunctions>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -511,4 +513,54 @@ TEST(BaraffWitkin, ParametersAreChecked) {
                loom::InputError);
   EXPECT_THROW(loom::parse_baraff_witkin_options(Params::from_string("{rayleigh: 0.1}")), loom::InputError);
   EXPECT_THROW(loom::parse_baraff_witkin_options(Params::from_string("{max_halvings: 0}")), loom::InputError);
+}
+
+// Above 2048 vertices the integrator's assembly and update passes are threaded: the same
+// steps on 1 and 2 threads give the same system bit for bit and the same state. (Solved by
+// eigen_ldlt: the threaded PCG iteration is compared with the serial one in
+// test_eigen_solvers; here, on a loaded machine, it would cost seconds of barrier waits.)
+TEST(BaraffWitkin, ThreadedPathsMatchSerial) {
+  const Index nx = 48, ny = 48;  // 2304 vertices
+  const double dx = 0.02;
+  auto run = [&](int threads, SolverKind sk, std::vector<double>& x, std::vector<double>& A) {
+    const int saved = omp_get_max_threads();
+    omp_set_num_threads(threads);
+    Scene sc;
+    std::vector<double> x0 = grid_xz(nx, ny, dx);
+    for (Index i = 0; i < nx * ny; ++i) x0[3 * i + 1] = 1e-3 * std::sin(0.37 * i);
+    loom::testing::init_scene(sc, x0,
+                              std::make_unique<SpringMaterial>(std::vector<double>(nx * ny, 1e-3),
+                                                               loom::testing::grid_springs(nx, ny, dx, 200), true));
+    sc.state.pin((ny - 1) * nx);
+    sc.state.pin(ny * nx - 1);
+    sc.state.update_inverse_masses();
+    sc.solver = make_solver(sk, 1e-7);
+    BaraffWitkinOptions o;
+    o.kang_cho_damping = 0.01;
+    BaraffWitkin bw(o);
+    bw.prepare(sc, 0.005);
+    bw.step(sc, 0.005);
+    A = bw.system_matrix().values();  // assembled from the same initial state
+    bw.step(sc, 0.005);
+    x = sc.state.x;
+    omp_set_num_threads(saved);
+  };
+  for (SolverKind sk : {SolverKind::Ldlt}) {
+    std::vector<double> x1, x2, A1, A2;
+    auto t0 = std::chrono::steady_clock::now();
+    run(1, sk, x1, A1);
+    auto t1 = std::chrono::steady_clock::now();
+    run(2, sk, x2, A2);
+    auto t2 = std::chrono::steady_clock::now();
+    std::printf("%s: 1 thread %.0f ms, 2 threads %.0f ms (wall, this machine's load included)\n", label(sk),
+                1e3 * std::chrono::duration<double>(t1 - t0).count(), 1e3 * std::chrono::duration<double>(t2 - t1).count());
+    EXPECT_EQ(A1, A2) << label(sk);  // the assembly of the first step, bit for bit
+    std::vector<double> d1(x1.size()), d2(x2.size());
+    const std::vector<double> x0 = grid_xz(nx, ny, dx);
+    for (std::size_t k = 0; k < x1.size(); ++k) {
+      d1[k] = x1[k] - x0[k];
+      d2[k] = x2[k] - x0[k];
+    }
+    EXPECT_LT(rel_err(d2, d1), 1e-12) << label(sk);
+  }
 }
