@@ -56,7 +56,7 @@ BsrMatrix::BsrMatrix(const BsrPattern* pattern) : pattern_(pattern) {
 void BsrMatrix::set_zero() {
   const std::size_t m = values_.size();
   double* v = values_.data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (m >= 9 * static_cast<std::size_t>(kParallelMinVertices))
   for (std::size_t k = 0; k < m; ++k) v[k] = 0.0;
 }
 
@@ -68,7 +68,7 @@ void BsrMatrix::multiply(std::span<const double> x, std::span<double> y) const {
   const Index* cl = p.col.data();
   const double* xp = x.data();
   double* yp = y.data();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= kParallelMinVertices)
   for (Index i = 0; i < n; ++i) {
     double s0 = 0, s1 = 0, s2 = 0;
     for (Index k = rp[i]; k < rp[i + 1]; ++k) {

@@ -112,7 +112,7 @@ int ColliderSet::resolve_contacts(State& s, double t, double h) const {
   if (colliders_.empty()) return 0;
   const Index n = s.size();
   int contacts = 0;
-#pragma omp parallel for reduction(+ : contacts) schedule(static)
+#pragma omp parallel for reduction(+ : contacts) schedule(static) if (n >= kParallelMinVertices)
   for (Index i = 0; i < n; ++i) {
     if (s.pinned[i]) continue;
     double* x = &s.x[3 * i];

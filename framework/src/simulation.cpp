@@ -429,7 +429,7 @@ void Simulation::check_state(bool check_strain) {
   Index bad = std::numeric_limits<Index>::max();
   const double* x = st.x.data();
   const double* v = st.v.data();
-#pragma omp parallel for reduction(min : bad) schedule(static)
+#pragma omp parallel for reduction(min : bad) schedule(static) if (n >= kParallelMinVertices)
   for (Index i = 0; i < n; ++i) {
     const double a = x[3 * i] + x[3 * i + 1] + x[3 * i + 2];
     const double v2 = v[3 * i] * v[3 * i] + v[3 * i + 1] * v[3 * i + 1] + v[3 * i + 2] * v[3 * i + 2];

@@ -28,7 +28,7 @@ void State::update_inverse_masses() {
 double kinetic_energy(const State& s) {
   double e = 0;
   const Index n = s.size();
-#pragma omp parallel for reduction(+ : e) schedule(static)
+#pragma omp parallel for reduction(+ : e) schedule(static) if (n >= kParallelMinVertices)
   for (Index i = 0; i < n; ++i) {
     const double* v = &s.v[3 * i];
     e += 0.5 * s.mass[i] * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
@@ -39,7 +39,7 @@ double kinetic_energy(const State& s) {
 double gravitational_energy(const State& s, const double g[3]) {
   double e = 0;
   const Index n = s.size();
-#pragma omp parallel for reduction(+ : e) schedule(static)
+#pragma omp parallel for reduction(+ : e) schedule(static) if (n >= kParallelMinVertices)
   for (Index i = 0; i < n; ++i) {
     const double* x = &s.x[3 * i];
     e -= s.mass[i] * (g[0] * x[0] + g[1] * x[1] + g[2] * x[2]);
