@@ -50,13 +50,32 @@ struct HoSprings {
   // traversal structure (built with the layout; the same for every scalar type)
   std::vector<std::uint8_t> is_deferred;   ///< per vertex: touched by a cross spring
   std::vector<Index> deferred;             ///< those vertices
+  // Grouped traversal: each part's vertex range is cut into blocks of kHoVertexBlock vertices;
+  // the springs whose lower endpoint lies in a block are ordered by (offset j - i, i) and cut
+  // into segments of consecutive i with equal offset, so that a segment reads x, v, w
+  // contiguously (no gathers). Used when segments average at least 4 springs.
+  struct Segment {
+    Index begin, len, i0, off, step;   ///< springs (i0 + step r, i0 + step r + off), step 1 or 2
+  };
+  struct Block {
+    Index vertex_end, seg_begin, seg_end;
+  };
+  bool grouped = false;
+  std::vector<Segment> segs;
+  std::vector<Block> blocks;
+  std::vector<Index> part_block;           ///< blocks of part p: [part_block[p], part_block[p + 1])
   Index size() const { return static_cast<Index>(i.size()); }
 };
+
+/// Vertices per block of the grouped traversal.
+constexpr Index kHoVertexBlock = 64;
 
 /// Build the traversal layout and the spring arrays from a spring set over n vertices: springs
 /// in traversal order with i < j (HO is symmetric in its endpoints), sorted by i within each
 /// part, and the vertices that cross springs touch.
-void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out);
+/// allow_grouping = false keeps the plain blocked sweep (tests compare the two).
+void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out,
+                      bool allow_grouping = true);
 
 /// Copy the structure (endpoints, traversal data) and the material constants to another scalar.
 template <class T, class U>
@@ -65,6 +84,10 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
   out.j = in.j;
   out.is_deferred = in.is_deferred;
   out.deferred = in.deferred;
+  out.grouped = in.grouped;
+  out.segs = in.segs;
+  out.blocks = in.blocks;
+  out.part_block = in.part_block;
   out.l0.assign(in.l0.begin(), in.l0.end());
   out.k.assign(in.k.begin(), in.k.end());
   out.c.assign(in.c.begin(), in.c.end());
@@ -232,6 +255,51 @@ inline void ho_block_impulses(Index m, const Index* __restrict I, const Index* _
   }
 }
 
+/// Phase 1 of a segment: springs (i0 + Step r, i0 + Step r + off), r < len; strided reads.
+template <class T, HoVariant V, bool Table, int Step>
+inline void ho_segment_impulses(Index len, Index i0, Index off, const std::uint16_t* __restrict ID,
+                                const T* __restrict L0, const T* __restrict KX, const T* __restrict KV,
+                                const T* __restrict EX, const T* __restrict EV, const T* __restrict x,
+                                const T* __restrict v, const T* __restrict w, T* __restrict Gi, T* __restrict Gj,
+                                T* __restrict Pi, T* __restrict Pj) {
+  for (Index r = 0; r < len; ++r) {
+    const std::size_t a = 3 * static_cast<std::size_t>(i0 + Step * r);
+    const std::size_t b = a + 3 * static_cast<std::size_t>(off);
+    const std::size_t c = Table ? static_cast<std::size_t>(ID[r]) : static_cast<std::size_t>(r);
+    const T wi = w[i0 + Step * r], wj = w[i0 + off + Step * r];
+    T gv[3];
+    if constexpr (V == HoVariant::AnalyticPosition) {
+      const kernels::HoCoeffs<T> k{KX[c], KV[c], EX[c], EV[c]};
+      T pv[3];
+      kernels::ho_spring_velocity_position(x, v, a, b, L0[c], k, gv, pv);
+      for (int e = 0; e < 3; ++e) {
+        Pi[3 * r + e] = wi * pv[e];
+        Pj[3 * r + e] = wj * pv[e];
+      }
+    } else if constexpr (V == HoVariant::KangCho2011) {
+      kernels::kang_cho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], gv);
+    } else {
+      kernels::ho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], gv);
+    }
+    for (int e = 0; e < 3; ++e) {
+      Gi[3 * r + e] = wi * gv[e];
+      Gj[3 * r + e] = wj * gv[e];
+    }
+  }
+}
+
+/// Phase 2 of a segment: two passes (the i and j ranges may overlap).
+template <class T, int Step>
+inline void ho_segment_scatter(Index len, Index i0, Index off, T* __restrict acc, const T* __restrict Gi,
+                               const T* __restrict Gj) {
+  T* ai = acc + 3 * static_cast<std::size_t>(i0);
+  for (Index r = 0; r < len; ++r)
+    for (int e = 0; e < 3; ++e) ai[3 * Step * r + e] += Gi[3 * r + e];
+  T* aj = acc + 3 * static_cast<std::size_t>(i0 + off);
+  for (Index r = 0; r < len; ++r)
+    for (int e = 0; e < 3; ++e) aj[3 * Step * r + e] -= Gj[3 * r + e];
+}
+
 /// Springs per block in the sweep: phase 1 computes the impulses of a block (vectorised,
 /// gathers only), phase 2 scatters them.
 constexpr Index kHoBlock = 128;
@@ -339,6 +407,36 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
       if (!deferred[qfin]) finalize(qfin);
   };
 
+  // Grouped sweep of part p (see HoSprings::grouped).
+  auto sweep_grouped = [&](int p) {
+    Index qfin = layout.part_vertex_begin(p);
+    alignas(64) T Gi[3 * kHoVertexBlock], Gj[3 * kHoVertexBlock];
+    alignas(64) T Pi[kPos ? 3 * kHoVertexBlock : 1], Pj[kPos ? 3 * kHoVertexBlock : 1];
+    for (Index bk = s.part_block[p]; bk < s.part_block[p + 1]; ++bk) {
+      const auto& B = s.blocks[bk];
+      for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
+        const auto& G = s.segs[sg];
+        const std::size_t off = Table ? 0 : static_cast<std::size_t>(G.begin);
+        const std::uint16_t* id = Table ? P.id + G.begin : nullptr;
+        const T* ex = kPos ? P.ex + off : nullptr;
+        const T* ev = kPos ? P.ev + off : nullptr;
+        if (G.step == 1) {
+          ho_segment_impulses<T, V, Table, 1>(G.len, G.i0, G.off, id, P.l0 + off, P.kx + off, P.kv + off, ex, ev,
+                                              x, v, w, Gi, Gj, Pi, Pj);
+          ho_segment_scatter<T, 1>(G.len, G.i0, G.off, dv, Gi, Gj);
+          if constexpr (kPos) ho_segment_scatter<T, 1>(G.len, G.i0, G.off, dx, Pi, Pj);
+        } else {
+          ho_segment_impulses<T, V, Table, 2>(G.len, G.i0, G.off, id, P.l0 + off, P.kx + off, P.kv + off, ex, ev,
+                                              x, v, w, Gi, Gj, Pi, Pj);
+          ho_segment_scatter<T, 2>(G.len, G.i0, G.off, dv, Gi, Gj);
+          if constexpr (kPos) ho_segment_scatter<T, 2>(G.len, G.i0, G.off, dx, Pi, Pj);
+        }
+      }
+      for (; qfin < B.vertex_end; ++qfin)
+        if (!deferred[qfin]) finalize(qfin);
+    }
+  };
+
   const int NP = layout.parts();
   const int C = layout.num_colours();
   const Index ND = static_cast<Index>(s.deferred.size());
@@ -346,7 +444,12 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
 #pragma omp parallel if (!serial)
   {
 #pragma omp for schedule(static)
-    for (int p = 0; p < NP; ++p) sweep(p);
+    for (int p = 0; p < NP; ++p) {
+      if (s.grouped)
+        sweep_grouped(p);
+      else
+        sweep(p);
+    }
     if (C > 0) {
       if (layout.cross_serial()) {
 #pragma omp single
@@ -377,7 +480,8 @@ class HoIntegrator final : public Integrator {
  public:
   explicit HoIntegrator(const Params& p = Params());
   /// allow_table = false forces per-spring constants (parameter storage: direct).
-  explicit HoIntegrator(HoVariant variant, bool allow_table = true) : variant_(variant), allow_table_(allow_table) {}
+  explicit HoIntegrator(HoVariant variant, bool allow_table = true, bool allow_grouping = true)
+      : variant_(variant), allow_table_(allow_table), allow_grouping_(allow_grouping) {}
   std::string name() const override { return "harmonic_oscillation"; }
   IntegratorNeeds needs() const override { return {true, false, false}; }
   void prepare(Scene& scene, double h) override;
@@ -391,6 +495,7 @@ class HoIntegrator final : public Integrator {
  private:
   HoVariant variant_ = HoVariant::Velocity;
   bool allow_table_ = true;
+  bool allow_grouping_ = true;
   SpringLayout layout_;
   HoSprings<double> springs_;
   std::vector<double> dv_, dx_;   ///< accumulators, zero between steps
