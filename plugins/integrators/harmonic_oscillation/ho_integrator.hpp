@@ -33,6 +33,15 @@ enum class HoVariant { Velocity, AnalyticPosition, KangCho2011 };
 HoVariant parse_ho_variant(const std::string& s);
 const char* to_string(HoVariant v);
 
+/// A run of springs (i0 + step r, i0 + step r + off), r < len, stored at [begin, begin + len).
+struct HoSegment {
+  Index begin, len, i0, off, step;   ///< step 1 or 2
+};
+/// A block of the grouped sweep: its segments, and the vertex bound after which vertices are final.
+struct HoBlock {
+  Index vertex_end, seg_begin, seg_end;
+};
+
 /// Springs in traversal order with i < j and their per-step constants. T = double in the
 /// plugin; the benchmark also builds a float copy.
 template <class T>
@@ -54,12 +63,8 @@ struct HoSprings {
   // the springs whose lower endpoint lies in a block are ordered by (offset j - i, i) and cut
   // into segments of consecutive i with equal offset, so that a segment reads x, v, w
   // contiguously (no gathers). Used when segments average at least 4 springs.
-  struct Segment {
-    Index begin, len, i0, off, step;   ///< springs (i0 + step r, i0 + step r + off), step 1 or 2
-  };
-  struct Block {
-    Index vertex_end, seg_begin, seg_end;
-  };
+  using Segment = HoSegment;
+  using Block = HoBlock;
   bool grouped = false;
   std::vector<Segment> segs;
   std::vector<Block> blocks;
