@@ -353,8 +353,12 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     loader.ensure(PluginKind::Solver, chosen);
     Params sp = solver.is_map() ? solver.child(chosen) : Params();
     if (solver.is_map()) {
+      // Parameter blocks of other solvers may stay in the file (so that --set solver.type=...
+      // can switch between them); a block for a name that is no solver at all is an error.
       for (const auto& nm : names) solver.mark_used(nm);
-      solver.check_unused();
+      for (const auto& k : solver.keys())
+        if (k != "type" && loader.available(PluginKind::Solver, k)) solver.mark_used(k);
+      solver.check_unused(loader.names(PluginKind::Solver));
     }
     sc.solver = loader.registry().make_solver(chosen, sc.backend, sp);
   } else if (solver.valid()) {
