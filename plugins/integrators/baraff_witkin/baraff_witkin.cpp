@@ -84,12 +84,16 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
 
   S_.reset(n);
   for (Index i : s.pin_list) S_.constrain_all(i);
+  contacts_.clear();
+  if (!scene.colliders.empty()) contacts_.reserve(n);
   scene.solver->analyze_pattern(A_, S_);
   last_ = {};
 }
 
-void BaraffWitkin::set_constraints(const State& s, double h) {
-  if (hook_) {
+void BaraffWitkin::set_constraints(const Scene& scene, double h) {
+  const State& s = scene.state;
+  const bool contacts = !scene.colliders.empty();
+  if (hook_ || contacts) {
     S_.reset(n_);
     for (Index i : s.pin_list) S_.constrain_all(i);
     std::fill(z_.begin(), z_.end(), 0.0);
@@ -102,6 +106,139 @@ void BaraffWitkin::set_constraints(const State& s, double h) {
     z_[o + 2] = -s.v[o + 2];
   }
   if (hook_) hook_(s, h, S_, z_);
+  contacts_.clear();
+  if (!contacts) return;
+  // A free vertex inside a collider's offset surface, or predicted to enter it during the
+  // step, loses its normal DOF: its normal velocity is prescribed to the surface's, plus
+  // what takes it out of any penetration within the step (Baraff & Witkin 1998, sec. 5).
+  const double t0 = s.time, t1 = s.time + h;
+  for (Index i = 0; i < n_; ++i) {
+    if (s.pinned[i] || S_.free_dofs(i) < 3) continue;
+    const double* x = &s.x[3 * static_cast<std::size_t>(i)];
+    const double* v = &s.v[3 * static_cast<std::size_t>(i)];
+    // Predicted end-of-step position of an explicit step (forces and gravity included), so a
+    // vertex resting on a surface, whose velocity is zero, is still seen to press into it.
+    const double* f = &f_[3 * static_cast<std::size_t>(i)];
+    const double w = s.inv_mass[i];
+    double vp[3], xp[3];
+    for (int k = 0; k < 3; ++k) {
+      vp[k] = v[k] + h * (w * f[k] + scene.gravity[k]);
+      xp[k] = x[k] + h * vp[k];
+    }
+    const Collider* best = nullptr;
+    Collider::Contact bc{};
+    double depth = 0;
+    for (const Collider& c : scene.colliders.colliders()) {
+      const Collider::Contact now = c.query(x, t0);
+      const Collider::Contact next = c.query(xp, t1);
+      const double d = std::min(now.distance, next.distance);
+      if (d <= 0 && (!best || d < depth)) {
+        best = &c;
+        bc = next.distance < now.distance ? next : now;
+        bc.distance = now.distance;
+        depth = d;
+      }
+    }
+    if (!best) continue;
+    Contact ct{};
+    ct.vertex = i;
+    for (int k = 0; k < 3; ++k) {
+      ct.normal[k] = bc.normal[k];
+      ct.surface_velocity[k] = bc.velocity[k];
+    }
+    ct.mu_static = best->mu_static;
+    ct.mu_kinetic = best->mu_kinetic;
+    const double vn = v[0] * ct.normal[0] + v[1] * ct.normal[1] + v[2] * ct.normal[2];
+    const double vpn = vp[0] * ct.normal[0] + vp[1] * ct.normal[1] + vp[2] * ct.normal[2];
+    const double sn = ct.surface_velocity[0] * ct.normal[0] + ct.surface_velocity[1] * ct.normal[1] +
+                      ct.surface_velocity[2] * ct.normal[2];
+    const double out = bc.distance < 0 ? -bc.distance / h : 0.0;  // leave the penetration within this step
+    if (vpn > sn + out) continue;  // leaving by itself within the step: no constraint needed
+    S_.constrain_direction(i, ct.normal);
+    ct.dvn = sn + out - vn;
+    double* zi = &z_[3 * static_cast<std::size_t>(i)];
+    for (int k = 0; k < 3; ++k) zi[k] = ct.dvn * ct.normal[k];
+    contacts_.push_back(ct);
+  }
+}
+
+// The constraint impulse on a contact vertex is the normal part of (A dv - b)_i. A negative
+// one means the surface would have to pull the vertex: release it (Baraff & Witkin) and let
+// the caller solve again. Returns whether anything was released.
+bool BaraffWitkin::release_pulling_contacts(const Scene& scene, double h) {
+  const BsrPattern& P = *pattern_;
+  const double* a = A_.values().data();
+  bool released = false;
+  std::size_t keep = 0;
+  for (std::size_t c = 0; c < contacts_.size(); ++c) {
+    Contact& ct = contacts_[c];
+    const Index i = ct.vertex;
+    double r[3] = {0, 0, 0};
+    for (Index k = P.row_ptr[i]; k < P.row_ptr[i + 1]; ++k)
+      kernels::mat3_mul_add(a + 9 * static_cast<std::size_t>(k), &dv_[3 * static_cast<std::size_t>(P.col[k])], r);
+    const double* bi = &b_[3 * static_cast<std::size_t>(i)];
+    ct.impulse = (r[0] - bi[0]) * ct.normal[0] + (r[1] - bi[1]) * ct.normal[1] + (r[2] - bi[2]) * ct.normal[2];
+    if (ct.impulse < 0) {
+      released = true;
+      continue;
+    }
+    contacts_[keep++] = ct;
+  }
+  contacts_.resize(keep);
+  if (!released) return false;
+  // Rebuild S and z: pins, the hook, and the contacts that push.
+  const State& s = scene.state;
+  S_.reset(n_);
+  std::fill(z_.begin(), z_.end(), 0.0);
+  for (Index i : s.pin_list) {
+    S_.constrain_all(i);
+    const std::size_t o = 3 * static_cast<std::size_t>(i);
+    for (int k = 0; k < 3; ++k) z_[o + k] = -s.v[o + k];
+  }
+  if (hook_) hook_(s, h, S_, z_);
+  for (const Contact& ct : contacts_) {
+    const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
+    S_.constrain_direction(ct.vertex, ct.normal);
+    for (int k = 0; k < 3; ++k) z_[o + k] = ct.dvn * ct.normal[k];
+  }
+  return true;
+}
+
+// Coulomb friction as a velocity-level correction (Baraff & Witkin): the normal impulse per
+// unit mass j = impulse / m bounds the tangential velocity change relative to the surface.
+void BaraffWitkin::apply_friction(const Scene& scene) {
+  const State& s = scene.state;
+  for (const Contact& ct : contacts_) {
+    if (ct.mu_static <= 0 && ct.mu_kinetic <= 0) continue;
+    const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
+    const double j = std::max(0.0, ct.impulse) * s.inv_mass[ct.vertex];
+    double vrel[3];
+    for (int k = 0; k < 3; ++k) vrel[k] = s.v[o + k] + dv_[o + k] - ct.surface_velocity[k];
+    const double vn = vrel[0] * ct.normal[0] + vrel[1] * ct.normal[1] + vrel[2] * ct.normal[2];
+    double vt[3];
+    for (int k = 0; k < 3; ++k) vt[k] = vrel[k] - vn * ct.normal[k];
+    const double len = std::sqrt(vt[0] * vt[0] + vt[1] * vt[1] + vt[2] * vt[2]);
+    double keep = 1.0;
+    if (len <= ct.mu_static * j) keep = 0.0;
+    else if (len > 0) keep = std::max(0.0, 1.0 - ct.mu_kinetic * j / len);
+    for (int k = 0; k < 3; ++k) dv_[o + k] -= (1.0 - keep) * vt[k];
+  }
+}
+
+// Residual penetration after the step (the velocity constraints stop further approach, but a
+// vertex the prediction missed, or a released one, may end slightly inside): move positions
+// onto the offset surface, velocities untouched.
+void BaraffWitkin::project_positions(Scene& scene, double t) {
+  State& s = scene.state;
+  for (Index i = 0; i < n_; ++i) {
+    if (s.pinned[i]) continue;
+    double* x = &s.x[3 * static_cast<std::size_t>(i)];
+    for (const Collider& c : scene.colliders.colliders()) {
+      const Collider::Contact q = c.query(x, t);
+      if (q.distance < 0)
+        for (int k = 0; k < 3; ++k) x[k] -= q.distance * q.normal[k];
+    }
+  }
 }
 
 void BaraffWitkin::assemble(const Scene& scene, double h) {
@@ -165,25 +302,32 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
   st.force_evaluations += 1;
   scene.material->compute_jacobians(s.x, s.v, dfdx_, &dfdv_);
   assemble(scene, h);
-  set_constraints(s, h);
+  set_constraints(scene, h);
   const auto t1 = Clock::now();
   st.assemble_seconds += seconds_between(t0, t1);
 
-  rep = SolveReport{};
-  const bool ok = scene.solver->factorize(A_, S_, rep);
-  if (ok) {
-    if (!options_.warm_start) std::fill(dv_.begin(), dv_.end(), 0.0);
-    const double fs = rep.factorize_seconds;
-    rep = scene.solver->solve(A_, S_, b_, z_, dv_);
-    rep.factorize_seconds = fs;
-    st.linear_iterations += rep.iterations;
-    st.linear_residual = rep.residual;
-  }
+  auto solve_once = [&] {
+    rep = SolveReport{};
+    const bool ok = scene.solver->factorize(A_, S_, rep);
+    if (ok) {
+      if (!options_.warm_start) std::fill(dv_.begin(), dv_.end(), 0.0);
+      const double fs = rep.factorize_seconds;
+      rep = scene.solver->solve(A_, S_, b_, z_, dv_);
+      rep.factorize_seconds = fs;
+      st.linear_iterations += rep.iterations;
+      st.linear_residual = rep.residual;
+    }
+    return ok && rep.converged;
+  };
+  bool ok = solve_once();
+  // Contacts whose constraint would pull are released, and the step is solved once more.
+  if (ok && !contacts_.empty() && release_pulling_contacts(scene, h)) ok = solve_once();
   st.solve_seconds += seconds_between(t1, Clock::now());
-  if (!ok || !rep.converged) {
+  if (!ok) {
     std::fill(dv_.begin(), dv_.end(), 0.0);  // no warm start from a failed solve
     return false;
   }
+  if (!contacts_.empty()) apply_friction(scene);
 
   const Index n = n_;
   double* x = s.x.data();
@@ -197,6 +341,7 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
       x[o + c] += h * v[o + c];
     }
   }
+  if (!scene.colliders.empty()) project_positions(scene, s.time + h);
   return true;
 }
 

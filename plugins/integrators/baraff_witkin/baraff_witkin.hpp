@@ -47,6 +47,10 @@ class BaraffWitkin final : public Integrator {
   void prepare(Scene& scene, double h) override;
   void step(Scene& scene, double h) override;
   StepStats last_step() const override { return last_; }
+  /// Contacts with the scene's colliders become constraints of the filter (see contacts below).
+  bool handles_contacts() const override { return true; }
+  /// Vertices constrained by a collider in the last step (after releases).
+  int contact_count() const { return static_cast<int>(contacts_.size()); }
 
   void set_constraint_hook(ConstraintHook hook) { hook_ = std::move(hook); }
   const BaraffWitkinOptions& options() const { return options_; }
@@ -59,8 +63,22 @@ class BaraffWitkin final : public Integrator {
   bool attempt(Scene& scene, double h, StepStats& st, SolveReport& rep);
   void advance(Scene& scene, double h, int depth, StepStats& st);
   void assemble(const Scene& scene, double h);
-  void set_constraints(const State& state, double h);
+  void set_constraints(const Scene& scene, double h);
+  bool release_pulling_contacts(const Scene& scene, double h);
+  void apply_friction(const Scene& scene);
+  void project_positions(Scene& scene, double t);
 
+  // One contact per vertex (the deepest collider): Baraff & Witkin's 2-DOF constraint.
+  struct Contact {
+    Index vertex;
+    double normal[3];
+    double surface_velocity[3];
+    double mu_static, mu_kinetic;
+    double dvn;      // prescribed normal velocity change (z = dvn * normal)
+    double impulse;  // normal constraint impulse (A dv - b).n after the solve (>= 0 when pushing)
+  };
+  std::vector<Contact> contacts_;   // capacity reserved in prepare()
+  std::vector<double> r_;           // work: A dv - b rows of contact vertices
   BaraffWitkinOptions options_;
   ConstraintHook hook_;
   std::unique_ptr<BsrPattern> pattern_;
