@@ -19,7 +19,45 @@
 #include "loom/common.hpp"
 #include "seam.hpp"
 
+#if THRUST_DEVICE_SYSTEM == THRUST_DEVICE_SYSTEM_CUDA
+#include <cuda_runtime.h>
+#include <thrust/system/cuda/execution_policy.h>
+#endif
+
 namespace loom::cuda {
+
+#if THRUST_DEVICE_SYSTEM == THRUST_DEVICE_SYSTEM_CUDA
+/// Temporary storage of Thrust's reductions, kept between calls (one block that only grows), so
+/// that the step loop does no cudaMalloc/cudaFree per reduction. One reduction at a time
+/// (the backend runs on one host thread); the block lives until the process ends.
+class ScratchAllocator {
+ public:
+  using value_type = char;
+  char* allocate(std::ptrdiff_t n) {
+    if (n > size_) {
+      if (ptr_) cudaFree(ptr_);
+      ptr_ = nullptr;
+      size_ = 0;
+      if (cudaMalloc(reinterpret_cast<void**>(&ptr_), static_cast<std::size_t>(n)) != cudaSuccess)
+        throw SolverError("backend cuda: cudaMalloc of " + std::to_string(n) + " bytes of reduction scratch failed");
+      size_ = n;
+    }
+    return ptr_;
+  }
+  void deallocate(char*, std::size_t) {}
+
+ private:
+  char* ptr_ = nullptr;
+  std::ptrdiff_t size_ = 0;
+};
+inline ScratchAllocator& scratch() {
+  static ScratchAllocator a;
+  return a;
+}
+#define LOOM_CUDA_REDUCE_POLICY thrust::cuda::par(::loom::cuda::scratch())
+#else
+#define LOOM_CUDA_REDUCE_POLICY thrust::device
+#endif
 
 template <class T>
 using DVec = thrust::device_vector<T>;
@@ -70,7 +108,7 @@ T reduce_sum(Index n, const F& f) {
     return thrust::transform_reduce(thrust::seq, thrust::counting_iterator<Index>(0),
                                     thrust::counting_iterator<Index>(n), f, T(0), thrust::plus<T>());
 #endif
-  return thrust::transform_reduce(thrust::device, thrust::counting_iterator<Index>(0),
+  return thrust::transform_reduce(LOOM_CUDA_REDUCE_POLICY, thrust::counting_iterator<Index>(0),
                                   thrust::counting_iterator<Index>(n), f, T(0), thrust::plus<T>());
 }
 
@@ -81,7 +119,7 @@ T dot(const DVec<T>& a, const DVec<T>& b) {
   if (static_cast<Index>(a.size()) < omp_serial_below())
     return thrust::inner_product(thrust::seq, a.begin(), a.end(), b.begin(), T(0));
 #endif
-  return thrust::inner_product(thrust::device, a.begin(), a.end(), b.begin(), T(0));
+  return thrust::inner_product(LOOM_CUDA_REDUCE_POLICY, a.begin(), a.end(), b.begin(), T(0));
 }
 
 /// Upload host data (any arithmetic type) into a device vector of T, resizing it.
