@@ -86,39 +86,61 @@ double RigidMotion::spin(double t) const {
   }
 }
 
-Collider::Contact Collider::query(const double xp[3], double t) const {
+Collider::Frame Collider::frame_at(double t) const {
+  Frame f;
+  f.center = add(point, motion.displacement(t));
+  f.omega = scale(motion.axis, motion.spin(t));
+  f.vlin = motion.linear_velocity(t);
+  f.normal = shape == Shape::Plane ? rotate(normal, motion.axis, motion.angle(t)) : normal;
+  return f;
+}
+
+Collider::Contact Collider::query(const Frame& f, const double xp[3]) const {
   const Vec3 x{xp[0], xp[1], xp[2]};
-  const Vec3 c = add(point, motion.displacement(t));   // reference point now
-  const Vec3 omega = scale(motion.axis, motion.spin(t));
-  const Vec3 vlin = motion.linear_velocity(t);
   Contact ct{};
   if (shape == Shape::Sphere) {
-    const Vec3 r = sub(x, c);
+    const Vec3 r = sub(x, f.center);
     const double len = norm(r);
     ct.normal = len > 1e-300 ? scale(r, 1.0 / len) : Vec3{0, 1, 0};
     ct.distance = len - radius - thickness;
-    const Vec3 surface = add(c, scale(ct.normal, radius));
-    ct.velocity = add(vlin, cross(omega, sub(surface, c)));
+    ct.velocity = add(f.vlin, cross(f.omega, scale(ct.normal, radius)));
   } else {
-    ct.normal = rotate(normal, motion.axis, motion.angle(t));
-    ct.distance = dot(sub(x, c), ct.normal) - thickness;
+    ct.normal = f.normal;
+    ct.distance = dot(sub(x, f.center), ct.normal) - thickness;
     const Vec3 surface = sub(x, scale(ct.normal, ct.distance + thickness));
-    ct.velocity = add(vlin, cross(omega, sub(surface, c)));
+    ct.velocity = add(f.vlin, cross(f.omega, sub(surface, f.center)));
   }
   return ct;
 }
 
 int ColliderSet::resolve_contacts(State& s, double t, double h) const {
   if (colliders_.empty()) return 0;
+  // Placements once per call, not per vertex. A scene has a handful of colliders: a stack
+  // array covers them without allocating; more than that (rare) uses a vector.
+  constexpr std::size_t kStackFrames = 16;
+  const std::size_t nc = colliders_.size();
+  if (nc > kStackFrames) {
+    std::vector<Collider::Frame> many(nc);
+    for (std::size_t c = 0; c < nc; ++c) many[c] = colliders_[c].frame_at(t);
+    return resolve_with_frames(s, many.data(), h);
+  }
+  Collider::Frame frames[kStackFrames];
+  for (std::size_t c = 0; c < nc; ++c) frames[c] = colliders_[c].frame_at(t);
+  return resolve_with_frames(s, frames, h);
+}
+
+int ColliderSet::resolve_with_frames(State& s, const Collider::Frame* frames, double h) const {
   const Index n = s.size();
+  const std::size_t nc = colliders_.size();
   int contacts = 0;
 #pragma omp parallel for reduction(+ : contacts) schedule(static) if (n >= kParallelMinVertices)
   for (Index i = 0; i < n; ++i) {
     if (s.pinned[i]) continue;
     double* x = &s.x[3 * i];
     double* v = &s.v[3 * i];
-    for (const Collider& col : colliders_) {
-      const Collider::Contact ct = col.query(x, t);
+    for (std::size_t c = 0; c < nc; ++c) {
+      const Collider& col = colliders_[c];
+      const Collider::Contact ct = col.query(frames[c], x);
       if (ct.distance >= 0) continue;
       ++contacts;
       for (int k = 0; k < 3; ++k) x[k] -= ct.distance * ct.normal[k];   // onto the offset surface

@@ -56,8 +56,18 @@ struct Collider {
     Vec3 normal;       ///< outward unit normal
     Vec3 velocity;     ///< velocity of the surface at the contact point
   };
-  /// Signed distance, normal and surface velocity at position x and time t.
-  Contact query(const double x[3], double t) const;
+  /// The collider's placement at one time: computed once per step, then queried per vertex.
+  struct Frame {
+    Vec3 center;    ///< reference point c(t)
+    Vec3 normal;    ///< plane normal at t
+    Vec3 omega;     ///< angular velocity vector
+    Vec3 vlin;      ///< linear velocity of the reference point
+  };
+  Frame frame_at(double t) const;
+  /// Signed distance, normal and surface velocity at position x for a placement.
+  Contact query(const Frame& f, const double x[3]) const;
+  /// Same, at time t (computes the frame: use frame_at + query in loops).
+  Contact query(const double x[3], double t) const { return query(frame_at(t), x); }
 };
 
 /// All colliders of a scene.
@@ -81,6 +91,7 @@ class ColliderSet {
   int resolve_contacts(State& s, double t, double h) const;
 
  private:
+  int resolve_with_frames(State& s, const Collider::Frame* frames, double h) const;
   std::vector<Collider> colliders_;
 };
 

@@ -86,6 +86,8 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
   for (Index i : s.pin_list) S_.constrain_all(i);
   contacts_.clear();
   if (!scene.colliders.empty()) contacts_.reserve(n);
+  frames0_.resize(scene.colliders.size());
+  frames1_.resize(scene.colliders.size());
   scene.solver->analyze_pattern(A_, S_);
   last_ = {};
 }
@@ -112,6 +114,11 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
   // step, loses its normal DOF: its normal velocity is prescribed to the surface's, plus
   // what takes it out of any penetration within the step (Baraff & Witkin 1998, sec. 5).
   const double t0 = s.time, t1 = s.time + h;
+  const auto& cols = scene.colliders.colliders();
+  for (std::size_t c = 0; c < cols.size(); ++c) {
+    frames0_[c] = cols[c].frame_at(t0);
+    frames1_[c] = cols[c].frame_at(t1);
+  }
   for (Index i = 0; i < n_; ++i) {
     if (s.pinned[i] || S_.free_dofs(i) < 3) continue;
     const double* x = &s.x[3 * static_cast<std::size_t>(i)];
@@ -128,9 +135,10 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
     const Collider* best = nullptr;
     Collider::Contact bc{};
     double depth = 0;
-    for (const Collider& c : scene.colliders.colliders()) {
-      const Collider::Contact now = c.query(x, t0);
-      const Collider::Contact next = c.query(xp, t1);
+    for (std::size_t ci = 0; ci < cols.size(); ++ci) {
+      const Collider& c = cols[ci];
+      const Collider::Contact now = c.query(frames0_[ci], x);
+      const Collider::Contact next = c.query(frames1_[ci], xp);
       const double d = std::min(now.distance, next.distance);
       if (d <= 0 && (!best || d < depth)) {
         best = &c;
@@ -230,11 +238,13 @@ void BaraffWitkin::apply_friction(const Scene& scene) {
 // onto the offset surface, velocities untouched.
 void BaraffWitkin::project_positions(Scene& scene, double t) {
   State& s = scene.state;
+  const auto& cols = scene.colliders.colliders();
+  for (std::size_t c = 0; c < cols.size(); ++c) frames1_[c] = cols[c].frame_at(t);
   for (Index i = 0; i < n_; ++i) {
     if (s.pinned[i]) continue;
     double* x = &s.x[3 * static_cast<std::size_t>(i)];
-    for (const Collider& c : scene.colliders.colliders()) {
-      const Collider::Contact q = c.query(x, t);
+    for (std::size_t ci = 0; ci < cols.size(); ++ci) {
+      const Collider::Contact q = cols[ci].query(frames1_[ci], x);
       if (q.distance < 0)
         for (int k = 0; k < 3; ++k) x[k] -= q.distance * q.normal[k];
     }

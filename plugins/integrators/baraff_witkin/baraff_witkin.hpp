@@ -78,7 +78,7 @@ class BaraffWitkin final : public Integrator {
     double impulse;  // normal constraint impulse (A dv - b).n after the solve (>= 0 when pushing)
   };
   std::vector<Contact> contacts_;   // capacity reserved in prepare()
-  std::vector<double> r_;           // work: A dv - b rows of contact vertices
+  std::vector<Collider::Frame> frames0_, frames1_;  // collider placements at step start / end
   BaraffWitkinOptions options_;
   ConstraintHook hook_;
   std::unique_ptr<BsrPattern> pattern_;
