@@ -4,7 +4,7 @@
 
 static void register_petsc(loom::Registry& r) {
   r.add_solver({loom::PluginKind::Solver, "petsc", "cpu", "1.0",
-                "PETSc KSP (CG + block Jacobi/Jacobi/GAMG) on a bs=3 BAIJ matrix; runs under mpirun", ""},
+                "PETSc KSP (CG + Jacobi/block Jacobi/GAMG) on the bs=3 projected system; distributed under mpirun", ""},
                [](const loom::Params& p) { return std::make_unique<loom::PetscSolver>(p); });
 }
 
