@@ -27,9 +27,9 @@ solver: {type: eigen_pcg, eigen_pcg: {tolerance: 1.0e-5}}
 }
 
 const std::map<std::string, std::string> kIntegrators = {
-    {"symplectic_euler", "{type: symplectic_euler, dt: 1.0e-4}"},
-    {"harmonic_oscillation", "{type: harmonic_oscillation, dt: 5.0e-5}"},
-    {"rk4", "{type: rk4, dt: 1.0e-4}"},
+    {"symplectic_euler", "{type: symplectic_euler, dt: 5.0e-5}"},
+    {"harmonic_oscillation", "{type: harmonic_oscillation, dt: 4.0e-5}"},
+    {"rk4", "{type: rk4, dt: 8.0e-5}"},
     {"baraff_witkin", "{type: baraff_witkin, dt: 2.0e-3}"}};
 
 loom::Registry& registry() {
