@@ -317,6 +317,7 @@ void Params::check_unused(const std::vector<std::string>& also_known) const {
   for (auto it = impl_->node.begin(); it != impl_->node.end(); ++it) {
     const std::string k = it->first.Scalar();
     if (asked.count(k) || std::find(also_known.begin(), also_known.end(), k) != also_known.end()) continue;
+    if (it->second.IsNull()) continue;  // `key: null` (or --set key=null) removes a key
     std::string msg = "unknown key '" + k + "'";
     if (!impl_->path.empty()) msg += " in '" + impl_->path + "'";
     const std::string hint = closest_match(k, known);

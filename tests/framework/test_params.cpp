@@ -60,6 +60,14 @@ TEST(Params, UnknownKeyGetsDidYouMean) {
   EXPECT_NE(e.find("did you mean 'stiffness'"), std::string::npos) << e;
 }
 
+TEST(Params, NullValueRemovesAKey) {
+  Params p = Params::from_string("a: 1\nb: 2\n", "n.yaml");
+  p.set_path("b", "null");
+  p.get("a", 0.0);
+  EXPECT_NO_THROW(p.check_unused());
+  EXPECT_DOUBLE_EQ(p.get("b", 7.0), 7.0);
+}
+
 TEST(Params, ChoiceSuggestsClosest) {
   Params p = Params::from_string("variant: velocty\n", "c.yaml");
   const std::string e = error_of([&] { p.get_choice("variant", "velocity", {"velocity", "analytic_position"}); });

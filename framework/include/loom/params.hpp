@@ -77,7 +77,8 @@ class Params {
   /// Mark a key as used without reading it (the framework reads it elsewhere).
   void mark_used(const std::string& key) const;
   /// Throw InputError for the first key of this mapping that was never read, with a
-  /// "did you mean" suggestion among the keys that were read.
+  /// "did you mean" suggestion among the keys that were read. A key whose value is null
+  /// counts as absent (so --set integrator.kang_cho_damping=null removes a key).
   void check_unused(const std::vector<std::string>& also_known = {}) const;
 
   /// Throw InputError "<where>: <message>" for this node.
