@@ -343,7 +343,8 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
   } catch (const YAML::Exception& e) {
     throw InputError("--set " + dotted_key + "=" + value_yaml + ": the value is not valid YAML (" + e.what() + ")");
   }
-  if (!value.IsDefined() || value.IsNull()) value = YAML::Node(value_yaml);
+  if (!value.IsDefined() || (value.IsNull() && value_yaml.find_first_not_of(" \t") == std::string::npos))
+    value = YAML::Node(value_yaml);  // `--set key=` sets an empty text; `key=null` removes the key
   std::vector<std::string> parts;
   std::stringstream ss(dotted_key);
   std::string part;
@@ -372,9 +373,13 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
   last[parts.back()] = value;
 }
 
-std::string Params::dump() const {
+std::string Params::dump(bool flow) const {
   if (!impl_->present) return "";
   YAML::Emitter out;
+  if (flow) {
+    out.SetSeqFormat(YAML::Flow);
+    out.SetMapFormat(YAML::Flow);
+  }
   out << impl_->node;
   return out.c_str();
 }

@@ -46,9 +46,9 @@ std::string fmt(double v) {
   return os.str();
 }
 
+// A value as one line of YAML (lists and maps in flow form), for key=value overrides.
 std::string yaml_scalar(const Params& p) {
-  std::string d = p.dump();
-  // one-line flow form for lists and maps
+  std::string d = p.dump(true);
   std::replace(d.begin(), d.end(), '\n', ' ');
   return d;
 }

@@ -88,8 +88,8 @@ class Params {
   /// The value text is parsed as YAML (so "0.5", "[0,1,0]", "true" work).
   void set_path(const std::string& dotted_key, const std::string& value_yaml);
 
-  /// Emit this node as YAML text.
-  std::string dump() const;
+  /// Emit this node as YAML text (flow = on one line: [a, b], {k: v}).
+  std::string dump(bool flow = false) const;
 
   const std::shared_ptr<Impl>& impl() const { return impl_; }
 
