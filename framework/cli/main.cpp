@@ -21,9 +21,10 @@ namespace {
 const char* kUsage = R"(loom: cloth simulation from a scene file
 
 usage:
-  loom run SCENE.yaml [--out DIR] [--frames N] [--set key=value]... [--quiet]
+  loom run SCENE.yaml [--out DIR] [--frames N] [--set key=value]... [--quiet] [--render]
       Simulate and write one OBJ per frame (frame_00000.obj, ...) and stats.csv to DIR
-      (default: the scene's output.dir, else out/<scene name>).
+      (default: the scene's output.dir, else out/<scene name>). --render: then draw the
+      frames as `loom render DIR` does.
   loom validate SCENE.yaml [--set key=value]...
       Check the scene and its combo without running; print what would be built.
   loom render RUN_DIR [--scene SCENE.yaml] [--out DIR] [--set render.key=value]...
@@ -59,6 +60,7 @@ struct Args {
   int frames = -1;
   bool quiet = false;
   bool stability = false;
+  bool render = false;
   std::vector<std::string> sets;
 };
 
@@ -112,6 +114,8 @@ Args parse_args(int argc, char** argv) {
       a.sets.push_back(kv);
     } else if (a.command == "render" && (s == "--scene" || s.rfind("--scene=", 0) == 0)) {
       a.render_scene = value("--scene");
+    } else if (a.command == "run" && s == "--render") {
+      a.render = true;
     } else if (a.command == "study" && s == "--stability") {
       a.stability = true;
     } else if (s == "--quiet" || s == "-q") {
@@ -230,6 +234,13 @@ int main(int argc, char** argv) {
     };
     sim.run(progress);
     if (tty) std::printf("\n");
+    if (args.render && loom::is_output_rank()) {
+      if (!args.quiet)
+        std::printf("loom: %d frames (%lld steps) simulated; rendering\n", sim.frames(),
+                    static_cast<long long>(sim.scene().state.step));
+      loom::cli::RenderArgs r{sim.output().dir, "", "", {}, args.quiet};
+      return loom::cli::render_command(r);
+    }
     if (!args.quiet && loom::is_output_rank()) {
       const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       std::printf("loom: %d frames (%lld steps, %.4g s simulated) in %.3g s; wrote %s\n", sim.frames(),

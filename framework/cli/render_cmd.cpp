@@ -1,6 +1,8 @@
 // `loom render RUN_DIR`: draw the OBJ frames of a run with a renderer plugin.
 #include "render_cmd.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -118,7 +120,7 @@ int render_command(const RenderArgs& args) {
     const std::string png = (out_dir / (f.stem().string() + ".png")).string();
     renderer->render(x, png);
     ++k;
-    if (!args.quiet) {
+    if (!args.quiet && ::isatty(STDOUT_FILENO)) {
       std::printf("\rrendered %d/%zu frames", k, frames.size());
       std::fflush(stdout);
     }

@@ -144,6 +144,16 @@ TEST(Cli, DivergenceExitsWith3AndKeepsEarlierFrames) {
   EXPECT_FALSE(fs::exists(dir / "out" / "frame_00002.obj"));
 }
 
+TEST(Cli, RunWithRenderDrawsTheFrames) {
+  const auto dir = scratch("render");
+  const Result r = run("run " + write_scene(dir, kScene) + " --frames 2 --quiet --render --out " + (dir / "out").string());
+  if (r.code == 2 && r.out.find("unknown renderer 'gl'") != std::string::npos)
+    GTEST_SKIP() << "the gl renderer is not in this build (EGL/GLES not found at configure time)";
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(fs::exists(dir / "out" / "render" / "frame_00000.png"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "render" / "frame_00002.png"));
+}
+
 TEST(Cli, PluginsListsModulesOnThePath) {
   const Result r = run("plugins");
   EXPECT_NE(r.out.find("test_gravity_only"), std::string::npos) << r.out;
