@@ -8,7 +8,7 @@ root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 packages=(build-essential cmake ninja-build pkg-config
           libeigen3-dev libyaml-cpp-dev libgtest-dev libgmock-dev libbenchmark-dev
           libsuitesparse-dev libopenblas-dev petsc-dev openmpi-bin python3-matplotlib
-          libglm-dev libstb-dev libegl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri)
+          libglm-dev libstb-dev libegl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

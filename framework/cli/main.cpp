@@ -30,6 +30,9 @@ usage:
   loom render RUN_DIR [--scene SCENE.yaml] [--out DIR] [--set render.key=value]...
       Draw the frames of a run to PNG images (DIR, default RUN_DIR/render) with the
       renderer plugin the scene's render section names (default: gl).
+  loom view RUN_DIR [--scene SCENE.yaml] [--set render.key=value]...
+      Play the frames of a run in a window (needs a display and a build with GLFW):
+      drag rotates, scroll zooms, space plays/pauses, left/right step, Esc or q quits.
   loom study SCENE.yaml STUDY.yaml [--out DIR] [--stability]
       Work-precision study: run the study's combos over a ladder of steps against a
       verified RK4 reference; write DIR/study.csv (error, cost, status per combo, step and
@@ -81,11 +84,11 @@ Args parse_args(int argc, char** argv) {
     std::cout << "loom " << LOOM_VERSION_STRING << " (plugin ABI " << loom::kPluginAbiVersion << ")\n";
     std::exit(0);
   }
-  const std::vector<std::string> commands = {"run", "validate", "plugins", "render", "study"};
+  const std::vector<std::string> commands = {"run", "validate", "plugins", "render", "view", "study"};
   if (std::find(commands.begin(), commands.end(), a.command) == commands.end()) {
     const std::string hint = loom::closest_match(a.command, commands);
     usage_error("unknown command '" + a.command + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
-                "; commands: run, validate, study, render, plugins");
+                "; commands: run, validate, study, render, view, plugins");
   }
   for (int i = 2; i < argc; ++i) {
     const std::string s = argv[i];
@@ -112,7 +115,7 @@ Args parse_args(int argc, char** argv) {
       if (kv.find('=') == std::string::npos || kv[0] == '=')
         usage_error("--set needs key=value, e.g. --set integrator.dt=0.0005 (got '" + kv + "')");
       a.sets.push_back(kv);
-    } else if (a.command == "render" && (s == "--scene" || s.rfind("--scene=", 0) == 0)) {
+    } else if ((a.command == "render" || a.command == "view") && (s == "--scene" || s.rfind("--scene=", 0) == 0)) {
       a.render_scene = value("--scene");
     } else if (a.command == "run" && s == "--render") {
       a.render = true;
@@ -134,6 +137,7 @@ Args parse_args(int argc, char** argv) {
   if (a.command == "study" && (a.scene.empty() || a.study.empty()))
     usage_error("study needs a scene and a study file, e.g. loom study scenes/hanging_10x10.yaml studies/hanging_k2000.yaml");
   if (a.command == "render" && a.scene.empty()) usage_error("render needs the output folder of a run, e.g. loom render out/hanging_cloth");
+  if (a.command == "view" && a.scene.empty()) usage_error("view needs the output folder of a run, e.g. loom view out/hanging_cloth");
   if (a.command != "plugins" && a.scene.empty()) usage_error(a.command + " needs a scene file, e.g. loom " + a.command + " scenes/hanging_cloth.yaml");
   if (a.command == "plugins" && !a.scene.empty()) usage_error("plugins takes no scene file");
   return a;
@@ -169,6 +173,10 @@ int main(int argc, char** argv) {
     if (args.command == "render") {
       loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
       return loom::cli::render_command(r);
+    }
+    if (args.command == "view") {
+      loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
+      return loom::cli::view_command(r);
     }
     if (args.command == "study") {
       loom::StudyOptions opt;

@@ -1,6 +1,7 @@
 // `loom render RUN_DIR`: draw the OBJ frames of a run with a renderer plugin.
 #include "render_cmd.hpp"
 
+#include <dlfcn.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,6 +14,7 @@
 
 #include "loom/output.hpp"
 #include "loom/registry.hpp"
+#include "loom/renderer.hpp"
 
 namespace fs = std::filesystem;
 
@@ -38,37 +40,80 @@ void read_frame_positions(const std::string& path, std::vector<double>& x) {
   }
 }
 
+// The frames, scene and `render:` section of a run folder (shared by render and view).
+struct RunInput {
+  std::vector<fs::path> frames;
+  Params root;
+  Params render;
+  std::string base_dir;
+  std::string type;
+};
+
+RunInput load_run(const std::string& run_dir_arg, const std::string& scene_arg, const std::vector<std::string>& sets) {
+  RunInput in;
+  const fs::path run_dir = run_dir_arg;
+  if (!fs::is_directory(run_dir))
+    throw InputError(run_dir_arg + ": not a folder. Fix: give the output folder of 'loom run' (it holds frame_*.obj).");
+  for (const auto& e : fs::directory_iterator(run_dir)) {
+    const std::string f = e.path().filename().string();
+    if (f.rfind("frame_", 0) == 0 && e.path().extension() == ".obj") in.frames.push_back(e.path());
+  }
+  std::sort(in.frames.begin(), in.frames.end());
+  if (in.frames.empty()) throw InputError(run_dir_arg + ": no frame_*.obj files. Fix: run 'loom run SCENE --out " + run_dir_arg + "' first.");
+
+  // The render settings come from the scene: --scene, else the copy `loom run` left in the folder.
+  const std::string scene_path = scene_arg.empty() ? (run_dir / "scene.yaml").string() : scene_arg;
+  in.root = fs::exists(scene_path) ? Params::from_file(scene_path) : Params::from_string("{}", "<defaults>");
+  for (const auto& o : sets) {
+    const auto eq = o.find('=');
+    if (eq == std::string::npos || eq == 0) throw InputError("--set " + o + ": expected key=value");
+    in.root.set_path(o.substr(0, eq), o.substr(eq + 1));
+  }
+  in.base_dir = fs::path(scene_path).parent_path().string();
+  if (scene_arg.empty() && fs::exists(scene_path)) {
+    std::ifstream f(scene_path);
+    std::string line;
+    while (std::getline(f, line))
+      if (line.rfind("# loom-scene-dir: ", 0) == 0) in.base_dir = line.substr(18);
+  }
+  in.render = in.root.child("render");
+  in.type = in.render.valid() ? in.render.get("type", std::string("gl")) : std::string("gl");
+  return in;
+}
+
+// Topology from the first frame (a full, validated OBJ read). Frames carry no texture
+// coordinates: take the scene mesh's own (an OBJ with vt) when it has them for the same
+// vertices; otherwise the renderer derives planar ones.
+Mesh first_frame_mesh(const RunInput& in) {
+  Mesh mesh = read_obj(in.frames.front().string(), 0.0);
+  Params mesh_spec = in.root.child("mesh");
+  if (mesh_spec.valid() && mesh_spec.is_map() && mesh_spec.has("obj")) {
+    fs::path obj = mesh_spec.child("obj").as_string();
+    if (obj.is_relative() && !in.base_dir.empty()) obj = fs::path(in.base_dir) / obj;
+    if (fs::exists(obj)) {
+      Mesh source = read_obj(obj.string());
+      if (source.num_vertices() == mesh.num_vertices() && source.uvs.size() == 2 * std::size_t(mesh.num_vertices()))
+        mesh.uvs = std::move(source.uvs);
+    }
+  }
+  return mesh;
+}
+
+void check_frame_size(const fs::path& f, const std::vector<double>& x, const Mesh& mesh) {
+  if (x.size() != mesh.positions.size())
+    throw InputError(f.string() + ": has " + std::to_string(x.size() / 3) + " vertices, the first frame has " +
+                     std::to_string(mesh.positions.size() / 3) + ". Fix: render the frames of one run only.");
+}
+
 }  // namespace
 
 int render_command(const RenderArgs& args) {
+  RunInput in = load_run(args.run_dir, args.scene, args.sets);
   const fs::path run_dir = args.run_dir;
-  if (!fs::is_directory(run_dir))
-    throw InputError(args.run_dir + ": not a folder. Fix: give the output folder of 'loom run' (it holds frame_*.obj).");
-  std::vector<fs::path> frames;
-  for (const auto& e : fs::directory_iterator(run_dir)) {
-    const std::string f = e.path().filename().string();
-    if (f.rfind("frame_", 0) == 0 && e.path().extension() == ".obj") frames.push_back(e.path());
-  }
-  std::sort(frames.begin(), frames.end());
-  if (frames.empty()) throw InputError(args.run_dir + ": no frame_*.obj files. Fix: run 'loom run SCENE --out " + args.run_dir + "' first.");
-
-  // The render settings come from the scene: --scene, else the copy `loom run` left in the folder.
-  const std::string scene_path = args.scene.empty() ? (run_dir / "scene.yaml").string() : args.scene;
-  Params root = fs::exists(scene_path) ? Params::from_file(scene_path) : Params::from_string("{}", "<defaults>");
-  for (const auto& o : args.sets) {
-    const auto eq = o.find('=');
-    if (eq == std::string::npos || eq == 0) throw InputError("--set " + o + ": expected key=value");
-    root.set_path(o.substr(0, eq), o.substr(eq + 1));
-  }
-  std::string base_dir = fs::path(scene_path).parent_path().string();
-  if (args.scene.empty() && fs::exists(scene_path)) {
-    std::ifstream in(scene_path);
-    std::string line;
-    while (std::getline(in, line))
-      if (line.rfind("# loom-scene-dir: ", 0) == 0) base_dir = line.substr(18);
-  }
-  Params render = root.child("render");
-  const std::string type = render.valid() ? render.get("type", std::string("gl")) : std::string("gl");
+  const auto& frames = in.frames;
+  const std::string& base_dir = in.base_dir;
+  const std::string& type = in.type;
+  Params& render = in.render;
   // MP4 of the frames through ffmpeg: auto (when ffmpeg is on the PATH), on, off.
   std::string video = "auto";
   double fps = 30.0;
@@ -95,28 +140,13 @@ int render_command(const RenderArgs& args) {
   const fs::path out_dir = args.out.empty() ? run_dir / "render" : fs::path(args.out);
   prepare_output_dir(out_dir.string());
 
-  // Topology from the first frame (a full, validated OBJ read).
-  Mesh mesh = read_obj(frames.front().string(), 0.0);
-  // Frames carry no texture coordinates: take the scene mesh's own (an OBJ with vt) when it
-  // has them for the same vertices; otherwise the renderer derives planar ones.
-  Params mesh_spec = root.child("mesh");
-  if (mesh_spec.valid() && mesh_spec.is_map() && mesh_spec.has("obj")) {
-    fs::path obj = mesh_spec.child("obj").as_string();
-    if (obj.is_relative() && !base_dir.empty()) obj = fs::path(base_dir) / obj;
-    if (fs::exists(obj)) {
-      Mesh source = read_obj(obj.string());
-      if (source.num_vertices() == mesh.num_vertices() && source.uvs.size() == 2 * std::size_t(mesh.num_vertices()))
-        mesh.uvs = std::move(source.uvs);
-    }
-  }
+  Mesh mesh = first_frame_mesh(in);
   renderer->begin(mesh);
   std::vector<double> x;
   int k = 0;
   for (const auto& f : frames) {
     read_frame_positions(f.string(), x);
-    if (x.size() != mesh.positions.size())
-      throw InputError(f.string() + ": has " + std::to_string(x.size() / 3) + " vertices, the first frame has " +
-                       std::to_string(mesh.positions.size() / 3) + ". Fix: render the frames of one run only.");
+    check_frame_size(f, x, mesh);
     const std::string png = (out_dir / (f.stem().string() + ".png")).string();
     renderer->render(x, png);
     ++k;
@@ -143,6 +173,55 @@ int render_command(const RenderArgs& args) {
     if (!args.quiet) std::printf("loom: wrote %s\n", mp4.c_str());
   }
   return 0;
+}
+
+int view_command(const RenderArgs& args) {
+  RunInput in = load_run(args.run_dir, args.scene, args.sets);
+  const char* x11 = std::getenv("DISPLAY");
+  const char* wayland = std::getenv("WAYLAND_DISPLAY");
+  if ((!x11 || !*x11) && (!wayland || !*wayland))
+    throw InputError("loom view needs a display (DISPLAY and WAYLAND_DISPLAY are unset). Fix: run it where a display "
+                     "exists (a desktop session, or ssh -X), or draw images with 'loom render " + args.run_dir + "'.");
+  double fps = 30.0;
+  if (in.render.valid()) fps = in.render.get_positive("fps", fps);
+
+  Registry registry;
+  PluginLoader loader(registry);
+  loader.ensure(PluginKind::Renderer, in.type);
+  std::string module;
+  for (const auto& info : registry.list())
+    if (info.kind == PluginKind::Renderer && info.name == in.type) module = info.module_path;
+  RendererViewFn view = nullptr;
+  if (!module.empty()) {
+    // Already loaded by ensure(): RTLD_NOLOAD returns the same handle.
+    if (void* h = ::dlopen(module.c_str(), RTLD_NOW | RTLD_NOLOAD)) {
+      view = reinterpret_cast<RendererViewFn>(::dlsym(h, kRendererViewSymbol));
+      ::dlclose(h);
+    }
+  }
+  if (!view)
+    throw InputError("the renderer '" + in.type + "' (" + (module.empty() ? std::string("built in") : module) +
+                     ") has no interactive viewer: this Loom was built without GLFW. Fix: apt-get install "
+                     "libglfw3-dev and rebuild (cmake, then ninja), or draw images with 'loom render'.");
+
+  const Mesh mesh = first_frame_mesh(in);
+  RendererViewArgs va;
+  va.render = &in.render;
+  va.base_dir = in.base_dir;
+  va.mesh = &mesh;
+  va.num_frames = int(in.frames.size());
+  for (const auto& f : in.frames) va.frame_names.push_back(f.filename().string());
+  va.fps = fps;
+  va.load_frame = [&](int k, std::vector<double>& x) {
+    const fs::path& f = in.frames.at(std::size_t(k));
+    read_frame_positions(f.string(), x);
+    check_frame_size(f, x, mesh);
+  };
+  if (!args.quiet)
+    std::printf("loom: viewing %zu frames of %s (drag: rotate, scroll: zoom, space: play/pause, "
+                "left/right: step, Esc/q: quit)\n", in.frames.size(), args.run_dir.c_str());
+  std::fflush(stdout);
+  return view(va);
 }
 
 }  // namespace loom::cli

@@ -17,4 +17,9 @@ struct RenderArgs {
 /// (default "gl"). Throws InputError on bad input.
 int render_command(const RenderArgs& args);
 
+/// `loom view RUN_DIR`: play the frames in an interactive window (the renderer module's
+/// optional viewer, GLFW). Throws InputError on bad input, without a display, or when the
+/// viewer was not built.
+int view_command(const RenderArgs& args);
+
 }  // namespace loom::cli

@@ -154,6 +154,36 @@ TEST(Cli, RunWithRenderDrawsTheFrames) {
   EXPECT_TRUE(fs::exists(dir / "out" / "render" / "frame_00002.png"));
 }
 
+TEST(Cli, ViewWithoutADisplayOrFramesIsBadInput) {
+  const auto dir = scratch("view");
+  // A missing folder: exit 2 naming the folder (checked before the display).
+  Result r = run("view " + (dir / "missing").string());
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("not a folder"), std::string::npos) << r.out;
+  // A folder without frames.
+  r = run("view " + dir.string());
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("no frame_*.obj"), std::string::npos) << r.out;
+  // A real run, but no display (CI): exit 2 with one clear line naming the fix.
+  r = run("run " + write_scene(dir, kScene) + " --frames 1 --quiet --out " + (dir / "out").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::string cmd_env = "env -u DISPLAY -u WAYLAND_DISPLAY ";
+  std::string cmd = cmd_env + "LOOM_PLUGIN_PATH=" LOOM_TEST_PLUGIN_DIR " " + std::string(LOOM_EXE) + " view " +
+                    (dir / "out").string() + " 2>&1";
+  FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf{};
+  while (fgets(buf.data(), buf.size(), p)) out += buf.data();
+  const int status = pclose(p);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << out;
+  EXPECT_NE(out.find("loom view needs a display"), std::string::npos) << out;
+  EXPECT_NE(out.find("Fix:"), std::string::npos) << out;
+  // view is a known command with a usage error when the folder is missing.
+  r = run("view");
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("view needs the output folder"), std::string::npos) << r.out;
+}
+
 TEST(Cli, PluginsListsModulesOnThePath) {
   const Result r = run("plugins");
   EXPECT_NE(r.out.find("test_gravity_only"), std::string::npos) << r.out;

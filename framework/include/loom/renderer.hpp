@@ -1,8 +1,10 @@
 // Renderer: draws cloth frames to images. Used by `loom render`; not part of a run.
 #pragma once
 
+#include <functional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "loom/mesh.hpp"
 #include "loom/params.hpp"
@@ -18,5 +20,20 @@ class Renderer {
   /// Render positions x (3n) of the mesh given to begin() into an image file at png_path.
   virtual void render(std::span<const double> x, const std::string& png_path) = 0;
 };
+
+/// What `loom view` hands a renderer module's optional interactive viewer. A module that has
+/// one exports `extern "C" int loom_renderer_view(const loom::RendererViewArgs&)` (found by
+/// dlsym; see kRendererViewSymbol); it returns an exit code and throws InputError on bad input.
+struct RendererViewArgs {
+  const Params* render = nullptr;  ///< the scene's `render:` section (may be invalid: defaults)
+  std::string base_dir;            ///< folder relative paths in it are resolved against
+  const Mesh* mesh = nullptr;      ///< topology (and UVs) of the first frame
+  int num_frames = 0;
+  std::vector<std::string> frame_names;                    ///< for the window title
+  std::function<void(int, std::vector<double>&)> load_frame;  ///< positions (3n) of frame k
+  double fps = 30.0;               ///< playback rate
+};
+using RendererViewFn = int (*)(const RendererViewArgs&);
+inline constexpr const char* kRendererViewSymbol = "loom_renderer_view";
 
 }  // namespace loom

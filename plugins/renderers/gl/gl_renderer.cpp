@@ -174,6 +174,9 @@ class EglContext {
 
 GlRenderer::GlRenderer(RenderSettings settings) : settings_(std::move(settings)) {}
 
+GlRenderer::GlRenderer(RenderSettings settings, bool external_context)
+    : settings_(std::move(settings)), external_context_(external_context) {}
+
 GlRenderer::~GlRenderer() {
   if (egl_ && egl_->try_make_current()) {
     if (program_) glDeleteProgram(program_);
@@ -187,7 +190,7 @@ GlRenderer::~GlRenderer() {
 }
 
 std::string GlRenderer::gl_renderer() const {
-  if (!egl_) return "";
+  if (!egl_ && !external_context_) return "";
   const auto* s = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
   return s ? s : "";
 }
@@ -195,8 +198,10 @@ std::string GlRenderer::gl_renderer() const {
 void GlRenderer::begin(const Mesh& mesh) {
   if (mesh.num_vertices() < 3 || mesh.num_triangles() < 1)
     throw InputError("gl renderer: the mesh '" + mesh.source + "' has no triangles to draw.");
-  if (!egl_) egl_ = std::make_unique<EglContext>();
-  egl_->make_current();
+  if (!external_context_) {
+    if (!egl_) egl_ = std::make_unique<EglContext>();
+    egl_->make_current();
+  }
   num_vertices_ = mesh.num_vertices();
   triangles_ = mesh.triangles;
   uv_ = texture_coords(mesh);
@@ -211,7 +216,7 @@ void GlRenderer::begin(const Mesh& mesh) {
     }
   camera_ = make_camera(settings_.camera, lo, hi, settings_.width, settings_.height);
   light_dir_ = light_direction(settings_.light, camera_);
-  const int ss = settings_.supersample;
+  const int ss = external_context_ ? 1 : settings_.supersample;
   readback_.assign(std::size_t(settings_.width) * ss * settings_.height * ss * 4, 0);
   image_.assign(std::size_t(settings_.width) * settings_.height * 3, 0);
   create_gl_objects();
@@ -260,6 +265,10 @@ void GlRenderer::create_gl_objects() {
                GL_STATIC_DRAW);
   glBindVertexArray(0);
 
+  if (external_context_) {
+    set_uniforms();
+    return;
+  }
   const int w = settings_.width * settings_.supersample, h = settings_.height * settings_.supersample;
   glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
   glBindRenderbuffer(GL_RENDERBUFFER, rb_color_);
@@ -299,12 +308,12 @@ void GlRenderer::set_uniforms() {
   glUniformMatrix4fv(loc("u_view_proj"), 1, GL_FALSE, glm::value_ptr(vp));
 }
 
-const std::vector<unsigned char>& GlRenderer::render_image(std::span<const double> x) {
+void GlRenderer::upload(std::span<const double> x) {
   if (!begun_) throw std::logic_error("gl renderer: render() before begin()");
   if (x.size() != pos_.size())
     throw InputError("gl renderer: got " + std::to_string(x.size() / 3) + " vertices, the mesh has " +
                      std::to_string(num_vertices_) + ".");
-  egl_->make_current();
+  if (egl_) egl_->make_current();
   for (std::size_t i = 0; i < x.size(); ++i) pos_[i] = float(x[i]);
   vertex_frames(pos_, uv_, triangles_, normals_, tangents_);
   const std::vector<float>* attrs[3] = {&pos_, &normals_, &tangents_};
@@ -312,9 +321,10 @@ const std::vector<unsigned char>& GlRenderer::render_image(std::span<const doubl
     glBindBuffer(GL_ARRAY_BUFFER, vbo_[a]);
     glBufferSubData(GL_ARRAY_BUFFER, 0, GLsizeiptr(attrs[a]->size() * sizeof(float)), attrs[a]->data());
   }
-  const int ss = settings_.supersample;
-  const int w = settings_.width * ss, h = settings_.height * ss;
-  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
+}
+
+void GlRenderer::draw(unsigned fbo, int w, int h) {
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
   glViewport(0, 0, w, h);
   glDisable(GL_CULL_FACE);
   glEnable(GL_DEPTH_TEST);
@@ -325,6 +335,24 @@ const std::vector<unsigned char>& GlRenderer::render_image(std::span<const doubl
   glBindVertexArray(vao_);
   glDrawElements(GL_TRIANGLES, GLsizei(triangles_.size()), GL_UNSIGNED_INT, nullptr);
   glBindVertexArray(0);
+}
+
+void GlRenderer::set_camera(const Camera& cam) {
+  camera_ = cam;
+  if (!begun_) return;
+  if (egl_) egl_->make_current();
+  glUseProgram(program_);
+  glUniform3fv(glGetUniformLocation(program_, "u_eye"), 1, glm::value_ptr(camera_.eye));
+  const glm::mat4 vp = camera_.proj * camera_.view;
+  glUniformMatrix4fv(glGetUniformLocation(program_, "u_view_proj"), 1, GL_FALSE, glm::value_ptr(vp));
+}
+
+const std::vector<unsigned char>& GlRenderer::render_image(std::span<const double> x) {
+  if (external_context_) throw std::logic_error("gl renderer: render_image() needs the headless context");
+  upload(x);
+  const int ss = settings_.supersample;
+  const int w = settings_.width * ss, h = settings_.height * ss;
+  draw(fbo_, w, h);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, readback_.data());
   if (const GLenum e = glGetError(); e != GL_NO_ERROR)

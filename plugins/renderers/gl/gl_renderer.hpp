@@ -86,6 +86,9 @@ class EglContext;
 class GlRenderer final : public Renderer {
  public:
   explicit GlRenderer(RenderSettings settings);
+  /// external_context: draw with the caller's current OpenGL ES 3 context (the `loom view`
+  /// window) instead of an own headless EGL one; no offscreen framebuffer is made.
+  GlRenderer(RenderSettings settings, bool external_context);
   ~GlRenderer() override;
   std::string name() const override { return "gl"; }
   void begin(const Mesh& mesh) override;
@@ -96,6 +99,12 @@ class GlRenderer final : public Renderer {
   const RenderSettings& settings() const { return settings_; }
   const Camera& camera() const { return camera_; }
   glm::vec3 light_dir() const { return light_dir_; }
+  /// Upload positions x (3n) and their normals and tangents for draw().
+  void upload(std::span<const double> x);
+  /// Draw the uploaded frame into framebuffer fbo (0: the window) with a w x h viewport.
+  void draw(unsigned fbo, int w, int h);
+  /// Replace the camera (the light keeps the direction begin() gave it).
+  void set_camera(const Camera& cam);
   /// GL_RENDERER string of the context (e.g. "llvmpipe (LLVM 15.0.6, 256 bits)").
   std::string gl_renderer() const;
 
@@ -112,6 +121,7 @@ class GlRenderer final : public Renderer {
   std::vector<unsigned char> readback_, image_;
   unsigned program_ = 0, vao_ = 0, vbo_[4] = {0, 0, 0, 0}, ebo_ = 0, fbo_ = 0, rb_color_ = 0, rb_depth_ = 0;
   bool begun_ = false;
+  bool external_context_ = false;
 };
 
 /// PNG I/O (stb): RGB, 8 bit, top row first.
