@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "loom/kernels/bsr_ops.hpp"
+#include "loom/kernels/bw_assembly.hpp"
 #include "loom/kernels/ho.hpp"
 #include "loom/kernels/rk4.hpp"
 
@@ -314,46 +315,8 @@ class CudaRk4 final : public Integrator {
 
 // ======================= baraff_witkin =======================
 
-template <class T>
-struct BwAssemble {  // one block row of A and b (same formula as the CPU plugin)
-  const Index *rp, *col;
-  const T *dfx, *dfv, *v, *f, *mass, *degree;
-  T* a;
-  T* b;
-  T h, cm, cx, cbx, hcd, alpha, cd, g0, g1, g2;
-  LOOM_HD void operator()(Index i) const {
-    const long long o = 3LL * i;
-    T y[3] = {T(0), T(0), T(0)};
-    T sv[3] = {T(0), T(0), T(0)};
-    for (Index k = rp[i]; k < rp[i + 1]; ++k) {
-      const long long kb = 9LL * k;
-      const Index j = col[k];
-      const T* vj = v + 3LL * j;
-      kernels::mat3_mul_add(dfx + kb, vj, y);
-      T* ak = a + kb;
-      for (int e = 0; e < 9; ++e) ak[e] = -h * dfv[kb + e] - cx * dfx[kb + e];
-      if (j == i) {
-        const T d = cm * mass[i] + hcd * degree[i];
-        ak[0] += d;
-        ak[4] += d;
-        ak[8] += d;
-      } else {
-        ak[0] -= hcd;
-        ak[4] -= hcd;
-        ak[8] -= hcd;
-        sv[0] += vj[0];
-        sv[1] += vj[1];
-        sv[2] += vj[2];
-      }
-    }
-    const T m = mass[i], deg = degree[i];
-    const T g[3] = {g0, g1, g2};
-    for (int c = 0; c < 3; ++c) {
-      const T lv = deg * v[o + c] - sv[c];
-      b[o + c] = h * (f[o + c] + m * g[c] - alpha * m * v[o + c] + cbx * y[c] - cd * lv);
-    }
-  }
-};
+// BwAssemble: one block row of A and b, shared with the CPU plugin (loom/kernels/bw_assembly.hpp).
+using kernels::BwAssemble;
 
 template <class T>
 struct PinPrescribed {  // z = -v0 on the pinned vertices (fixed pins)

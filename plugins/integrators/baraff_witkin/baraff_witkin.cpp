@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "loom/kernels/bsr_ops.hpp"
+#include "loom/kernels/bw_assembly.hpp"
 #include "loom/solver_common.hpp"
 #include "loom/state.hpp"
 
@@ -256,53 +257,12 @@ void BaraffWitkin::assemble(const Scene& scene, double h) {
   const BsrPattern& P = *pattern_;
   const Index n = n_;
   const double alpha = options_.rayleigh_alpha, beta = options_.rayleigh_beta, cd = options_.kang_cho_damping;
-  const double cm = 1.0 + h * alpha;       // on M
-  const double cx = h * h + h * beta;      // on -df/dx in A
-  const double cbx = h + beta;             // on df/dx v0 inside b / h
-  const double hcd = h * cd;
-  const double g0 = scene.gravity[0], g1 = scene.gravity[1], g2 = scene.gravity[2];
-  const Index* rp = P.row_ptr.data();
-  const Index* col = P.col.data();
-  const double* dfx = dfdx_.values().data();
-  const double* dfv = dfdv_.values().data();
-  double* a = A_.values().data();
-  const double* v = s.v.data();
-  const double* f = f_.data();
-  const double* mass = s.mass.data();
-  double* b = b_.data();
+  const kernels::BwAssemble<double> row{P.row_ptr.data(), P.col.data(), dfdx_.values().data(), dfdv_.values().data(),
+                                        s.v.data(), f_.data(), s.mass.data(), degree_.data(), A_.values().data(),
+                                        b_.data(), h, 1.0 + h * alpha, h * h + h * beta, h + beta, h * cd, alpha, cd,
+                                        scene.gravity[0], scene.gravity[1], scene.gravity[2]};
 #pragma omp parallel for schedule(static) if (n >= solver::kParallelMinRows)
-  for (Index i = 0; i < n; ++i) {
-    const std::size_t o = 3 * static_cast<std::size_t>(i);
-    double y[3] = {0, 0, 0};   // df/dx v0 (row i)
-    double sv[3] = {0, 0, 0};  // sum of neighbour velocities
-    for (Index k = rp[i]; k < rp[i + 1]; ++k) {
-      const std::size_t kb = 9 * static_cast<std::size_t>(k);
-      const Index j = col[k];
-      const double* vj = v + 3 * static_cast<std::size_t>(j);
-      kernels::mat3_mul_add(dfx + kb, vj, y);
-      double* ak = a + kb;
-      for (int e = 0; e < 9; ++e) ak[e] = -h * dfv[kb + e] - cx * dfx[kb + e];
-      if (j == i) {
-        const double d = cm * mass[i] + hcd * degree_[i];
-        ak[0] += d;
-        ak[4] += d;
-        ak[8] += d;
-      } else {
-        ak[0] -= hcd;
-        ak[4] -= hcd;
-        ak[8] -= hcd;
-        sv[0] += vj[0];
-        sv[1] += vj[1];
-        sv[2] += vj[2];
-      }
-    }
-    const double m = mass[i], deg = degree_[i];
-    const double g[3] = {g0, g1, g2};
-    for (int c = 0; c < 3; ++c) {
-      const double lv = deg * v[o + c] - sv[c];  // (L v0)_i
-      b[o + c] = h * (f[o + c] + m * g[c] - alpha * m * v[o + c] + cbx * y[c] - cd * lv);
-    }
-  }
+  for (Index i = 0; i < n; ++i) row(i);
 }
 
 bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& rep) {
