@@ -18,6 +18,7 @@
 #include <map>
 #include <memory>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -40,7 +41,7 @@ struct Row {
 
 std::vector<Row> table1() {
   std::vector<Row> rows;
-  std::ifstream in(std::string(LOOM_SHARED_DIR) + "/data/table1_kang_cho2011.csv");
+  std::ifstream in(std::string(LOOM_SOURCE_DIR) + "/data/table1_kang_cho2011.csv");
   std::string line;
   while (std::getline(in, line)) {
     if (line.empty() || line[0] == '#' || line[0] == 'v') continue;
@@ -51,10 +52,7 @@ std::vector<Row> table1() {
     std::getline(ss, c, ',');
     rows.push_back({static_cast<int>(std::lround(std::sqrt(std::stod(a)))), std::stol(b), std::stod(c)});
   }
-  if (rows.empty()) {   // the shared data folder is missing: the six rows of the paper
-    rows = {{160, 253128, 68.1}, {176, 306600, 57.1}, {200, 396400, 47.2},
-            {256, 650760, 30.3}, {296, 870840, 23.1}, {336, 1233920, 15.7}};
-  }
+  if (rows.empty()) throw std::runtime_error("data/table1_kang_cho2011.csv is missing or empty");
   return rows;
 }
 

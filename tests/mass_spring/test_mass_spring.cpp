@@ -142,7 +142,7 @@ TEST(MassSpringStencil, KangChoBendSpringsFollowTheTriangulation) {
 }
 
 TEST(MassSpringStencil, KangChoTable1Rows) {
-  std::ifstream in(std::string(LOOM_SHARED_DIR) + "/data/table1_kang_cho2011.csv");
+  std::ifstream in(std::string(LOOM_SOURCE_DIR) + "/data/table1_kang_cho2011.csv");
   ASSERT_TRUE(in) << "missing table1_kang_cho2011.csv";
   std::string line;
   int rows = 0;
