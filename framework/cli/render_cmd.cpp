@@ -15,6 +15,7 @@
 #include "loom/output.hpp"
 #include "loom/registry.hpp"
 #include "loom/renderer.hpp"
+#include "loom/spawn.hpp"
 
 namespace fs = std::filesystem;
 
@@ -128,7 +129,7 @@ int render_command(const RenderArgs& args) {
     }
     fps = render.get_positive("fps", fps);
   }
-  const bool have_ffmpeg = std::system("command -v ffmpeg > /dev/null 2>&1") == 0;
+  const bool have_ffmpeg = program_on_path("ffmpeg");
   if (video == "on" && !have_ffmpeg)
     throw InputError("render.video is on but ffmpeg is not installed. Fix: apt-get install ffmpeg, or set render.video: off.");
 
@@ -160,16 +161,11 @@ int render_command(const RenderArgs& args) {
     const std::string mp4 = (out_dir / "render.mp4").string();
     char rate[32];
     std::snprintf(rate, sizeof(rate), "%g", fps);
-    auto quote = [](const std::string& t) {
-      std::string q = "'";
-      for (char c : t) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-      return q + "'";
-    };
-    const std::string cmd = "ffmpeg -y -loglevel error -framerate " + std::string(rate) + " -pattern_type glob -i " +
-                            quote((out_dir / "frame_*.png").string()) +
-                            " -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' -pix_fmt yuv420p -c:v libx264 " + quote(mp4);
-    if (std::system(cmd.c_str()) != 0)
-      throw std::runtime_error("ffmpeg failed to write " + mp4 + " (command: " + cmd + ")");
+    const std::vector<std::string> argv = {"ffmpeg", "-y", "-loglevel", "error", "-framerate", rate, "-pattern_type",
+                                           "glob", "-i", (out_dir / "frame_*.png").string(), "-vf",
+                                           "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p", "-c:v", "libx264", mp4};
+    const SpawnResult r = run_program(argv, /*quiet=*/false);
+    if (!r.ok()) throw std::runtime_error("ffmpeg failed to write " + mp4 + ": " + r.error);
     if (!args.quiet) std::printf("loom: wrote %s\n", mp4.c_str());
   }
   return 0;

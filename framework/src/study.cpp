@@ -1,4 +1,5 @@
 #include "loom/study.hpp"
+#include "loom/spawn.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -362,10 +363,11 @@ std::vector<StudyRow> run_study(const StudyOptions& opt) {
   if (opt.plot) {
     const std::string script = find_plot_script();
     if (!script.empty()) {
-      const std::string cmd = "python3 '" + script + "' '" + (fs::path(opt.out_dir) / "study.csv").string() + "' '" +
-                              (fs::path(opt.out_dir) / "study.png").string() + "' > /dev/null 2>&1";
-      if (std::system(cmd.c_str()) != 0)
-        std::fprintf(stderr, "loom: note: no plot (python3 with matplotlib needed: apt-get install python3-matplotlib)\n");
+      const SpawnResult r = run_program({"python3", script, (fs::path(opt.out_dir) / "study.csv").string(),
+                                         (fs::path(opt.out_dir) / "study.png").string()});
+      if (!r.ok())
+        std::fprintf(stderr, "loom: note: no plot (%s; python3 with matplotlib is needed: apt-get install python3-matplotlib)\n",
+                     r.error.c_str());
     }
   }
   (void)ref_change;

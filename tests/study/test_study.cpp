@@ -131,3 +131,33 @@ TEST(Study, BadStudyFileIsAClearError) {
   EXPECT_NE(out.find("combo 'X' does not build"), std::string::npos) << out;
   EXPECT_NE(out.find("study2.yaml:3"), std::string::npos) << out;
 }
+
+// Folder names reach python3 (the plot) as arguments, never through a shell: a name that
+// would run a command under `sh -c` is inert.
+TEST(Study, HostileFolderNameIsInert) {
+  const fs::path base = fs::temp_directory_path() / "loom_test_study_hostile";
+  fs::remove_all(base);
+  const fs::path marker = base / "PWNED";
+  const fs::path dir = base / ("x'; touch " + marker.string() + "; echo '");
+  fs::create_directories(dir);
+  std::ofstream(dir / "scene.yaml") << kScene;
+  std::ofstream(dir / "study.yaml") << R"(times: [0.02]
+steps: {h0: 2.0e-3, levels: 2}
+reference: {integrator: rk4, dt: 1.0e-4}
+combos:
+  - {name: SE, set: {integrator.type: symplectic_euler}}
+)";
+  auto quote = [](const std::string& t) {
+    std::string q = "'";
+    for (char c : t) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return q + "'";
+  };
+  std::string out;
+  const int code = run("study " + quote((dir / "scene.yaml").string()) + " " + quote((dir / "study.yaml").string()) +
+                           " --out " + quote((dir / "out").string()), out);
+  ASSERT_EQ(code, 0) << out;
+  EXPECT_TRUE(fs::exists(dir / "out" / "study.csv")) << out;
+  EXPECT_FALSE(fs::exists(marker)) << "a folder name ran a shell command";
+  // The plot itself is drawn when python3 with matplotlib is installed (scripts/setup.sh installs it).
+  EXPECT_TRUE(fs::exists(dir / "out" / "study.png")) << out;
+}
