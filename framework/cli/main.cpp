@@ -2,6 +2,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <csignal>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -13,7 +14,9 @@
 #include "loom/output.hpp"
 #include "loom/registry.hpp"
 #include "loom/simulation.hpp"
+#include "loom/stability.hpp"
 #include "loom/study.hpp"
+#include "loom/threads.hpp"
 #include "render_cmd.hpp"
 
 namespace {
@@ -21,10 +24,12 @@ namespace {
 const char* kUsage = R"(loom: cloth simulation from a scene file
 
 usage:
-  loom run SCENE.yaml [--out DIR] [--frames N] [--set key=value]... [--quiet] [--render]
+  loom run SCENE.yaml [--out DIR] [--frames N] [--set key=value]... [--quiet] [--render] [--overwrite]
       Simulate and write one OBJ per frame (frame_00000.obj, ...) and stats.csv to DIR
       (default: the scene's output.dir, else out/<scene name>). --render: then draw the
-      frames as `loom render DIR` does.
+      frames as `loom render DIR` does. A folder holding another scene's run is refused
+      unless --overwrite (a rerun of the same scene replaces its files). Ctrl-C stops at
+      the next step; the frames written so far are kept.
   loom validate SCENE.yaml [--set key=value]...
       Check the scene and its combo without running; print what would be built.
   loom render RUN_DIR [--scene SCENE.yaml] [--out DIR] [--set render.key=value]...
@@ -40,7 +45,7 @@ usage:
       --stability: instead, the study's stability atlas: the largest stable step of each
       combo by bisection, over a swept key (stiffness, mass, ...): DIR/stability.csv.
   loom plugins
-      List the plugins on the plugin path (kind, name, backend, version, module).
+      List the plugins on the plugin path (kind, name, backend, version, description).
   loom --help | --version
 
 options:
@@ -52,10 +57,13 @@ options:
 
 environment:
   LOOM_PLUGIN_PATH  colon-separated folders searched first for plugin modules
-  OMP_NUM_THREADS   threads (the scene's 'threads' key takes precedence)
+  OMP_NUM_THREADS   threads for 'threads: auto' (capped at the usable cores; a count in
+                    the scene takes precedence)
+  OMP_WAIT_POLICY, GOMP_SPINCOUNT   when neither is set, loom sets GOMP_SPINCOUNT=20000
+                    (idle threads spin briefly, then sleep: see docs/ARCHITECTURE.md)
 
 exit codes: 0 ok, 1 internal error, 2 bad input (scene, mesh, flags), 3 diverged,
-            4 linear solver failed
+            4 linear solver failed, 130 interrupted (Ctrl-C; frames written so far kept)
 )";
 
 struct Args {
@@ -64,6 +72,7 @@ struct Args {
   bool quiet = false;
   bool stability = false;
   bool render = false;
+  bool overwrite = false;
   std::vector<std::string> sets;
 };
 
@@ -74,7 +83,7 @@ struct Args {
 
 Args parse_args(int argc, char** argv) {
   Args a;
-  if (argc < 2) usage_error("missing command: one of run, validate, plugins");
+  if (argc < 2) usage_error("missing command: one of run, validate, study, render, view, plugins");
   a.command = argv[1];
   if (a.command == "--help" || a.command == "-h" || a.command == "help") {
     std::cout << kUsage;
@@ -119,12 +128,14 @@ Args parse_args(int argc, char** argv) {
       a.render_scene = value("--scene");
     } else if (a.command == "run" && s == "--render") {
       a.render = true;
+    } else if (a.command == "run" && s == "--overwrite") {
+      a.overwrite = true;
     } else if (a.command == "study" && s == "--stability") {
       a.stability = true;
     } else if (s == "--quiet" || s == "-q") {
       a.quiet = true;
     } else if (!s.empty() && s[0] == '-') {
-      const std::string hint = loom::closest_match(s, {"--out", "--frames", "--set", "--quiet", "--help"});
+      const std::string hint = loom::closest_match(s, {"--out", "--frames", "--set", "--quiet", "--help", "--overwrite", "--render"});
       usage_error("unknown option '" + s + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)"));
     } else if (a.scene.empty()) {
       a.scene = s;
@@ -167,6 +178,7 @@ int cmd_plugins() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  loom::set_wait_policy_and_reexec(argc, argv);
   const Args args = parse_args(argc, argv);
   try {
     if (args.command == "plugins") return cmd_plugins();
@@ -224,24 +236,78 @@ int main(int argc, char** argv) {
     if (args.frames >= 0) sim.set_frames(args.frames);
     if (args.command == "validate") {
       for (const auto& line : sim.describe()) std::cout << line << "\n";
-      std::cout << "ok: the scene is valid\n";
+      bool step_warning = false;
+      if (const auto lim = loom::estimate_step_limit(sim.scene(), sim.integrator_name())) {
+        char buf[512];
+        std::snprintf(buf, sizeof buf,
+                      "stability:  largest stable step about %.3g s (sqrt(lambda_max) h = %.3g for %s; lambda_max of "
+                      "M^-1 K at the initial state = %.4g 1/s^2, %d power iterations)",
+                      lim->h_max, lim->factor, sim.integrator_name().c_str(), lim->lambda_max, lim->iterations);
+        std::cout << buf << "\n";
+        if (sim.dt() > lim->h_max) {
+          step_warning = true;
+          std::snprintf(buf, sizeof buf,
+                        "loom: warning: dt = %.3g s exceeds the estimated stable step %.3g s: this run will most likely "
+                        "diverge. Fix: set integrator.dt <= %.3g (with integrator.frame_time the frames keep their "
+                        "spacing), lower the stiffness, or use baraff_witkin.",
+                        sim.dt(), lim->h_max, 0.9 * lim->h_max);
+          std::cerr << buf << "\n";
+        }
+      }
+      std::cout << (step_warning ? "ok: the scene is valid (see the warning above)\n" : "ok: the scene is valid\n");
       return 0;
     }
     if (!args.out.empty()) sim.output().dir = args.out;
     if (sim.output().dir.empty()) sim.output().dir = "out/" + stem(args.scene);
-    const bool tty = ::isatty(STDOUT_FILENO) && !args.quiet && loom::is_output_rank();
+    sim.output().overwrite = args.overwrite;
+    const bool show = !args.quiet && loom::is_output_rank();
+    const bool tty = show && ::isatty(STDOUT_FILENO);
     const auto t0 = std::chrono::steady_clock::now();
-    auto progress = [&](int f, int total) {
-      if (!tty) return;
-      const int width = 40;
-      const int filled = total > 0 ? width * f / total : width;
-      const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      std::printf("\r[%.*s%*s] %d/%d frames  t = %.4g s  %.1f s elapsed", filled,
-                  "########################################", width - filled, "", f, total, sim.scene().state.time, el);
+    // Progress: on a terminal one line redrawn at most every 0.5 s; elsewhere (a log) one line
+    // every 5 s. Steps per second, simulated time, and the time left.
+    const long long total_steps = static_cast<long long>(sim.frames()) * sim.substeps();
+    const long long first_step = sim.scene().state.step;
+    auto last_print = t0;
+    auto report = [&](bool final_line) {
+      const auto now = std::chrono::steady_clock::now();
+      const double since = std::chrono::duration<double>(now - last_print).count();
+      if (!final_line && since < (tty ? 0.5 : 5.0)) return;
+      last_print = now;
+      const double el = std::chrono::duration<double>(now - t0).count();
+      const long long done = sim.scene().state.step - first_step;
+      const double rate = el > 0 ? done / el : 0.0;
+      const double eta = rate > 0 ? (total_steps - done) / rate : 0.0;
+      const int pct = total_steps > 0 ? static_cast<int>(100.0 * done / total_steps) : 100;
+      char line[256];
+      std::snprintf(line, sizeof line, "%3d%%  step %lld/%lld  t = %.4g s  %.4g steps/s  %.1f s elapsed  ETA %.1f s", pct,
+                    done, total_steps, sim.scene().state.time, rate, el, eta);
+      if (tty) std::printf("\r\033[K%s", line);
+      else std::printf("loom: %s\n", line);
       std::fflush(stdout);
     };
-    sim.run(progress);
+    if (show) sim.set_step_callback([&] { report(false); });
+    auto progress = [&](int, int) {};
+    std::signal(SIGINT, [](int) { loom::Simulation::request_stop(); });
+    std::signal(SIGTERM, [](int) { loom::Simulation::request_stop(); });
+    try {
+      sim.run(progress);
+    } catch (const loom::Interrupted& e) {
+      if (tty) std::printf("\n");
+      std::fprintf(stderr, "loom: %s; the frames written before it are complete and kept in %s\n", e.what(),
+                   sim.output().dir.c_str());
+      return 130;
+    }
     if (tty) std::printf("\n");
+    if (show) {
+      const auto& st = sim;
+      const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const auto f = st.measure(st.frames());
+      std::printf("loom: summary: %lld steps in %.3g s (%.3g ms per step in the integrator); largest strain %.4g; "
+                  "final energy %.6g J (kinetic %.4g, elastic %.4g); %lld force evaluations, %lld linear iterations\n",
+                  static_cast<long long>(st.scene().state.step), el,
+                  st.scene().state.step > 0 ? 1e3 * st.step_seconds_total() / st.scene().state.step : 0.0, f.max_strain,
+                  f.kinetic + f.gravitational + f.elastic, f.kinetic, f.elastic, st.force_evaluations(), st.linear_iterations());
+    }
     if (args.render && loom::is_output_rank()) {
       if (!args.quiet)
         std::printf("loom: %d frames (%lld steps) simulated; rendering\n", sim.frames(),

@@ -1,8 +1,14 @@
 #include "loom/output.hpp"
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
+#include <algorithm>
+
 #include <charconv>
+#include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -46,31 +52,118 @@ void append_int(std::string& s, long long v) {
 }
 }  // namespace
 
-std::string obj_text(const Mesh& mesh, std::span<const double> x, const std::string& comment) {
+namespace {
+void append_exact(std::string& s, double v) {
+  char buf[32];
+  auto r = std::to_chars(buf, buf + sizeof(buf), v);  // shortest representation that round-trips
+  s.append(buf, r.ptr);
+}
+}  // namespace
+
+std::string obj_text(const Mesh& mesh, std::span<const double> x, const std::string& comment, const ObjOptions& o) {
+  const bool uvs = o.uvs && mesh.uvs.size() * 3 == x.size() * 2 && !x.empty();
+  const bool normals = o.normals;
+  auto num = o.lossless ? append_exact : append_double;
   std::string s;
-  s.reserve(x.size() * 14 + mesh.triangles.size() * 8 + 128);
+  s.reserve(x.size() * (o.lossless ? 22 : 14) * (normals ? 2 : 1) + mesh.triangles.size() * (uvs || normals ? 16 : 8) + 128);
   s += "# Loom frame";
   if (!comment.empty()) s += ": " + comment;
   s += '\n';
   for (std::size_t i = 0; i + 2 < x.size(); i += 3) {
     s += "v ";
-    append_double(s, x[i]);
+    num(s, x[i]);
     s += ' ';
-    append_double(s, x[i + 1]);
+    num(s, x[i + 1]);
     s += ' ';
-    append_double(s, x[i + 2]);
+    num(s, x[i + 2]);
     s += '\n';
   }
+  if (uvs)
+    for (std::size_t i = 0; i + 1 < mesh.uvs.size(); i += 2) {
+      s += "vt ";
+      num(s, mesh.uvs[i]);
+      s += ' ';
+      num(s, mesh.uvs[i + 1]);
+      s += '\n';
+    }
+  if (normals) {
+    // Area-weighted vertex normals: the sum of the (unnormalised) cross products of the
+    // triangles around a vertex, normalised.
+    std::vector<double> nrm(x.size(), 0.0);
+    for (std::size_t t = 0; t + 2 < mesh.triangles.size(); t += 3) {
+      const std::size_t a = 3 * static_cast<std::size_t>(mesh.triangles[t]), b = 3 * static_cast<std::size_t>(mesh.triangles[t + 1]),
+                        c = 3 * static_cast<std::size_t>(mesh.triangles[t + 2]);
+      const double e1[3] = {x[b] - x[a], x[b + 1] - x[a + 1], x[b + 2] - x[a + 2]};
+      const double e2[3] = {x[c] - x[a], x[c + 1] - x[a + 1], x[c + 2] - x[a + 2]};
+      const double n[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+      for (std::size_t v : {a, b, c})
+        for (int k = 0; k < 3; ++k) nrm[v + k] += n[k];
+    }
+    for (std::size_t i = 0; i + 2 < nrm.size(); i += 3) {
+      const double len = std::sqrt(nrm[i] * nrm[i] + nrm[i + 1] * nrm[i + 1] + nrm[i + 2] * nrm[i + 2]);
+      const double inv = len > 0 ? 1.0 / len : 0.0;
+      s += "vn ";
+      append_double(s, nrm[i] * inv);
+      s += ' ';
+      append_double(s, nrm[i + 1] * inv);
+      s += ' ';
+      append_double(s, nrm[i + 2] * inv);
+      s += '\n';
+    }
+  }
   for (std::size_t t = 0; t + 2 < mesh.triangles.size(); t += 3) {
-    s += "f ";
-    append_int(s, mesh.triangles[t] + 1);
-    s += ' ';
-    append_int(s, mesh.triangles[t + 1] + 1);
-    s += ' ';
-    append_int(s, mesh.triangles[t + 2] + 1);
+    s += 'f';
+    for (int k = 0; k < 3; ++k) {
+      const long long idx = mesh.triangles[t + k] + 1;
+      s += ' ';
+      append_int(s, idx);
+      if (uvs || normals) {
+        s += '/';
+        if (uvs) append_int(s, idx);
+        if (normals) {
+          s += '/';
+          append_int(s, idx);
+        }
+      }
+    }
     s += '\n';
   }
   return s;
+}
+
+PointCacheWriter::PointCacheWriter(const std::string& path, int num_points, float start_frame, float sample_rate)
+    : path_(path), points_(num_points), buf_(3 * static_cast<std::size_t>(num_points)) {
+  f_ = std::fopen(path.c_str(), "wb");
+  if (!f_) throw std::runtime_error("cannot create " + path + ": " + std::strerror(errno));
+  char header[32] = {0};
+  std::memcpy(header, "POINTCACHE2", 11);  // 12 bytes with the terminating zero
+  const std::int32_t version = 1, points = num_points, samples = 0;
+  std::memcpy(header + 12, &version, 4);
+  std::memcpy(header + 16, &points, 4);
+  std::memcpy(header + 20, &start_frame, 4);
+  std::memcpy(header + 24, &sample_rate, 4);
+  std::memcpy(header + 28, &samples, 4);
+  if (std::fwrite(header, 1, 32, f_) != 32 || std::fflush(f_) != 0)
+    throw std::runtime_error("cannot write " + path + " (disk full?)");
+}
+
+PointCacheWriter::~PointCacheWriter() {
+  if (f_) std::fclose(f_);
+}
+
+void PointCacheWriter::append(std::span<const double> x) {
+  if (x.size() != buf_.size())
+    throw std::runtime_error(path_ + ": a sample has " + std::to_string(x.size() / 3) + " points, the cache " +
+                             std::to_string(points_));
+  for (std::size_t i = 0; i < x.size(); ++i) buf_[i] = static_cast<float>(x[i]);
+  const std::int32_t next = samples_ + 1;
+  const long offset = 32L + static_cast<long>(samples_) * static_cast<long>(buf_.size()) * 4L;
+  bool ok = std::fseek(f_, offset, SEEK_SET) == 0 && std::fwrite(buf_.data(), 4, buf_.size(), f_) == buf_.size() &&
+            std::fflush(f_) == 0;
+  // Only now that the sample is on disk does the header count it.
+  ok = ok && std::fseek(f_, 28, SEEK_SET) == 0 && std::fwrite(&next, 4, 1, f_) == 1 && std::fflush(f_) == 0;
+  if (!ok) throw std::runtime_error("cannot write " + path_ + " (disk full?)");
+  samples_ = next;
 }
 
 void prepare_output_dir(const std::string& dir) {
@@ -86,6 +179,58 @@ void prepare_output_dir(const std::string& dir) {
                      "). Fix: choose a writable folder with --out DIR.");
   std::fclose(f);
   std::remove(probe.c_str());
+}
+
+OutputLock::OutputLock(const std::string& dir) {
+  const std::string path = (fs::path(dir) / ".loom.lock").string();
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd_ < 0)
+    throw InputError("cannot create " + path + ": " + std::strerror(errno) + ". Fix: choose a writable --out folder.");
+  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+    char buf[32] = {0};
+    const ssize_t n = ::pread(fd_, buf, sizeof(buf) - 1, 0);
+    const std::string pid = n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : std::string("?");
+    ::close(fd_);
+    fd_ = -1;
+    throw InputError("output folder '" + dir + "' is in use by another loom run (pid " + pid +
+                     "). Fix: wait for it to finish, or write this run elsewhere with --out DIR.");
+  }
+  const std::string me = std::to_string(::getpid());
+  if (::ftruncate(fd_, 0) == 0) {
+    [[maybe_unused]] const ssize_t w = ::pwrite(fd_, me.data(), me.size(), 0);
+  }
+}
+
+OutputLock::~OutputLock() {
+  if (fd_ >= 0) ::close(fd_);  // closing releases the flock; the file stays (harmless, reused)
+}
+
+int remove_stale_temporaries(const std::string& dir) {
+  int removed = 0;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    const auto pos = name.rfind(".tmp.");
+    if (pos == std::string::npos || pos + 5 >= name.size()) continue;
+    if (!std::all_of(name.begin() + static_cast<std::ptrdiff_t>(pos) + 5, name.end(), [](char c) { return c >= '0' && c <= '9'; }))
+      continue;
+    std::error_code rm;
+    if (fs::remove(e.path(), rm)) ++removed;
+  }
+  return removed;
+}
+
+std::vector<std::string> run_files_in(const std::string& dir) {
+  std::vector<std::string> out;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    const bool frame = name.rfind("frame_", 0) == 0 && name.size() > 4 && name.compare(name.size() - 4, 4, ".obj") == 0;
+    if (frame || name == "stats.csv" || name == "run.pc2" || name == "rest.obj" || name == "scene.yaml")
+      out.push_back(e.path().string());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
 }
 
 bool is_output_rank() {

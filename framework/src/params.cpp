@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <system_error>
 #include <fstream>
 #include <map>
 #include <set>
@@ -96,6 +98,37 @@ Params::~Params() = default;
 Params::Params(const Params&) = default;
 Params& Params::operator=(const Params&) = default;
 
+namespace {
+
+// yaml-cpp keeps both entries of a repeated key and lookups return the first, so a second
+// `integrator:` section would be ignored without a word: refuse it, naming both lines.
+void reject_duplicate_keys(const YAML::Node& node, const std::string& source) {
+  std::vector<YAML::Node> todo{node};
+  while (!todo.empty()) {
+    const YAML::Node n = todo.back();
+    todo.pop_back();
+    if (n.IsMap()) {
+      std::map<std::string, int> seen;
+      for (auto it = n.begin(); it != n.end(); ++it) {
+        const std::string key = it->first.IsScalar() ? it->first.Scalar() : std::string();
+        const int line = it->first.Mark().line + 1;
+        if (it->first.IsScalar()) {
+          const auto [pos, inserted] = seen.emplace(key, line);
+          if (!inserted)
+            throw InputError(source + ":" + std::to_string(line) + ": duplicate key '" + key +
+                             "' (first given at line " + std::to_string(pos->second) +
+                             "). Fix: keep one of them; YAML mappings need unique keys.");
+        }
+        todo.push_back(it->second);
+      }
+    } else if (n.IsSequence()) {
+      for (auto it = n.begin(); it != n.end(); ++it) todo.push_back(*it);
+    }
+  }
+}
+
+}  // namespace
+
 Params Params::from_string(const std::string& yaml, const std::string& source_name) {
   auto doc = std::make_shared<Doc>();
   doc->source = source_name;
@@ -108,6 +141,7 @@ Params Params::from_string(const std::string& yaml, const std::string& source_na
     throw InputError(os.str());
   }
   if (!doc->root.IsDefined() || doc->root.IsNull()) doc->root = YAML::Node(YAML::NodeType::Map);
+  reject_duplicate_keys(doc->root, source_name);
   auto impl = std::make_shared<Impl>();
   impl->doc = doc;
   impl->node = doc->root;
@@ -116,6 +150,26 @@ Params Params::from_string(const std::string& yaml, const std::string& source_na
 }
 
 Params Params::from_file(const std::string& path) {
+  // Refuse what is not a regular, reasonably sized file before reading it: a directory, a
+  // device (/dev/zero would be read forever), a symlink loop or an over-long name.
+  std::error_code ec;
+  const auto st = std::filesystem::status(path, ec);
+  if (ec) {
+    std::string why = ec.message();
+    if (ec == std::errc::too_many_symbolic_link_levels) why = "a symbolic link loop";
+    else if (ec == std::errc::filename_too_long) why = "the name is too long";
+    throw InputError(path + ": cannot read the file (" + why + "). Fix: give the path of a YAML file.");
+  }
+  if (!std::filesystem::exists(st)) throw InputError(path + ": file not found. Fix: check the path.");
+  if (std::filesystem::is_directory(st))
+    throw InputError(path + ": is a folder, not a file. Fix: give the YAML file inside it (e.g. scenes/hanging_cloth.yaml).");
+  if (!std::filesystem::is_regular_file(st))
+    throw InputError(path + ": is not a regular file (a device or a pipe). Fix: give the path of a YAML file.");
+  constexpr std::uintmax_t kMaxBytes = 64u << 20;
+  const auto bytes = std::filesystem::file_size(path, ec);
+  if (!ec && bytes > kMaxBytes)
+    throw InputError(path + ": is " + std::to_string(bytes >> 20) + " MiB; YAML inputs are limited to 64 MiB. "
+                     "Fix: give large data (meshes) as OBJ files the scene names.");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path + ": cannot open file (does it exist, and is it readable?)");
   std::stringstream ss;

@@ -85,7 +85,7 @@ std::unique_ptr<Material> Registry::make_material(const std::string& name, const
 std::unique_ptr<Integrator> Registry::make_integrator(const std::string& name, const std::string& backend,
                                                       const Params& params) const {
   auto m = find(PluginKind::Integrator, name, backend).integrator(params);
-  params.check_unused({"type", "dt", "substeps"});
+  params.check_unused({"type", "dt", "substeps", "frame_time"});
   return m;
 }
 std::unique_ptr<LinearSolver> Registry::make_solver(const std::string& name, const std::string& backend,

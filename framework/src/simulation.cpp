@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <csignal>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -13,6 +14,7 @@
 #include <sstream>
 
 #include "loom/output.hpp"
+#include "loom/threads.hpp"
 
 namespace fs = std::filesystem;
 
@@ -109,6 +111,28 @@ std::vector<Index> pin_group(const Mesh& mesh, const std::string& group, const P
 
 namespace {
 bool g_notes = true;
+
+// `threads: auto` (default) or a count; the policy lives in loom/threads.hpp.
+void configure_threads(const Params& t, Scene& sc) {
+  int requested = 0;
+  if (t.valid()) {
+    if (t.is_scalar() && t.as_string() == "auto") {
+      requested = 0;
+    } else {
+      const std::int64_t k = t.as_int();
+      if (k < 0 || k > kMaxThreads)
+        t.fail("must be 'auto' or a count in [0, " + std::to_string(kMaxThreads) + "] (0 = auto); got " +
+               std::to_string(k) + ". Fix: threads: auto uses the cores this process may run on.");
+      requested = static_cast<int>(k);
+    }
+  }
+  bool capped = false;
+  sc.threads = resolve_thread_count(requested, &capped);
+  if (capped && g_notes && is_output_rank())
+    std::cerr << "loom: note: threads: " << requested << " capped at " << sc.threads
+              << ", the cores this process may use (more threads than cores only wait at barriers).\n";
+  omp_set_num_threads(sc.threads);
+}
 }
 void Simulation::set_notes(bool on) { g_notes = on; }
 
@@ -116,7 +140,8 @@ Simulation::Simulation() = default;
 Simulation::~Simulation() = default;
 
 Simulation::Simulation(const std::string& path, const std::vector<std::string>& overrides, PluginLoader& loader) {
-  if (!fs::exists(path)) throw InputError(path + ": scene file not found. Fix: check the path (scenes/ has examples).");
+  std::error_code ec;
+  if (!fs::exists(path, ec) && !ec) throw InputError(path + ": scene file not found. Fix: check the path (scenes/ has examples).");
   Params root = Params::from_file(path);
   for (const auto& o : overrides) {
     const auto eq = o.find('=');
@@ -154,9 +179,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   base_dir_ = base_dir.empty() ? std::string(".") : base_dir;
 
   sc.backend = root.get_choice("backend", "cpu", {"cpu", "cuda"});
-  sc.threads = root.get("threads", 0);
-  if (sc.threads < 0) root.child("threads").fail("must be >= 0 (0 = all cores).");
-  if (sc.threads > 0) omp_set_num_threads(sc.threads);
+  configure_threads(root.child("threads"), sc);
 
   // ---- mesh ----
   Params mesh = root.child("mesh");
@@ -227,7 +250,12 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
       }
       if (vs.empty()) e.fail("give 'vertices' or 'group'.");
       e.check_unused();
-      for (Index i : vs) st.mass[i] *= factor;
+      for (Index i : vs) {
+        st.mass[i] *= factor;
+        if (!std::isfinite(st.mass[i]))
+          e.child("factor").fail("makes the mass of vertex " + std::to_string(i) + " overflow to " + fmt(st.mass[i]) +
+                                 " (factors of entries that select it multiply). Fix: use a smaller factor.");
+      }
     }
   }
   st.update_inverse_masses();
@@ -307,8 +335,22 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   if (!integ.is_map()) root.fail("missing 'integrator' section. Fix: add integrator: {type: symplectic_euler, dt: 0.001, substeps: 10}.");
   integrator_name_ = integ.require_string("type");
   dt_ = integ.get_positive("dt", 1e-3);
-  substeps_ = integ.get("substeps", 1);
-  if (substeps_ < 1) integ.child("substeps").fail("must be an integer >= 1 (steps per frame).");
+  std::int64_t substeps = integ.get("substeps", static_cast<std::int64_t>(1));
+  if (integ.has("frame_time")) {
+    // The frame time fixes the output rate; substeps follow dt (so --set integrator.dt=...
+    // keeps the frames' spacing).
+    if (integ.has("substeps"))
+      integ.child("substeps").fail("give either frame_time or substeps, not both (frame_time sets substeps = frame_time / dt).");
+    const double ft = integ.get_positive("frame_time", 1.0 / 60.0);
+    const double ratio = ft / dt_;
+    substeps = std::llround(ratio);
+    if (substeps < 1 || std::abs(ratio - static_cast<double>(substeps)) > 1e-6 * ratio)
+      integ.child("frame_time").fail("frame_time " + fmt(ft) + " s is not a whole number of steps of dt = " + fmt(dt_) +
+                                     " s (ratio " + fmt(ratio) + "). Fix: choose dt that divides frame_time.");
+  }
+  if (substeps < 1 || substeps > 100000000)
+    integ.child("substeps").fail("must be an integer in [1, 1e8] (steps per frame).");
+  substeps_ = static_cast<int>(substeps);
   loader.ensure(PluginKind::Integrator, integrator_name_);
   integrator_ = loader.registry().make_integrator(integrator_name_, sc.backend, integ);
   const IntegratorNeeds needs = integrator_->needs();
@@ -381,6 +423,10 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     output_.stats = out.get("stats", true);
     output_.every = out.get("every", 1);
     if (output_.every < 1) out.child("every").fail("must be >= 1 (write every n-th frame).");
+    output_.pc2 = out.get("pc2", false);
+    output_.uvs = out.get("uvs", false);
+    output_.normals = out.get("normals", false);
+    output_.lossless = out.get("lossless", false);
     out.check_unused();
   }
   Params guard = root.child("guard");
@@ -408,10 +454,10 @@ std::vector<std::string> Simulation::describe() const {
   for (const auto& [k, v] : sc.material->describe()) m += ", " + k + " " + v;
   lines.push_back(m);
   lines.push_back("integrator: " + integrator_name_ + ", dt " + fmt(dt_) + " s, " + std::to_string(substeps_) +
-                  " steps per frame (frame time " + fmt(dt_ * substeps_) + " s)");
+                  " steps per frame (frame time " + fmt(dt_ * static_cast<double>(substeps_)) + " s)");
   if (!solver_name_.empty()) lines.push_back("solver:     " + solver_name_);
-  lines.push_back("backend:    " + sc.backend + ", threads " +
-                  std::to_string(sc.threads > 0 ? sc.threads : omp_get_max_threads()));
+  lines.push_back("backend:    " + sc.backend + ", threads " + std::to_string(sc.threads) + " (of " +
+                  std::to_string(usable_cores()) + " usable cores)");
   double mass = 0;
   for (double mi : sc.state.mass) mass += mi;
   lines.push_back("pins:       " + std::to_string(sc.state.pin_list.size()) + " vertices; total mass " + fmt(mass) + " kg");
@@ -421,7 +467,7 @@ std::vector<std::string> Simulation::describe() const {
     lines.push_back(c);
   }
   lines.push_back("gravity:    [" + fmt(sc.gravity[0]) + ", " + fmt(sc.gravity[1]) + ", " + fmt(sc.gravity[2]) + "]");
-  lines.push_back("frames:     " + std::to_string(frames_) + " (" + fmt(frames_ * substeps_ * dt_) + " s simulated)");
+  lines.push_back("frames:     " + std::to_string(frames_) + " (" + fmt(static_cast<double>(frames_) * substeps_ * dt_) + " s simulated)");
   lines.push_back("output:     " + (output_.dir.empty() ? std::string("none") : output_.dir));
   return lines;
 }
@@ -464,7 +510,14 @@ void Simulation::check_state(bool check_strain) {
   }
 }
 
+namespace {
+volatile std::sig_atomic_t g_stop_requested = 0;
+}
+void Simulation::request_stop() { g_stop_requested = 1; }
+
 void Simulation::step() {
+  if (g_stop_requested)
+    throw Interrupted("interrupted at step " + std::to_string(scene_->state.step) + " (t = " + fmt(scene_->state.time) + " s)");
   const auto t0 = std::chrono::steady_clock::now();
   integrator_->step(*scene_, dt_);
   if (!scene_->colliders.empty() && !integrator_->handles_contacts())
@@ -477,6 +530,7 @@ void Simulation::step() {
   force_evals_ += s.force_evaluations;
   linear_iters_ += s.linear_iterations;
   if (scene_->state.step % guard_.check_every == 0) check_state(false);
+  if (on_step_) on_step_();
 }
 
 void Simulation::advance_frame() {
@@ -499,11 +553,46 @@ Simulation::FrameStats Simulation::measure(int frame) const {
   return fs;
 }
 
+// A run never mixes its files with another run's: the files of an earlier run of the same
+// scene (same resolved scene.yaml) are cleared first; another scene's are refused unless
+// output.overwrite (loom run --overwrite) says to replace them.
+void Simulation::claim_output_dir(const std::string& scene_text) const {
+  const auto files = run_files_in(output_.dir);
+  if (files.empty()) return;
+  std::ifstream in(fs::path(output_.dir) / "scene.yaml", std::ios::binary);
+  const std::string previous((std::istreambuf_iterator<char>(in)), {});
+  if (!output_.overwrite && previous != scene_text)
+    throw InputError("output folder '" + output_.dir + "' holds the files of another run (" +
+                     std::to_string(files.size()) + " files, e.g. " + fs::path(files.front()).filename().string() +
+                     (previous.empty() ? ", without its scene.yaml" : ", of a different scene or --set") +
+                     "). Fix: loom run ... --overwrite replaces them, or choose another folder with --out DIR.");
+  for (const auto& f : files) {
+    std::error_code ec;
+    fs::remove(f, ec);
+    if (ec) throw InputError("cannot remove " + f + " from the earlier run: " + ec.message() + ".");
+  }
+}
+
 void Simulation::run(const std::function<void(int, int)>& progress) {
+  // The initial state passes the same guards as every step before anything is written.
+  try {
+    check_state(true);
+  } catch (const DivergenceError& e) {
+    throw InputError(std::string("the initial state (initial_velocity, initial_scale, pins) is out of bounds, nothing was written: ") + e.what());
+  }
   const bool write = !output_.dir.empty() && is_output_rank();
   std::ofstream stats;
+  std::unique_ptr<OutputLock> lock;
+  std::error_code ec;
+  const std::string abs_base = fs::absolute(base_dir_, ec).lexically_normal().string();
+  const std::string scene_text = "# The scene as it ran (overrides applied), written by loom run.\n"
+                                 "# Relative paths resolve against the original scene's folder:\n"
+                                 "# loom-scene-dir: " + abs_base + "\n" + resolved_yaml_ + "\n";
   if (write) {
     prepare_output_dir(output_.dir);
+    lock = std::make_unique<OutputLock>(output_.dir);
+    remove_stale_temporaries(output_.dir);
+    claim_output_dir(scene_text);
     // Record exactly what ran (with --set overrides applied).
     if (output_.stats) {
       stats.open((fs::path(output_.dir) / "stats.csv").string(), std::ios::trunc);
@@ -513,30 +602,41 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       stats.precision(10);
     }
   }
+  const ObjOptions obj_options{output_.uvs, output_.normals, output_.lossless};
+  std::optional<PointCacheWriter> pc2;
+  if (write && output_.pc2) {
+    // The rest pose (topology, UVs, normals) that the point cache animates.
+    write_file_atomic((fs::path(output_.dir) / "rest.obj").string(),
+                      obj_text(scene_->mesh, scene_->state.x, "rest pose for run.pc2", {true, true, output_.lossless}));
+    // PC2's sample rate is the frame step between samples.
+    pc2.emplace((fs::path(output_.dir) / "run.pc2").string(), static_cast<int>(scene_->mesh.num_vertices()), 0.0f,
+                static_cast<float>(output_.every));
+  }
   auto emit = [&](int frame) {
     if (!write) return;
     const FrameStats f = measure(frame);
+    // Frame files first, then the stats row: a killed run never has a row for a frame it did
+    // not write.
+    if (frame % output_.every == 0) {
+      if (output_.obj) {
+        char name[32];
+        std::snprintf(name, sizeof(name), "frame_%05d.obj", frame);
+        write_file_atomic((fs::path(output_.dir) / name).string(),
+                          obj_text(scene_->mesh, scene_->state.x, "t = " + fmt(scene_->state.time) + " s", obj_options));
+      }
+      if (pc2) pc2->append(scene_->state.x);
+    }
     if (output_.stats) {
       stats << f.frame << ',' << f.time << ',' << f.kinetic << ',' << f.gravitational << ',' << f.elastic << ','
             << (f.kinetic + f.gravitational + f.elastic) << ',' << f.max_strain << ',' << f.wall_ms_per_step << ','
             << f.force_evaluations << ',' << f.linear_iterations << '\n';
       stats.flush();
-    }
-    if (output_.obj && frame % output_.every == 0) {
-      char name[32];
-      std::snprintf(name, sizeof(name), "frame_%05d.obj", frame);
-      write_file_atomic((fs::path(output_.dir) / name).string(),
-                        obj_text(scene_->mesh, scene_->state.x, "t = " + fmt(scene_->state.time) + " s"));
+      if (!stats)
+        throw std::runtime_error("cannot write " + (fs::path(output_.dir) / "stats.csv").string() +
+                                 " (disk full?); the frames written so far are kept.");
     }
   };
-  if (write) {
-    std::error_code ec;
-    const std::string abs_base = fs::absolute(base_dir_, ec).lexically_normal().string();
-    write_file_atomic((fs::path(output_.dir) / "scene.yaml").string(),
-                      "# The scene as it ran (overrides applied), written by loom run.\n"
-                      "# Relative paths resolve against the original scene's folder:\n"
-                      "# loom-scene-dir: " + abs_base + "\n" + resolved_yaml_ + "\n");
-  }
+  if (write) write_file_atomic((fs::path(output_.dir) / "scene.yaml").string(), scene_text);
   emit(0);
   for (int f = 1; f <= frames_; ++f) {
     step_seconds_ = 0;

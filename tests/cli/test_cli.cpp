@@ -192,3 +192,73 @@ TEST(Cli, PluginsListsModulesOnThePath) {
   EXPECT_NE(r.out.find("ABI version"), std::string::npos) << r.out;
   EXPECT_EQ(r.code, 2);
 }
+
+// Issue 20's fuzz findings, each with the exit code and message it must give.
+TEST(Cli, HardenedInputsAreBadInputWithAClearMessage) {
+  const auto dir = scratch("hardened");
+  auto expect_bad = [&](const std::string& args, const std::string& needle) {
+    const Result r = run(args);
+    EXPECT_EQ(r.code, 2) << args << "\n" << r.out;
+    EXPECT_NE(r.out.find(needle), std::string::npos) << args << "\n" << r.out;
+  };
+  // duplicate keys (a second integrator section) name both lines
+  expect_bad("validate " + write_scene(dir, std::string(kScene) + "integrator: {type: rk4}\n", "dup.yaml"),
+             "dup.yaml:11: duplicate key 'integrator' (first given at line 5)");
+  // a folder, a device and a symlink loop as the scene
+  expect_bad("validate " + dir.string(), "is a folder");
+  expect_bad("run /dev/zero", "not a regular file");
+  fs::create_symlink(dir / "loop_b.yaml", dir / "loop_a.yaml");
+  fs::create_symlink(dir / "loop_a.yaml", dir / "loop_b.yaml");
+  expect_bad("validate " + (dir / "loop_a.yaml").string(), "symbolic link loop");
+  // an absurd thread count
+  expect_bad("validate " + write_scene(dir, kScene) + " --set threads=100000", "must be 'auto' or a count in [0, 1024]");
+  // a step count that would overflow
+  expect_bad("validate " + write_scene(dir, kScene) + " --set integrator.substeps=2147483647", "[1, 1e8]");
+  // mass factors that overflow when multiplied
+  expect_bad("validate " + write_scene(dir, std::string(kScene) +
+                                              "mass_scale: [{vertices: [0], factor: 1.0e308}, {vertices: [0], factor: 1.0e308}]\n",
+                                          "mass.yaml"),
+             "overflow");
+  // an initial state beyond the guards: refused before anything is written
+  const Result r = run("run " + write_scene(dir, std::string(kScene) + "initial_velocity: [1.0e200, 0, 0]\n", "v0.yaml") +
+                       " --out " + (dir / "out_v0").string());
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("initial state"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "out_v0" / "frame_00000.obj"));
+  EXPECT_FALSE(fs::exists(dir / "out_v0" / "stats.csv"));
+}
+
+TEST(Cli, ThreadsAutoIsTheDefaultAndCountsAreCapped) {
+  const auto dir = scratch("threads");
+  Result r = run("validate " + write_scene(dir, kScene));
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("usable cores"), std::string::npos) << r.out;
+  r = run("validate " + write_scene(dir, kScene) + " --set threads=1000");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("capped at"), std::string::npos) << r.out;
+  r = run("validate " + write_scene(dir, kScene) + " --set threads=auto");
+  EXPECT_EQ(r.code, 0) << r.out;
+}
+
+// `loom validate` predicts divergence: the README's scene template (dt 1e-3 with k = 2000 on a
+// 32 x 32 grid) is past symplectic Euler's limit and gets the warning; no shipped scene does.
+TEST(Cli, ValidateWarnsWhenDtExceedsTheStableStep) {
+  std::ifstream readme(std::string(LOOM_SOURCE_DIR) + "/README.md");
+  const std::string text((std::istreambuf_iterator<char>(readme)), {});
+  const auto sec = text.find("## Scene files");
+  ASSERT_NE(sec, std::string::npos);
+  const auto a = text.find("```yaml\n", sec);
+  const auto b = text.find("```", a + 8);
+  ASSERT_NE(a, std::string::npos);
+  const auto dir = scratch("validate_readme");
+  const std::string scene = write_scene(dir, text.substr(a + 8, b - a - 8), "readme.yaml");
+  Result r = run("validate " + scene, false);
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("exceeds the estimated stable step"), std::string::npos) << r.out;
+  for (const auto& e : fs::directory_iterator(std::string(LOOM_SOURCE_DIR) + "/scenes")) {
+    if (e.path().extension() != ".yaml") continue;
+    r = run("validate " + e.path().string(), false);
+    EXPECT_EQ(r.code, 0) << e.path() << "\n" << r.out;
+    EXPECT_EQ(r.out.find("exceeds the estimated stable step"), std::string::npos) << e.path() << "\n" << r.out;
+  }
+}

@@ -5,6 +5,8 @@
 // Runs on one thread: the grid is tiny, and the parallel paths are tested elsewhere.
 #include <gtest/gtest.h>
 
+#include "loom/stability.hpp"
+
 #include <Eigen/Dense>
 #include <cmath>
 #include <cstdio>
@@ -224,6 +226,15 @@ TEST_F(Convergence, StabilityLimitsMatchLinearAnalysis) {
                                                           sc->state.inv_mass[free_dofs[c] / 3]);
   const double lambda = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(A, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff();
   const double sl = std::sqrt(lambda);
+  {
+    // `loom validate`'s estimate (power iteration on the material's own Jacobian) against this
+    // dense eigenvalue computation from the spring list.
+    auto est_scene = grid_scene();
+    const auto lim = loom::estimate_step_limit(*est_scene, "symplectic_euler");
+    ASSERT_TRUE(lim.has_value());
+    EXPECT_NEAR(lim->lambda_max / lambda, 1.0, 1e-2);
+    EXPECT_NEAR(lim->h_max * sl, 2.0, 2e-2);
+  }
 
   auto stable = [&](Method m, double h) {
     auto g = grid_scene();

@@ -24,7 +24,7 @@ struct Scene {
   std::unique_ptr<LinearSolver> solver;    ///< set only when the integrator needs one
   ColliderSet colliders;                   ///< empty unless the scene declares colliders
   std::string backend = "cpu";
-  int threads = 0;                         ///< 0 = OpenMP default
+  int threads = 1;                         ///< resolved thread count (loom/threads.hpp)
 };
 
 }  // namespace loom

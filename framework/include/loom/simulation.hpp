@@ -2,7 +2,9 @@
 #pragma once
 
 #include <functional>
+#include <optional>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -24,6 +26,18 @@ struct OutputOptions {
   bool obj = true;             ///< one OBJ per frame
   bool stats = true;           ///< stats.csv
   int every = 1;               ///< write every n-th frame
+  bool overwrite = false;      ///< replace another run's files in dir (loom run --overwrite)
+  bool pc2 = false;            ///< run.pc2 point cache (every written frame) beside rest.obj
+  bool uvs = false;            ///< OBJ frames carry vt (when the mesh has UVs)
+  bool normals = false;        ///< OBJ frames carry vn
+  bool lossless = false;       ///< OBJ coordinates in full double precision
+};
+
+/// Thrown by Simulation::step when request_stop() was called (Ctrl-C): the frames written so
+/// far are complete and kept.
+class Interrupted : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
 };
 
 /// A parsed, validated scene with its combo built. Construction throws InputError.
@@ -67,6 +81,12 @@ class Simulation {
   /// Lines describing what was built (counts, plugins, backend), for `loom validate`.
   std::vector<std::string> describe() const;
 
+  /// Ask a running simulation to stop at the next step boundary (async-signal-safe: call it
+  /// from a SIGINT handler). step() then throws Interrupted.
+  static void request_stop();
+  /// Called after every step (progress reporting); keep it cheap.
+  void set_step_callback(std::function<void()> cb) { on_step_ = std::move(cb); }
+
   /// One step of size dt with guards. Throws DivergenceError naming step, vertex and value.
   void step();
   /// One frame = substeps steps.
@@ -91,6 +111,7 @@ class Simulation {
   Simulation();
   void build(const Params& root, const std::string& base_dir, PluginLoader& loader);
   void check_state(bool check_strain);
+  void claim_output_dir(const std::string& scene_text) const;
 
   std::unique_ptr<Scene> scene_;
   std::unique_ptr<Integrator> integrator_;
@@ -106,6 +127,7 @@ class Simulation {
   double step_seconds_ = 0;
   double step_seconds_total_ = 0;
   long long steps_in_frame_ = 0;
+  std::function<void()> on_step_;
 };
 
 /// Resolve a path relative to the scene file's folder (absolute paths unchanged).
