@@ -5,6 +5,7 @@
 #include <csignal>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <iostream>
 #include <string>
@@ -175,6 +176,24 @@ int cmd_plugins() {
   return errors.empty() ? 0 : loom::kExitBadInput;
 }
 
+// Under mpirun, an error that only one rank sees must end every rank: exit at once, without
+// the MPI_Finalize of the atexit handlers (which would wait for the other ranks, who wait in
+// a collective for this one). mpirun then sees a rank that died without finalising and ends
+// the job with this rank's message and exit code.
+int finish(int code) {
+  if (code == 0) return 0;
+  int world = 1;
+  for (const char* var : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_SIZE", "MPI_LOCALNRANKS"})
+    if (const char* v = std::getenv(var)) world = std::max(world, std::atoi(v));
+  if (world > 1) {
+    std::cout.flush();
+    std::cerr.flush();
+    std::fflush(nullptr);
+    std::_Exit(code);
+  }
+  return code;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -295,7 +314,7 @@ int main(int argc, char** argv) {
       if (tty) std::printf("\n");
       std::fprintf(stderr, "loom: %s; the frames written before it are complete and kept in %s\n", e.what(),
                    sim.output().dir.c_str());
-      return 130;
+      return finish(130);
     }
     if (tty) std::printf("\n");
     if (show) {
@@ -323,15 +342,15 @@ int main(int argc, char** argv) {
     return 0;
   } catch (const loom::InputError& e) {
     std::cerr << "loom: error: " << e.what() << "\n";
-    return loom::kExitBadInput;
+    return finish(loom::kExitBadInput);
   } catch (const loom::DivergenceError& e) {
     std::cerr << "loom: " << e.what() << "\n(frames written before the divergence are kept)\n";
-    return loom::kExitDiverged;
+    return finish(loom::kExitDiverged);
   } catch (const loom::SolverError& e) {
     std::cerr << "loom: linear solver failed: " << e.what() << "\n";
-    return loom::kExitSolverFailed;
+    return finish(loom::kExitSolverFailed);
   } catch (const std::exception& e) {
     std::cerr << "loom: internal error: " << e.what() << "\n";
-    return loom::kExitInternal;
+    return finish(loom::kExitInternal);
   }
 }
