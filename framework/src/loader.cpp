@@ -142,9 +142,10 @@ void PluginLoader::ensure(PluginKind kind, const std::string& name) {
     const std::string hint = closest_match(name, avail);
     std::string dirs;
     for (const auto& d : search_path_) dirs += (dirs.empty() ? "" : ":") + d;
-    throw InputError(std::string("unknown ") + to_string(kind) + " '" + name + "'" +
+    const std::string shown = name.size() > 64 ? name.substr(0, 64) + "...(" + std::to_string(name.size()) + " characters)" : name;
+    throw InputError(std::string("unknown ") + to_string(kind) + " '" + shown + "'" +
                      (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
-                     ". Available: " + (list.empty() ? "none" : list) + ". Searched for " + module_prefix(kind) + name +
+                     ". Available: " + (list.empty() ? "none" : list) + ". Searched for " + module_prefix(kind) + shown +
                      ".so in " + dirs + " (set LOOM_PLUGIN_PATH to add folders).");
   }
   load_file(path);

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <iterator>
+#include <cstdlib>
+#include <filesystem>
 #include <sstream>
 
 namespace loom {
@@ -90,8 +93,16 @@ Index parse_vertex_ref(const std::string& tok, Index nverts, const std::string& 
 }  // namespace
 
 Mesh read_obj(const std::string& path, double area_tolerance) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": cannot open OBJ file (does it exist, and is it readable?)");
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec) || (std::filesystem::exists(path, ec) && !std::filesystem::is_regular_file(path, ec)))
+    throw InputError(path + ": is not a regular file. Fix: give the path of an OBJ file.");
+  std::ifstream file(path, std::ios::binary);
+  if (!file) throw InputError(path + ": cannot open OBJ file (does it exist, and is it readable?)");
+  // Line endings: LF, CRLF and old Mac CR-only files all read the same.
+  std::string text((std::istreambuf_iterator<char>(file)), {});
+  for (std::size_t k = 0; k < text.size(); ++k)
+    if (text[k] == '\r') text[k] = (k + 1 < text.size() && text[k + 1] == '\n') ? ' ' : '\n';
+  std::istringstream in(std::move(text));
   Mesh m;
   m.source = path;
   std::vector<double> vt;
@@ -111,13 +122,12 @@ Mesh read_obj(const std::string& path, double area_tolerance) {
       for (int k = 0; k < 3; ++k) {
         std::string t;
         if (!(ls >> t)) obj_error(path, lineno, "vertex needs 3 coordinates. Fix: 'v x y z'.");
-        try {
-          std::size_t used = 0;
-          p[k] = std::stod(t, &used);
-          if (used != t.size()) throw std::invalid_argument(t);
-        } catch (...) {
+        // strtod, not stod: a subnormal such as 4e-320 is a valid coordinate (stod rejects it
+        // because strtod reports underflow).
+        char* end = nullptr;
+        p[k] = std::strtod(t.c_str(), &end);
+        if (t.empty() || end != t.c_str() + t.size())
           obj_error(path, lineno, "vertex coordinate '" + t + "' is not a number.");
-        }
         if (!std::isfinite(p[k])) obj_error(path, lineno, "vertex coordinate is NaN or Inf. Fix the exporter or the file.");
       }
       m.positions.insert(m.positions.end(), p, p + 3);

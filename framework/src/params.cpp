@@ -399,6 +399,17 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
   }
   if (!value.IsDefined() || (value.IsNull() && value_yaml.find_first_not_of(" \t") == std::string::npos))
     value = YAML::Node(value_yaml);  // `--set key=` sets an empty text; `key=null` removes the key
+  if (value.IsNull()) {
+    // Only an explicit null removes a key: `&a` or `*a` alone parse as null too.
+    const auto b = value_yaml.find_first_not_of(" \t"), e = value_yaml.find_last_not_of(" \t");
+    const std::string t = b == std::string::npos ? std::string() : value_yaml.substr(b, e - b + 1);
+    if (t != "null" && t != "~" && t != "Null" && t != "NULL")
+      throw InputError("--set " + dotted_key + "=" + value_yaml + ": the value is not a YAML value (an anchor or alias "
+                       "alone). Fix: give a value, or " + dotted_key + "=null to remove the key.");
+  }
+  if (impl_->node.IsDefined() && !impl_->node.IsNull() && !impl_->node.IsMap())
+    throw InputError(source() + ": the file is not a YAML mapping, so --set " + dotted_key +
+                     " has nothing to set. Fix: a scene is a mapping with mesh, material, integrator, ... sections.");
   std::vector<std::string> parts;
   std::stringstream ss(dotted_key);
   std::string part;

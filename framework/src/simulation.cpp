@@ -212,8 +212,16 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   Params mat = root.child("material");
   if (!mat.is_map()) root.fail("missing 'material' section. Fix: add material: {type: mass_spring, ...}.");
   material_name_ = mat.require_string("type");
-  loader.ensure(PluginKind::Material, material_name_);
-  loader.ensure_backend(sc.backend);
+  try {
+    loader.ensure(PluginKind::Material, material_name_);
+  } catch (const InputError& e) {
+    mat.child("type").fail(e.what());
+  }
+  try {
+    loader.ensure_backend(sc.backend);
+  } catch (const InputError& e) {
+    root.child("backend").fail(e.what());
+  }
   // A material describes the cloth (masses, elements, curves); execution backends read that
   // description, so a material without a backend-specific version is used as is.
   const bool material_on_backend = loader.registry().has(PluginKind::Material, material_name_, sc.backend);
@@ -349,9 +357,13 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
                                      " s (ratio " + fmt(ratio) + "). Fix: choose dt that divides frame_time.");
   }
   if (substeps < 1 || substeps > 100000000)
-    integ.child("substeps").fail("must be an integer in [1, 1e8] (steps per frame).");
+    integ.child("substeps").fail("must be an integer >= 1 and <= 1e8 (steps per frame).");
   substeps_ = static_cast<int>(substeps);
-  loader.ensure(PluginKind::Integrator, integrator_name_);
+  try {
+    loader.ensure(PluginKind::Integrator, integrator_name_);
+  } catch (const InputError& e) {
+    integ.child("type").fail(e.what());
+  }
   integrator_ = loader.registry().make_integrator(integrator_name_, sc.backend, integ);
   const IntegratorNeeds needs = integrator_->needs();
   if (needs.springs && !sc.material->springs())

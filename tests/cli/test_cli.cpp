@@ -213,12 +213,24 @@ TEST(Cli, HardenedInputsAreBadInputWithAClearMessage) {
   // an absurd thread count
   expect_bad("validate " + write_scene(dir, kScene) + " --set threads=100000", "must be 'auto' or a count in [0, 1024]");
   // a step count that would overflow
-  expect_bad("validate " + write_scene(dir, kScene) + " --set integrator.substeps=2147483647", "[1, 1e8]");
+  expect_bad("validate " + write_scene(dir, kScene) + " --set integrator.substeps=2147483647", ">= 1 and <= 1e8");
   // mass factors that overflow when multiplied
   expect_bad("validate " + write_scene(dir, std::string(kScene) +
                                               "mass_scale: [{vertices: [0], factor: 1.0e308}, {vertices: [0], factor: 1.0e308}]\n",
                                           "mass.yaml"),
              "overflow");
+  // `--set key=&a` (an anchor alone) does not delete the key; a scalar YAML file with --set is bad input
+  expect_bad("validate " + write_scene(dir, kScene) + " --set 'integrator.dt=&a'", "not a YAML value");
+  expect_bad("validate " + write_scene(dir, "just a string\n", "scalar.yaml") + " --set frames=3", "not a YAML mapping");
+  // an unknown material names the file and line, and a 200 KB name is not echoed in full
+  const Result big = run("validate " + write_scene(dir, std::string(kScene).replace(
+                                                               std::string(kScene).find("test_gravity_only"), 17,
+                                                               std::string(200000, 'x')),
+                                                           "long.yaml"));
+  EXPECT_EQ(big.code, 2);
+  EXPECT_NE(big.out.find("long.yaml:4"), std::string::npos) << big.out.substr(0, 400);
+  EXPECT_NE(big.out.find("(200000 characters)"), std::string::npos) << big.out.substr(0, 400);
+  EXPECT_LT(big.out.size(), 4000u);
   // an initial state beyond the guards: refused before anything is written
   const Result r = run("run " + write_scene(dir, std::string(kScene) + "initial_velocity: [1.0e200, 0, 0]\n", "v0.yaml") +
                        " --out " + (dir / "out_v0").string());

@@ -79,3 +79,27 @@ TEST(Mesh, ObjErrorsNameFileLineAndFix) {
   EXPECT_NE(e.find("bad.obj:1"), std::string::npos) << e;
   EXPECT_THROW(loom::read_obj("/nonexistent.obj"), loom::InputError);
 }
+
+// Issue 20: CR-only (old Mac) and CRLF files read like LF files; a subnormal coordinate is a
+// number; a folder is not an OBJ file.
+TEST(Mesh, ObjLineEndingsSubnormalsAndFolders) {
+  const std::string lf = "v 0 0 0\nv 1 0 0\nv 0 1 4e-320\nf 1 2 3\n";
+  std::string cr = lf, crlf;
+  for (char& c : cr)
+    if (c == '\n') c = '\r';
+  for (char c : lf) crlf += c == '\n' ? std::string("\r\n") : std::string(1, c);
+  for (const auto& [name, text] : {std::pair{"lf.obj", lf}, std::pair{"cr.obj", cr}, std::pair{"crlf.obj", crlf}}) {
+    const loom::Mesh m = loom::read_obj(write_temp(name, text));
+    EXPECT_EQ(m.num_vertices(), 3) << name;
+    EXPECT_EQ(m.num_triangles(), 1) << name;
+    EXPECT_EQ(m.positions[8], 4e-320) << name;
+    EXPECT_GT(m.positions[8], 0.0);  // really subnormal, not flushed
+  }
+  EXPECT_NE(obj_error("v 0 0 0\nv 1 0 0\nv 0 1 1e999\nf 1 2 3\n").find("NaN or Inf"), std::string::npos);
+  try {
+    loom::read_obj(std::filesystem::temp_directory_path().string());
+    FAIL() << "a folder was read as an OBJ file";
+  } catch (const loom::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("not a regular file"), std::string::npos) << e.what();
+  }
+}

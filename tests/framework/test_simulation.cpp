@@ -171,7 +171,7 @@ TEST_F(Fixture, DivergenceNamesStepVertexValueAndKeepsFrames) {
     ++files;
     EXPECT_EQ(f.path().string().find(".tmp"), std::string::npos);
   }
-  EXPECT_EQ(files, 5);  // 3 frames + stats.csv + scene.yaml
+  EXPECT_EQ(files, 6);  // 3 frames + stats.csv + scene.yaml + the run's lock file .loom.lock
   std::ifstream stats(out / "stats.csv");
   std::string line;
   int lines = 0;
