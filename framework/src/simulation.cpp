@@ -109,6 +109,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   root.child("description");  // free text, allowed
   root.child("name");
   root.child("render");       // read by `loom render`, not by a run
+  root.child("kawabata");     // read by scripts/kawabata.py (virtual KES-F tests), not by a run
   resolved_yaml_ = root.dump();
   base_dir_ = base_dir.empty() ? std::string(".") : base_dir;
 
