@@ -181,6 +181,8 @@ def analyse(scene_path, stats_path):
 
 
 def run(args):
+    if args.plot:
+        ensure_matplotlib()
     loom = args.loom
     os.makedirs(args.out, exist_ok=True)
     results = []
@@ -206,13 +208,18 @@ def run(args):
         plot(results, args.plot)
 
 
-def plot(results, dst):
+def ensure_matplotlib():
+    """matplotlib may come from Debian's python3-matplotlib: if this interpreter lacks it, start
+    again (before any work) with the system's python3."""
     try:
         import matplotlib  # noqa: F401
     except ImportError:
         if os.path.exists("/usr/bin/python3") and os.path.realpath(sys.executable) != os.path.realpath("/usr/bin/python3"):
             os.execv("/usr/bin/python3", ["/usr/bin/python3"] + sys.argv)
         raise
+
+
+def plot(results, dst):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
