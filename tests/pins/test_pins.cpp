@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <vector>
@@ -91,6 +93,38 @@ TEST(PinSelection, BoxNamesAndVertexListsSelectTheSameVertices) {
   auto m = make(L, kGrid + "mass_scale: [{box: {min: [-0.01, -0.01, -0.01], max: [0.01, 1.01, 0.01]}, factor: 2}]\n");
   for (Index i = 0; i < 36; ++i)
     EXPECT_DOUBLE_EQ(m->scene().state.mass[i], (i % 6 == 0 ? 2.0 : 1.0) * b->scene().state.mass[i]) << i;
+}
+
+// An OBJ mesh (no grid structure, vertices in file order) clamped along an edge by a box.
+TEST(PinSelection, BoxClampsAnObjMeshAlongAnEdge) {
+  Loader L;
+  const std::string dir = std::string(LOOM_BINARY_DIR) + "/tests/pins";
+  std::filesystem::create_directories(dir);
+  {
+    // a 3 x 3 vertex square in the xz plane, vertices listed column by column (x = 0 first)
+    std::ofstream f(dir + "/square.obj");
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) f << "v " << 0.5 * i << " 0 " << 0.5 * j << "\n";
+    for (int i = 0; i < 2; ++i)
+      for (int j = 0; j < 2; ++j) {
+        const int a = 3 * i + j + 1, b = a + 3, c = a + 4, d = a + 1;
+        f << "f " << a << " " << b << " " << c << "\nf " << a << " " << c << " " << d << "\n";
+      }
+  }
+  const std::string yaml =
+      "mesh: {obj: square.obj}\n"
+      "material: {type: mass_spring, stiffness: 500, density: 0.1}\n"
+      "integrator: {type: symplectic_euler, dt: 0.0001}\n"
+      "pins: [{name: clamp, box: {min: [-0.01, -0.01, -0.01], max: [0.01, 0.01, 1.01]}, motion: {type: translate, "
+      "velocity: [0, 0.5, 0]}}]\n";
+  Simulation::set_notes(false);
+  auto sim = Simulation::from_string(yaml, dir + "/square.yaml", dir, {}, L.loader);
+  EXPECT_EQ(sim->scene().state.pin_list, (std::vector<Index>{0, 1, 2}));
+  for (int k = 0; k < 100; ++k) sim->step();
+  for (Index i : {0, 1, 2}) {
+    EXPECT_NEAR(sim->scene().state.x[3 * i + 1], 0.5 * sim->scene().state.time, 1e-15);
+    EXPECT_EQ(sim->scene().state.v[3 * i + 1], 0.5);  // the prescribed velocity, exactly
+  }
 }
 
 TEST(PinSelection, BadInputGetsOneClearError) {
