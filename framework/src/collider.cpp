@@ -34,15 +34,27 @@ std::pair<std::size_t, double> locate(const std::vector<RigidMotion::Key>& keys,
   return {k, (t - keys[k].t) / (keys[k + 1].t - keys[k].t)};
 }
 
+// Segment shape: weight s(w), ds/dw and d2s/dw2 for linear or smooth (quintic) keys.
+struct Ease {
+  double s, ds, dds;
+};
+Ease ease(RigidMotion::Interp in, double w) {
+  if (in == RigidMotion::Interp::Linear) return {w, 1.0, 0.0};
+  const double w2 = w * w;
+  return {w2 * w * (10.0 - 15.0 * w + 6.0 * w2), 30.0 * w2 * (1.0 - w) * (1.0 - w),
+          60.0 * w * (1.0 - w) * (1.0 - 2.0 * w)};
+}
+
 }  // namespace
 
 Vec3 RigidMotion::displacement(double t) const {
   switch (type) {
     case Type::Translate: return scale(velocity, t);
     case Type::Keyframes: {
-      const auto [k, w] = locate(keys, t);
       if (keys.size() == 1) return keys[0].translate;
-      return add(scale(keys[k].translate, 1 - w), scale(keys[k + 1].translate, w));
+      const auto [k, w] = locate(keys, t);
+      const double s = ease(interpolation, w).s;
+      return add(scale(keys[k].translate, 1 - s), scale(keys[k + 1].translate, s));
     }
     default: return {0, 0, 0};
   }
@@ -52,9 +64,10 @@ double RigidMotion::angle(double t) const {
   switch (type) {
     case Type::Rotate: return angular_velocity * t;
     case Type::Keyframes: {
-      const auto [k, w] = locate(keys, t);
       if (keys.size() == 1) return keys[0].angle;
-      return (1 - w) * keys[k].angle + w * keys[k + 1].angle;
+      const auto [k, w] = locate(keys, t);
+      const double s = ease(interpolation, w).s;
+      return (1 - s) * keys[k].angle + s * keys[k + 1].angle;
     }
     default: return 0.0;
   }
@@ -66,8 +79,8 @@ Vec3 RigidMotion::linear_velocity(double t) const {
     case Type::Keyframes: {
       if (keys.size() < 2 || t < keys.front().t || t >= keys.back().t) return {0, 0, 0};
       const auto [k, w] = locate(keys, t);
-      (void)w;
-      return scale(sub(keys[k + 1].translate, keys[k].translate), 1.0 / (keys[k + 1].t - keys[k].t));
+      const double T = keys[k + 1].t - keys[k].t;
+      return scale(sub(keys[k + 1].translate, keys[k].translate), ease(interpolation, w).ds / T);
     }
     default: return {0, 0, 0};
   }
@@ -79,11 +92,25 @@ double RigidMotion::spin(double t) const {
     case Type::Keyframes: {
       if (keys.size() < 2 || t < keys.front().t || t >= keys.back().t) return 0.0;
       const auto [k, w] = locate(keys, t);
-      (void)w;
-      return (keys[k + 1].angle - keys[k].angle) / (keys[k + 1].t - keys[k].t);
+      const double T = keys[k + 1].t - keys[k].t;
+      return (keys[k + 1].angle - keys[k].angle) * ease(interpolation, w).ds / T;
     }
     default: return 0.0;
   }
+}
+
+Vec3 RigidMotion::linear_acceleration(double t) const {
+  if (type != Type::Keyframes || keys.size() < 2 || t < keys.front().t || t >= keys.back().t) return {0, 0, 0};
+  const auto [k, w] = locate(keys, t);
+  const double T = keys[k + 1].t - keys[k].t;
+  return scale(sub(keys[k + 1].translate, keys[k].translate), ease(interpolation, w).dds / (T * T));
+}
+
+double RigidMotion::spin_acceleration(double t) const {
+  if (type != Type::Keyframes || keys.size() < 2 || t < keys.front().t || t >= keys.back().t) return 0.0;
+  const auto [k, w] = locate(keys, t);
+  const double T = keys[k + 1].t - keys[k].t;
+  return (keys[k + 1].angle - keys[k].angle) * ease(interpolation, w).dds / (T * T);
 }
 
 Collider::Frame Collider::frame_at(double t) const {
@@ -226,35 +253,7 @@ ColliderSet ColliderSet::parse(const Params& list) {
       fr.fail("friction is a number or {static: mu_s, kinetic: mu_k}.");
     }
     Params m = p.child("motion");
-    if (m.valid()) {
-      if (!m.is_map()) m.fail("motion is a mapping with 'type': fixed, translate, rotate or keyframes.");
-      const std::string mt = m.get_choice("type", "fixed", {"fixed", "translate", "rotate", "keyframes"});
-      RigidMotion& mo = c.motion;
-      if (mt == "translate") {
-        mo.type = RigidMotion::Type::Translate;
-        mo.velocity = read_vec3(m, "velocity", {0, 0, 0}, true);
-      } else if (mt == "rotate") {
-        mo.type = RigidMotion::Type::Rotate;
-        mo.axis = unit(m, "axis", read_vec3(m, "axis", {0, 1, 0}));
-        mo.angular_velocity = m.get("angular_velocity", 0.0);
-        if (!std::isfinite(mo.angular_velocity)) m.child("angular_velocity").fail("must be a finite number (rad/s).");
-      } else if (mt == "keyframes") {
-        mo.type = RigidMotion::Type::Keyframes;
-        mo.axis = unit(m, "axis", read_vec3(m, "axis", {0, 1, 0}));
-        Params keys = m.child("keys");
-        if (!keys.is_sequence() || keys.size() == 0)
-          m.fail("keyframes need 'keys': a list of {t, translate: [x,y,z], angle} sorted by t.");
-        for (std::size_t q = 0; q < keys.size(); ++q) {
-          Params kp = keys.at(q);
-          RigidMotion::Key key{kp.require_double("t"), read_vec3(kp, "translate", {0, 0, 0}), kp.get("angle", 0.0)};
-          if (!std::isfinite(key.t) || !std::isfinite(key.angle)) kp.fail("t and angle must be finite numbers.");
-          if (!mo.keys.empty() && !(key.t > mo.keys.back().t)) kp.fail("keyframe times must increase.");
-          kp.check_unused();
-          mo.keys.push_back(key);
-        }
-      }
-      m.check_unused();
-    }
+    if (m.valid()) c.motion = parse_rigid_motion(m);
     p.check_unused();
     set.add(c);
   }

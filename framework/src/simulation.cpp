@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "loom/output.hpp"
+#include "loom/pins.hpp"
 #include "loom/threads.hpp"
 
 namespace fs = std::filesystem;
@@ -38,73 +39,6 @@ std::string join(const std::vector<std::string>& v) {
   std::string s;
   for (const auto& x : v) s += (s.empty() ? "" : ", ") + x;
   return s;
-}
-
-const std::vector<std::string> kPinGroups = {"top_corners", "top_edge", "left_corners", "left_edge",
-                                             "bottom_corners", "bottom_edge", "right_edge", "corners"};
-
-// Vertices of a named pin group. Grids use their structure; other meshes use the bounding box
-// in the plane of the two largest extents ("top" = largest y).
-std::vector<Index> pin_group(const Mesh& mesh, const std::string& group, const Params& where) {
-  std::vector<Index> out;
-  const Index n = mesh.num_vertices();
-  if (mesh.grid) {
-    const GridInfo& g = *mesh.grid;
-    auto row = [&](Index iy) { for (Index ix = 0; ix < g.nx; ++ix) out.push_back(g.index(ix, iy)); };
-    auto colm = [&](Index ix) { for (Index iy = 0; iy < g.ny; ++iy) out.push_back(g.index(ix, iy)); };
-    if (group == "top_corners") out = {g.index(0, g.ny - 1), g.index(g.nx - 1, g.ny - 1)};
-    else if (group == "top_edge") row(g.ny - 1);
-    else if (group == "bottom_edge") row(0);
-    else if (group == "left_corners") out = {g.index(0, 0), g.index(0, g.ny - 1)};
-    else if (group == "left_edge") colm(0);
-    else if (group == "right_edge") colm(g.nx - 1);
-    else if (group == "bottom_corners") out = {g.index(0, 0), g.index(g.nx - 1, 0)};
-    else if (group == "corners") out = {g.index(0, 0), g.index(g.nx - 1, 0), g.index(0, g.ny - 1), g.index(g.nx - 1, g.ny - 1)};
-  } else {
-    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
-    for (Index i = 0; i < n; ++i)
-      for (int k = 0; k < 3; ++k) {
-        lo[k] = std::min(lo[k], mesh.positions[3 * i + k]);
-        hi[k] = std::max(hi[k], mesh.positions[3 * i + k]);
-      }
-    const double ext = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
-    const double tol = 1e-6 * ext;
-    auto select = [&](int axis, bool high) {
-      std::vector<Index> s;
-      for (Index i = 0; i < n; ++i) {
-        const double c = mesh.positions[3 * i + axis];
-        if (high ? c >= hi[axis] - tol : c <= lo[axis] + tol) s.push_back(i);
-      }
-      return s;
-    };
-    auto extremes = [&](const std::vector<Index>& s, int axis) {
-      if (s.empty()) return std::vector<Index>{};
-      Index a = s[0], b = s[0];
-      for (Index i : s) {
-        if (mesh.positions[3 * i + axis] < mesh.positions[3 * a + axis]) a = i;
-        if (mesh.positions[3 * i + axis] > mesh.positions[3 * b + axis]) b = i;
-      }
-      return a == b ? std::vector<Index>{a} : std::vector<Index>{a, b};
-    };
-    if (group == "top_edge") out = select(1, true);
-    else if (group == "bottom_edge") out = select(1, false);
-    else if (group == "left_edge") out = select(0, false);
-    else if (group == "right_edge") out = select(0, true);
-    else if (group == "top_corners") out = extremes(select(1, true), 0);
-    else if (group == "bottom_corners") out = extremes(select(1, false), 0);
-    else if (group == "left_corners") out = extremes(select(0, false), 1);
-    else if (group == "corners") {
-      out = extremes(select(1, true), 0);
-      auto b = extremes(select(1, false), 0);
-      out.insert(out.end(), b.begin(), b.end());
-    }
-  }
-  if (out.empty() && std::find(kPinGroups.begin(), kPinGroups.end(), group) == kPinGroups.end()) {
-    const std::string hint = closest_match(group, kPinGroups);
-    where.fail("unknown pin group '" + group + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
-               ". Groups: " + join(kPinGroups) + "; or give {vertices: [i, j, ...]}.");
-  }
-  return out;
 }
 
 }  // namespace
@@ -175,6 +109,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   root.child("description");  // free text, allowed
   root.child("name");
   root.child("render");       // read by `loom render`, not by a run
+  root.child("kawabata");     // read by scripts/kawabata.py (virtual KES-F tests), not by a run
   resolved_yaml_ = root.dump();
   base_dir_ = base_dir.empty() ? std::string(".") : base_dir;
 
@@ -243,20 +178,9 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     if (!mscale.is_sequence()) mscale.fail("must be a list like [{vertices: [0, 5], factor: 1.0e6}].");
     for (std::size_t k = 0; k < mscale.size(); ++k) {
       Params e = mscale.at(k);
-      if (!e.is_map()) e.fail("an entry is {vertices: [...], factor: f} or {group: name, factor: f}.");
+      if (!e.is_map()) e.fail("an entry is {vertices: [...], factor: f}, {group: name, factor: f} or {box: {min: [..], max: [..]}, factor: f}.");
       const double factor = e.get_positive("factor", 1.0);
-      std::vector<Index> vs;
-      if (e.has("group")) vs = pin_group(sc.mesh, e.child("group").as_string(), e.child("group"));
-      Params list = e.child("vertices");
-      if (list.valid()) {
-        if (!list.is_sequence()) list.fail("must be a list of vertex indices.");
-        for (std::size_t q = 0; q < list.size(); ++q) {
-          const auto idx = list.at(q).as_int();
-          if (idx < 0 || idx >= n) list.at(q).fail("vertex index " + std::to_string(idx) + " is out of range (0.." + std::to_string(n - 1) + ").");
-          vs.push_back(static_cast<Index>(idx));
-        }
-      }
-      if (vs.empty()) e.fail("give 'vertices' or 'group'.");
+      const std::vector<Index> vs = select_vertices(sc.mesh, e);
       e.check_unused();
       for (Index i : vs) {
         st.mass[i] *= factor;
@@ -291,39 +215,8 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
       for (int k = 0; k < 3; ++k) st.v[3 * i + k] = v[k];
   }
 
-  // ---- pins ----
-  Params pins = root.child("pins");
-  if (pins.valid()) {
-    if (!pins.is_sequence()) pins.fail("must be a list, e.g. pins: [top_corners] or pins: [{vertices: [0, 31]}].");
-    for (std::size_t k = 0; k < pins.size(); ++k) {
-      Params e = pins.at(k);
-      std::vector<Index> vs;
-      if (e.is_scalar()) {
-        vs = pin_group(sc.mesh, e.as_string(), e);
-      } else if (e.is_map()) {
-        if (e.has("group")) {
-          Params g = e.child("group");
-          vs = pin_group(sc.mesh, g.as_string(), g);
-        }
-        if (e.has("vertices")) {
-          Params list = e.child("vertices");
-          if (!list.is_sequence()) list.fail("must be a list of vertex indices.");
-          for (std::size_t q = 0; q < list.size(); ++q) {
-            const auto idx = list.at(q).as_int();
-            if (idx < 0 || idx >= n)
-              list.at(q).fail("vertex index " + std::to_string(idx) + " is out of range (the mesh has " +
-                              std::to_string(n) + " vertices, numbered from 0).");
-            vs.push_back(static_cast<Index>(idx));
-          }
-        }
-        e.check_unused();
-        if (vs.empty()) e.fail("a pin entry needs 'group' or 'vertices'.");
-      } else {
-        e.fail("a pin entry is a group name (top_corners, ...) or {vertices: [...]}.");
-      }
-      for (Index i : vs) st.pin(i);
-    }
-  }
+  // ---- pins (framework/src/pins.cpp: groups, regions, prescribed motion) ----
+  sc.pins = PinSet::parse(root.child("pins"), sc.mesh, st);
 
   // ---- gravity ----
   Params grav = root.child("gravity");
@@ -472,7 +365,11 @@ std::vector<std::string> Simulation::describe() const {
                   std::to_string(usable_cores()) + " usable cores)");
   double mass = 0;
   for (double mi : sc.state.mass) mass += mi;
-  lines.push_back("pins:       " + std::to_string(sc.state.pin_list.size()) + " vertices; total mass " + fmt(mass) + " kg");
+  std::string pl = "pins:       " + std::to_string(sc.state.pin_list.size()) + " vertices";
+  for (const PinGroup& g : sc.pins.groups())
+    pl += (&g == &sc.pins.groups().front() ? " (" : ", ") + g.name + ": " + std::to_string(g.vertices.size()) +
+          (g.moving() ? " moving" : " fixed") + (&g == &sc.pins.groups().back() ? ")" : "");
+  lines.push_back(pl + "; total mass " + fmt(mass) + " kg");
   if (!sc.colliders.empty()) {
     std::string c = "colliders:  ";
     for (std::size_t k = 0; k < sc.colliders.size(); ++k) c += (k ? ", " : "") + sc.colliders.colliders()[k].name;
@@ -600,6 +497,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   const std::string scene_text = "# The scene as it ran (overrides applied), written by loom run.\n"
                                  "# Relative paths resolve against the original scene's folder:\n"
                                  "# loom-scene-dir: " + abs_base + "\n" + resolved_yaml_ + "\n";
+  std::vector<double> reaction_work, reactions;
   if (write) {
     prepare_output_dir(output_.dir);
     lock = std::make_unique<OutputLock>(output_.dir);
@@ -610,7 +508,8 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       stats.open((fs::path(output_.dir) / "stats.csv").string(), std::ios::trunc);
       if (!stats) throw InputError("cannot write " + output_.dir + "/stats.csv. Fix: choose a writable --out folder.");
       stats << "frame,time,kinetic_energy,gravitational_energy,elastic_energy,total_energy,max_strain,"
-               "wall_ms_per_step,force_evaluations,linear_iterations\n";
+               "wall_ms_per_step,force_evaluations,linear_iterations"
+            << scene_->pins.csv_header() << '\n';
       stats.precision(10);
     }
   }
@@ -641,7 +540,12 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     if (output_.stats) {
       stats << f.frame << ',' << f.time << ',' << f.kinetic << ',' << f.gravitational << ',' << f.elastic << ','
             << (f.kinetic + f.gravitational + f.elastic) << ',' << f.max_strain << ',' << f.wall_ms_per_step << ','
-            << f.force_evaluations << ',' << f.linear_iterations << '\n';
+            << f.force_evaluations << ',' << f.linear_iterations;
+      if (!scene_->pins.empty()) {  // reaction force of each pin group on the cloth (N)
+        scene_->pins.reactions(scene_->state, *scene_->material, scene_->gravity, reaction_work, reactions);
+        for (double r : reactions) stats << ',' << r;
+      }
+      stats << '\n';
       stats.flush();
       if (!stats)
         throw std::runtime_error("cannot write " + (fs::path(output_.dir) / "stats.csv").string() +

@@ -443,3 +443,26 @@ TEST(CudaBw, NeedsTheDeviceSolver) {
   }
 }
 #endif
+
+// Pins with a prescribed motion (issue 13) are not implemented on the device: every device
+// integrator refuses them with one clear error (fixed pins still run).
+TEST(CudaPins, MovingPinsAreRefusedWithTheFix) {
+  std::vector<std::unique_ptr<Integrator>> integs;
+  integs.push_back(lc::make_cuda_ho(lc::HoVariantD::Velocity, lc::Precision::Double));
+  integs.push_back(lc::make_cuda_rk4(lc::Precision::Double));
+  for (auto& di : integs) {
+    auto sc = make_scene(Mat::Springs, 5, 5);
+    PinGroup g;
+    g.name = "clamp";
+    g.vertices = {2};
+    g.motion.type = RigidMotion::Type::Translate;
+    g.motion.velocity = {0.1, 0, 0};
+    sc->pins.add(g, sc->state);
+    try {
+      di->prepare(*sc, 1e-3);
+      ADD_FAILURE() << "expected InputError";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("backend: cpu"), std::string::npos) << e.what();
+    }
+  }
+}

@@ -51,12 +51,16 @@ struct TempDir {
   }
 };
 
-std::string good_file(const std::string& weft_curve) {
+// A valid file around the given weft curve; the weft gets `measure: green_pk2` unless it
+// names a measure itself (or `nomeasure` is set).
+std::string good_file(std::string weft_curve, bool nomeasure = false) {
+  if (!nomeasure && weft_curve.find("measure") == std::string::npos && weft_curve.rfind('{', 0) == 0)
+    weft_curve.insert(1, "measure: green_pk2, ");
   return "areal_density: 0.2\n"
          "curves:\n"
          "  weft: " + weft_curve + "\n"
-         "  warp: {start: 0.0, step: 0.01, stress: [0, 10, 30]}\n"
-         "  shear: {strain: [-0.1, 0.0, 0.1], stress: [-5, 0, 5]}\n";
+         "  warp: {measure: green_pk2, start: 0.0, step: 0.01, stress: [0, 10, 30]}\n"
+         "  shear: {measure: green_pk2, strain: [-0.1, 0.0, 0.1], stress: [-5, 0, 5]}\n";
 }
 
 }  // namespace
@@ -328,6 +332,37 @@ TEST(GnatvMaterial, UsersOwnFileWithTheSameShapeWorks) {
   EXPECT_NEAR(m.data().shear.stress(0.1), 5.0, 1e-12);
 }
 
+// A nominal tensile curve (force per reference width P against engineering strain e) is
+// converted exactly to the model's measure: S = P / (1 + e) at Green strain e + e^2/2; a
+// nominal shear curve (force per clamp length against the trellis angle phi) to sigma_uv = P
+// at eps_uv = sin(phi). Checked at the samples (tests/kawabata checks it through the model).
+TEST(GnatvMaterial, NominalCurvesAreConvertedExactlyOnLoad) {
+  TempDir td;
+  const std::string text =
+      "areal_density: 0.2\n"
+      "curves:\n"
+      "  weft: {measure: nominal, start: 0.0, step: 0.02, stress: [0, 5, 12, 30]}\n"
+      "  warp: {measure: nominal, strain: [-0.01, 0.0, 0.05, 0.1], stress: [-1, 0, 20, 60]}\n"
+      "  shear: {measure: nominal, strain: [-0.2, 0.0, 0.2], stress: [-5, 0, 5]}\n";
+  const std::string f = td.write("nominal.yaml", text);
+  const loom::Mesh mesh = loom::make_grid(3, 3, 1.0, 1.0);
+  auto p = loom::Params::from_string("material_file: " + f + "\n", "<test>");
+  GnatvMaterial m(p, mesh);
+  EXPECT_EQ(m.data().weft_measure, "nominal");
+  const double P[4] = {0, 5, 12, 30};
+  for (int k = 0; k < 4; ++k) {
+    const double e = 0.02 * k, lam = 1 + e;
+    EXPECT_NEAR(m.data().weft.stress((lam * lam - 1) / 2), P[k] / lam, 1e-12) << k;
+  }
+  const double ew[4] = {-0.01, 0.0, 0.05, 0.1}, Pw[4] = {-1, 0, 20, 60};
+  for (int k = 0; k < 4; ++k) {
+    const double lam = 1 + ew[k];
+    EXPECT_NEAR(m.data().warp.stress((lam * lam - 1) / 2), Pw[k] / lam, 1e-12) << k;
+  }
+  EXPECT_NEAR(m.data().shear.stress(std::sin(0.2)), 5.0, 1e-12);
+  EXPECT_NEAR(m.data().shear.stress(std::sin(-0.2)), -5.0, 1e-12);
+}
+
 TEST(GnatvMaterial, BadMaterialFilesNameTheFileAndLine) {
   TempDir td;
   struct Bad {
@@ -340,12 +375,21 @@ TEST(GnatvMaterial, BadMaterialFilesNameTheFileAndLine) {
       {"nan.yaml", good_file("{start: 0.0, step: 0.02, stress: [0, 5, .nan, 30]}"), "finite"},
       {"short.yaml", good_file("{start: 0.0, step: 0.02, stress: [0]}"), "at least 2"},
       {"missing.yaml",
-       "areal_density: 0.2\ncurves:\n  weft: {start: 0.0, step: 0.01, stress: [0, 10]}\n"
-       "  shear: {start: -0.1, step: 0.1, stress: [-5, 0, 5]}\n",
+       "areal_density: 0.2\ncurves:\n  weft: {measure: green_pk2, start: 0.0, step: 0.01, stress: [0, 10]}\n"
+       "  shear: {measure: green_pk2, start: -0.1, step: 0.1, stress: [-5, 0, 5]}\n",
        "missing curve 'warp'"},
       {"rest.yaml", good_file("{start: 0.0, step: 0.02, stress: [1, 5, 12, 30]}"), "stress free"},
       {"typo.yaml", good_file("{start: 0.0, stepp: 0.02, step: 0.02, stress: [0, 5, 12, 30]}"), "stepp"},
       {"density.yaml", "areal_density: -1\ncurves: {}\n", "areal_density"},
+      // issue 13: what a curve measures, percent strains, softening curves
+      {"nomeasure.yaml", good_file("{start: 0.0, step: 0.02, stress: [0, 5, 12, 30]}", true),
+       "does not say what it measures"},
+      {"badmeasure.yaml", good_file("{measure: engineering, start: 0.0, step: 0.02, stress: [0, 5, 12, 30]}"),
+       "green_pk2"},
+      {"percent.yaml", good_file("{measure: nominal, strain: [0, 2, 4, 6], stress: [0, 5, 12, 30]}"),
+       "percent"},
+      {"percent_step.yaml", good_file("{start: 0.0, step: 0.5, stress: [0, 5, 12, 30]}"), "divide the strains by 100"},
+      {"dip.yaml", good_file("{start: 0.0, step: 0.02, stress: [0, 5, 4.5, 30]}"), "sample 2"},
   };
   const loom::Mesh mesh = loom::make_grid(3, 3, 1.0, 1.0);
   for (const Bad& b : bad) {

@@ -21,10 +21,13 @@ namespace loom {
 
 using Vec3 = std::array<double, 3>;
 
-/// Rigid motion of a collider: a reference point c(t) = c0 + d(t) and a rotation R(t) by
-/// angle(t) about a fixed unit axis through c(t).
+/// Rigid motion of a collider or a pin group: a reference point c(t) = c0 + d(t) and a
+/// rotation R(t) by angle(t) about a fixed unit axis through c(t).
 struct RigidMotion {
   enum class Type { Fixed, Translate, Rotate, Keyframes } type = Type::Fixed;
+  /// Keyframes: Linear (constant velocity between keys) or Smooth (each segment eased by the
+  /// quintic s(w) = 10w^3 - 15w^4 + 6w^5: velocity and acceleration vanish at every key, C2).
+  enum class Interp { Linear, Smooth } interpolation = Interp::Linear;
   Vec3 velocity{0, 0, 0};          ///< Translate: dc/dt (m/s)
   Vec3 axis{0, 1, 0};              ///< Rotate/Keyframes: unit rotation axis
   double angular_velocity = 0;     ///< Rotate: rad/s
@@ -33,13 +36,20 @@ struct RigidMotion {
     Vec3 translate;
     double angle;
   };
-  std::vector<Key> keys;           ///< Keyframes: sorted by t, linear in between, held outside
+  std::vector<Key> keys;           ///< Keyframes: sorted by t, interpolated in between, held outside
 
   Vec3 displacement(double t) const;     ///< d(t)
   double angle(double t) const;          ///< rotation angle at t
   Vec3 linear_velocity(double t) const;  ///< dd/dt
   double spin(double t) const;           ///< d angle/dt
+  Vec3 linear_acceleration(double t) const;  ///< d^2 d/dt^2 (inside segments; 0 for linear keys)
+  double spin_acceleration(double t) const;  ///< d^2 angle/dt^2
 };
+
+/// Parse a `motion:` mapping {type: fixed | translate | rotate | keyframes, ...} shared by
+/// colliders and pins (InputError with file:line on bad input). Keys listed in `also_known`
+/// are left for the caller (e.g. a pin group's rotation `center`).
+RigidMotion parse_rigid_motion(const Params& m, const std::vector<std::string>& also_known = {});
 
 struct Collider {
   enum class Shape { Sphere, Plane } shape = Shape::Plane;

@@ -11,6 +11,7 @@
 #include "loom/material.hpp"
 #include "loom/mesh.hpp"
 #include "loom/params.hpp"
+#include "loom/pins.hpp"
 #include "loom/state.hpp"
 
 namespace loom {
@@ -23,6 +24,7 @@ struct Scene {
   std::unique_ptr<Material> material;
   std::unique_ptr<LinearSolver> solver;    ///< set only when the integrator needs one
   ColliderSet colliders;                   ///< empty unless the scene declares colliders
+  PinSet pins;                             ///< pin groups (motions, reactions); empty: fixed pins only
   std::string backend = "cpu";
   int threads = 1;                         ///< resolved thread count (loom/threads.hpp)
 };

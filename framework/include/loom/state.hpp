@@ -11,8 +11,8 @@ namespace loom {
 
 /// Positions and velocities are flat arrays of 3 * n doubles (x0 y0 z0 x1 y1 z1 ...),
 /// so that they map directly onto the 3n vectors of the linear algebra.
-/// Pinned vertices have inverse mass 0; their motion is prescribed: x(t) follows
-/// pin_velocity (zero for fixed pins), so a fixed pin never moves, bit for bit.
+/// Pinned vertices have inverse mass 0; their motion is prescribed by the scene's pin groups
+/// (Scene::pins, loom/pins.hpp); a fixed pin never moves, bit for bit.
 struct State {
   std::vector<double> x;          ///< positions, 3n
   std::vector<double> v;          ///< velocities, 3n

@@ -29,6 +29,10 @@ void check_device_scene(const Scene& scene, const char* integrator) {
     throw InputError(scene.source + ": integrator " + integrator +
                      " on backend cuda does not handle colliders yet (contacts are resolved on the host state, which "
                      "the device would not see). Fix: set backend: cpu for scenes with colliders.");
+  if (scene.pins.moving())
+    throw InputError(scene.source + ": integrator " + integrator +
+                     " on backend cuda does not implement pins with a prescribed motion (the device keeps pinned "
+                     "vertices where they are). Fix: set backend: cpu for scenes whose pins have a 'motion'.");
 }
 
 /// Reads host_sync_every (>= 1): copy x, v back into scene.state after every n-th step.

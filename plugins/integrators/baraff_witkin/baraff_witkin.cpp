@@ -85,6 +85,7 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
 
   S_.reset(n);
   for (Index i : s.pin_list) S_.constrain_all(i);
+  scene.pins.constraint_forces().assign(3 * s.pin_list.size(), 0.0);
   contacts_.clear();
   if (!scene.colliders.empty()) contacts_.reserve(n);
   frames0_.resize(scene.colliders.size());
@@ -101,13 +102,9 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
     for (Index i : s.pin_list) S_.constrain_all(i);
     std::fill(z_.begin(), z_.end(), 0.0);
   }
-  // Fixed pins: prescribed velocity 0, so dv = -v0 there.
-  for (Index i : s.pin_list) {
-    const std::size_t o = 3 * static_cast<std::size_t>(i);
-    z_[o] = -s.v[o];
-    z_[o + 1] = -s.v[o + 1];
-    z_[o + 2] = -s.v[o + 2];
-  }
+  // Pins: dv = v1 - v0 with v1 = 0 for fixed pins and v1 = (p(t + h) - x0)/h for moving
+  // ones, so that x1 = x0 + h v1 is the prescribed position (docs/NUMERICS.md, moving pins).
+  scene.pins.write_dv(s, t0_ + h, h, z_);
   if (hook_) hook_(s, h, S_, z_);
   contacts_.clear();
   if (!contacts) return;
@@ -199,11 +196,8 @@ bool BaraffWitkin::release_pulling_contacts(const Scene& scene, double h) {
   const State& s = scene.state;
   S_.reset(n_);
   std::fill(z_.begin(), z_.end(), 0.0);
-  for (Index i : s.pin_list) {
-    S_.constrain_all(i);
-    const std::size_t o = 3 * static_cast<std::size_t>(i);
-    for (int k = 0; k < 3; ++k) z_[o + k] = -s.v[o + k];
-  }
+  for (Index i : s.pin_list) S_.constrain_all(i);
+  scene.pins.write_dv(s, t0_ + h, h, z_);
   if (hook_) hook_(s, h, S_, z_);
   for (const Contact& ct : contacts_) {
     const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
@@ -298,6 +292,7 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
     return false;
   }
   if (!contacts_.empty()) apply_friction(scene);
+  record_pin_forces(scene, h);
 
   const Index n = n_;
   double* x = s.x.data();
@@ -311,17 +306,42 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
       x[o + c] += h * v[o + c];
     }
   }
+  // Moving pins: x0 + h v1 equals p(t + h) up to rounding; store it exactly.
+  scene.pins.apply_positions(s, t0_ + h);
   if (!scene.colliders.empty()) project_positions(scene, s.time + h);
   return true;
 }
 
+// The force each pinned vertex receives from its pin in this step: the constraint force
+// r_i = (A dv - b)_i / h = (M dv / h - f_lin(t + h) - M g)_i (plus the damping terms of A, b),
+// recorded for the pin groups' reactions in stats.csv.
+void BaraffWitkin::record_pin_forces(Scene& scene, double h) {
+  const State& s = scene.state;
+  std::vector<double>& out = scene.pins.constraint_forces();
+  if (out.size() != 3 * s.pin_list.size()) return;  // sized in prepare(); pins added later are not recorded
+  const BsrPattern& P = *pattern_;
+  const double* a = A_.values().data();
+  for (std::size_t k = 0; k < s.pin_list.size(); ++k) {
+    const Index i = s.pin_list[k];
+    double r[3] = {0, 0, 0};
+    for (Index q = P.row_ptr[i]; q < P.row_ptr[i + 1]; ++q)
+      kernels::mat3_mul_add(a + 9 * static_cast<std::size_t>(q), &dv_[3 * static_cast<std::size_t>(P.col[q])], r);
+    const double* bi = &b_[3 * static_cast<std::size_t>(i)];
+    for (int c = 0; c < 3; ++c) out[3 * k + c] = (r[c] - bi[c]) / h;
+  }
+  scene.pins.record_constraint_forces(t0_ + h);
+}
+
 void BaraffWitkin::advance(Scene& scene, double h, int depth, StepStats& st) {
   SolveReport rep;
+  const double t_start = t0_;
   if (attempt(scene, h, st, rep)) return;
   if (options_.on_failure == BaraffWitkinOptions::OnFailure::HalveStep && depth < options_.max_halvings) {
     st.retries += 1;
     advance(scene, 0.5 * h, depth + 1, st);
+    t0_ = t_start + 0.5 * h;  // the second half starts where the first ended (prescribed pins)
     advance(scene, 0.5 * h, depth + 1, st);
+    t0_ = t_start;
     return;
   }
   char buf[256];
@@ -339,6 +359,7 @@ void BaraffWitkin::advance(Scene& scene, double h, int depth, StepStats& st) {
 void BaraffWitkin::step(Scene& scene, double h) {
   if (n_ != scene.state.size() || !pattern_) prepare(scene, h);
   StepStats st;
+  t0_ = scene.state.time;
   advance(scene, h, 0, st);
   finish_step(scene.state, h);
   last_ = st;

@@ -67,6 +67,7 @@ class BaraffWitkin final : public Integrator {
   bool release_pulling_contacts(const Scene& scene, double h);
   void apply_friction(const Scene& scene);
   void project_positions(Scene& scene, double t);
+  void record_pin_forces(Scene& scene, double h);
 
   // One contact per vertex (the deepest collider): Baraff & Witkin's 2-DOF constraint.
   struct Contact {
@@ -87,6 +88,7 @@ class BaraffWitkin final : public Integrator {
   std::vector<double> degree_;           // graph-Laplacian diagonal n_i
   std::vector<double> f_, b_, z_, dv_;
   Index n_ = -1;
+  double t0_ = 0;                        // start time of the (sub)step being solved
   StepStats last_;
 };
 

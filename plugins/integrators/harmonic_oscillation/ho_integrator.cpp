@@ -182,6 +182,9 @@ void HoIntegrator::step(Scene& scene, double h) {
       ho_step_arrays<double, HoVariant::AnalyticPosition>(layout_, springs_, x, v, dv_.data(), dx_.data(), w, h, g);
       break;
   }
+  // Moving pins (w = 0: the springs treat them as infinite masses at their prescribed
+  // velocity): exactly the prescribed positions and velocities at the end of the step.
+  scene.pins.apply(s, s.time + h);
   finish_step(s, h);
 }
 

@@ -24,12 +24,22 @@ void Rk4Integrator::step(Scene& scene, double h) {
   if (xs_.size() != s.x.size()) prepare(scene, h);
   const std::size_t m = s.x.size();
   const std::array<double, 3> g{scene.gravity[0], scene.gravity[1], scene.gravity[2]};
+  // Stage k (1..4) evaluates forces at time t + c_k h, c = (0, 1/2, 1/2, 1). Moving pins are
+  // placed at that time in the stage arrays (xs, vs) before the force evaluation, so every
+  // stage sees the prescribed pins; at the end they get exactly p(t + h), v(t + h).
+  const PinSet& pins = scene.pins;
+  const double t0 = s.time;
+  int stage = 0;
   rk4_step_arrays<double>(s.size(), s.x.data(), s.v.data(), s.inv_mass.data(), g, h, xs_.data(), vs_.data(),
                           f_.data(), accx_.data(), accv_.data(),
                           [&](const double* x, const double* v, double* f) {
+                            ++stage;
+                            if (stage > 1 && pins.moving())
+                              pins.place(t0 + (stage == 4 ? h : 0.5 * h), xs_.data(), vs_.data());
                             mat.compute_forces(std::span<const double>(x, m), std::span<const double>(v, m),
                                                std::span<double>(f, m));
                           });
+  pins.apply(s, t0 + h);
   finish_step(s, h);
 }
 

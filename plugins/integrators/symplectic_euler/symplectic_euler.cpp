@@ -53,6 +53,8 @@ void SymplecticEuler::step(Scene& scene, double h) {
         if (vi[c] != 0.0) xi[c] += h * vi[c];
     }
   }
+  // Moving pins: exactly the prescribed positions and velocities at the end of the step.
+  scene.pins.apply(s, s.time + h);
   stats_ = StepStats{};
   stats_.force_evaluations = 1;
   finish_step(s, h);

@@ -264,6 +264,7 @@ std::vector<std::pair<std::string, std::string>> GnatvMaterial::describe() const
           {"chunk colours", std::to_string(num_colours())},
           {"chunks", std::to_string(chunk_start_.size() - 1)},
           {"material file", data_.path},
+          {"curve measures weft/warp/shear", data_.weft_measure + " / " + data_.warp_measure + " / " + data_.shear_measure},
           {"interpolation", opt_.interpolation == CurveInterpolation::BSpline ? "bspline" : "monotone_cubic"},
           {"areal density (kg/m^2)", fmt(density_)},
           {"weft angle (rad)", fmt(opt_.weft_angle)},
