@@ -7,7 +7,8 @@
 //
 // bw_solver/wool<n>/<solver>: the wool hang at 32^2 .. 512^2 for every CPU solver and
 // preconditioner (eigen_pcg block_jacobi, eigen_pcg sa_amg with the rigid-body or translation
-// near-null space and a prolongator rebuilt every step or every 10th, eigen_ldlt up to 128^2),
+// near-null space and a prolongator (or the whole coarse hierarchy) rebuilt every step or every
+// 10th, eigen_ldlt up to 128^2),
 // with a timing wrapper around the solver: setup_ms (the first factorize: aggregation and
 // patterns + values), factorize_ms and solve_ms per step, iters per step, step_ms.
 //   bench_baraff_witkin --benchmark_filter=bw_solver --benchmark_counters_tabular=true
@@ -153,6 +154,9 @@ std::vector<SolverVariant> variants() {
   amg.amg.prolongator_refresh_steps = 10;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10", false, amg});
   amg.amg.prolongator_refresh_steps = 1;
+  amg.amg.hierarchy_refresh_steps = 10;
+  v.push_back({"eigen_pcg_sa_amg_rigid_hierarchy10", false, amg});
+  amg.amg.hierarchy_refresh_steps = 1;
   amg.amg.near_null_modes = 3;
   v.push_back({"eigen_pcg_sa_amg_translations", false, amg});
   v.push_back({"eigen_ldlt", true, bj, 128});

@@ -101,6 +101,10 @@ PcgOptions parse_pcg_options(const Params& p) {
     if (rs < 1 || rs > 1000000)
       a.child("prolongator_refresh_steps").fail("prolongator_refresh_steps must be >= 1 (1 = every step)");
     m.prolongator_refresh_steps = static_cast<int>(rs);
+    const std::int64_t hs = a.get("hierarchy_refresh_steps", static_cast<std::int64_t>(m.hierarchy_refresh_steps));
+    if (hs < 1 || hs > 1000000)
+      a.child("hierarchy_refresh_steps").fail("hierarchy_refresh_steps must be >= 1 (1 = every step)");
+    m.hierarchy_refresh_steps = static_cast<int>(hs);
     m.prolongator_damping = a.get_in_range("prolongator_damping", m.prolongator_damping, 0.0, 1.9);
     a.check_unused();
   }

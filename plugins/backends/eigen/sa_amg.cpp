@@ -621,8 +621,20 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
     L0.b = L0.x;
     L0.r = L0.x;
   }
-  const bool new_p = rebuild || since_prolongator_ + 1 >= o_.prolongator_refresh_steps || filter_changed(S);
+  const bool s_changed = !rebuild && filter_changed(S);
   fill_level0(A, S);
+  if (!rebuild && !s_changed && since_hierarchy_ + 1 < o_.hierarchy_refresh_steps) {
+    // Frozen coarse levels: only the smoother of level 0 follows the new matrix.
+    ++since_hierarchy_;
+    if (!invert_diagonal(0, message)) {
+      built_ = false;
+      return false;
+    }
+    return true;
+  }
+  since_hierarchy_ = 0;
+  ++hierarchy_builds_;
+  const bool new_p = rebuild || s_changed || since_prolongator_ + 1 >= o_.prolongator_refresh_steps;
   for (std::size_t l = 0;; ++l) {
     if (!invert_diagonal(l, message)) {
       built_ = false;

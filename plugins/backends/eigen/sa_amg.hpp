@@ -34,6 +34,10 @@ struct SaAmgOptions {
   Index coarse_dofs = 300;        ///< levels are added until a level has at most this many DOFs
   int max_levels = 10;
   int prolongator_refresh_steps = 1;  ///< rebuild T, P every k refreshes (the Galerkin product always)
+  /// Recompute the coarse levels (Galerkin products, coarsest factor) every k refreshes; in
+  /// between only level 0 (A~ and its diagonal blocks) follows the new matrix. Any k keeps the
+  /// V-cycle SPD (NUMERICS.md 3.6); a changed S always refreshes everything.
+  int hierarchy_refresh_steps = 1;
   double prolongator_damping = 4.0 / 3.0;  ///< omega = damping / lambda_max(D^-1 A)
   Index parallel_min_dofs = 6144;  ///< loops run on all OpenMP threads from this many DOFs on
 };
@@ -76,6 +80,7 @@ class SaAmg {
   double operator_complexity() const;
   int refreshes() const { return refreshes_; }
   int prolongator_builds() const { return prolongator_builds_; }
+  int hierarchy_builds() const { return hierarchy_builds_; }
   const SaAmgOptions& options() const { return o_; }
 
  private:
@@ -123,7 +128,7 @@ class SaAmg {
   Eigen::MatrixXd coarse_;
   Eigen::LLT<Eigen::MatrixXd> llt_;
   bool coarse_direct_ = true;
-  int refreshes_ = 0, prolongator_builds_ = 0, since_prolongator_ = 0;
+  int refreshes_ = 0, prolongator_builds_ = 0, since_prolongator_ = 0, since_hierarchy_ = 0, hierarchy_builds_ = 0;
   std::vector<Index> s_constrained_;
   std::vector<double> s_proj_;
   bool had_coordinates_ = false;
