@@ -8,7 +8,7 @@
 // bw_solver/wool<n>/<solver>: the wool hang at 32^2 .. 512^2 for every CPU solver and
 // preconditioner (eigen_pcg block_jacobi, eigen_pcg sa_amg with the rigid-body or translation
 // near-null space and a prolongator (or the whole coarse hierarchy) rebuilt every step or every
-// 10th, eigen_ldlt up to 128^2),
+// 10th, eigen_ldlt up to 128^2; *_cold: warm_start off, each solve from dv = 0),
 // with a timing wrapper around the solver: setup_ms (the first factorize: aggregation and
 // patterns + values), factorize_ms and solve_ms per step, iters per step, step_ms.
 //   bench_baraff_witkin --benchmark_filter=bw_solver --benchmark_counters_tabular=true
@@ -140,6 +140,7 @@ struct SolverVariant {
   bool ldlt = false;
   loom::PcgOptions pcg;
   int max_n = 1 << 30;
+  bool warm_start = true;  // BaraffWitkinOptions::warm_start (start from the previous dv)
 };
 
 std::vector<SolverVariant> variants() {
@@ -148,9 +149,11 @@ std::vector<SolverVariant> variants() {
   bj.tolerance = 1e-5;
   bj.max_iterations = 100000;
   v.push_back({"eigen_pcg_block_jacobi", false, bj});
+  v.push_back({"eigen_pcg_block_jacobi_cold", false, bj, 1 << 30, false});
   loom::PcgOptions amg = bj;
   amg.preconditioner = loom::PcgPreconditioner::SaAmg;
   v.push_back({"eigen_pcg_sa_amg_rigid", false, amg});
+  v.push_back({"eigen_pcg_sa_amg_rigid_cold", false, amg, 1 << 30, false});
   amg.amg.prolongator_refresh_steps = 10;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10", false, amg});
   amg.amg.prolongator_refresh_steps = 1;
@@ -177,6 +180,7 @@ void BM_WoolSolver(benchmark::State& st, SolverVariant var, int n, int warmup) {
   sc->solver = std::move(timed);
   loom::BaraffWitkinOptions o;
   o.kang_cho_damping = 0.01;
+  o.warm_start = var.warm_start;
   loom::BaraffWitkin bw(o);
   const double h = 0.01;
   bw.prepare(*sc, h);
