@@ -423,19 +423,26 @@ void SaAmg::tentative(std::size_t l) {
   }
 }
 
-// Largest eigenvalue of D^-1 A by 12 power iterations (for the prolongator smoother's weight).
+// Largest eigenvalue of D^-1 A by power iteration (for the prolongator smoother's weight):
+// 12 iterations on the first build, then 3 from the previous build's vector (the matrix
+// changes little from step to step).
 double SaAmg::lambda_max(std::size_t l) {
   Level& L = L_[l];
   const Index n = L.A.rows;
   const int b = L.A.br;
   const std::size_t N = static_cast<std::size_t>(n) * b;
-  std::vector<double>& v = L.x;
+  std::vector<double>& v = L.ev;
   std::vector<double>& w = L.r;
-  for (std::size_t k = 0; k < N; ++k) v[k] = 1.0 + 0.5 * std::sin(0.7 * static_cast<double>(k) + 0.3);
+  int iterations = 3;
+  if (v.size() != N) {
+    v.resize(N);
+    for (std::size_t k = 0; k < N; ++k) v[k] = 1.0 + 0.5 * std::sin(0.7 * static_cast<double>(k) + 0.3);
+    iterations = 12;
+  }
   double lam = 0;
   with_size(b, [&](auto Bc) {
     constexpr int B = decltype(Bc)::value;
-    for (int it = 0; it < 12; ++it) {
+    for (int it = 0; it < iterations; ++it) {
       double nv = 0, nw = 0;
 #pragma omp parallel for schedule(static) reduction(+ : nv, nw) if (parallel(L))
       for (Index i = 0; i < n; ++i) {

@@ -97,6 +97,7 @@ class SaAmg {
     BlockMatrix P, R, AP;             // to/from the next level: P (b x m), R = P^T, A P
     std::vector<Index> r_from_p;      // block of P transposed into each block of R
     std::vector<double> x, b, r;      // work vectors
+    std::vector<double> ev;           // last power-iteration vector of D^-1 A (warm start)
   };
 
   void build(const BsrMatrix& A, const Filter& S, std::span<const double> x);
