@@ -55,7 +55,8 @@ std::vector<Config> configs_for(const std::string& name) {
   if (name == "petsc")
     return {{name, "bjacobi", "{pc: bjacobi, tolerance: 1.0e-10}", 1e-10},
             {name, "jacobi", "{pc: jacobi, tolerance: 1.0e-10, max_iterations: 20000}", 1e-10},
-            {name, "gamg", "{pc: gamg, tolerance: 1.0e-10}", 1e-10}};
+            {name, "gamg", "{pc: gamg, tolerance: 1.0e-10}", 1e-10},
+            {name, "boomeramg", "{pc: boomeramg, tolerance: 1.0e-10}", 1e-10}};
   return {{name, "default", "{}", 1e-5}};
 }
 

@@ -30,12 +30,13 @@ class LinearSolver {
   /// Numeric phase: called each time A's values (or S) change. Returns false (with
   /// report.message) when A is not positive definite on range(S).
   virtual bool factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) = 0;
-  /// Vertex positions (3n), given before factorize() by integrators that have them: solvers
-  /// that use geometry (sa_amg's rigid-body near-null space) read them; others ignore them.
-  virtual void set_coordinates(std::span<const double> x) { (void)x; }
   /// Solve. dv holds the initial guess on entry (warm start) and the solution on exit.
   virtual SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                             std::span<const double> z, std::span<double> dv) = 0;
+  /// Vertex positions (3n), given before factorize() by integrators that have them. Solvers
+  /// that use geometry read them (the rigid-body near-null space of eigen_pcg's sa_amg and of
+  /// petsc's gamg / boomeramg); the others ignore them.
+  virtual void set_coordinates(std::span<const double> x) { (void)x; }
 };
 
 }  // namespace loom
