@@ -4,10 +4,24 @@
 // 256x256 grids. The cloth is first advanced `warmup` steps from rest so the measured steps
 // see a deformed, moving cloth. Counters: assembly and solve ms per step (forces +
 // Jacobians + system vs factorize + solve), iterations per step, last relative residual.
+//
+// bw_solver/wool<n>/<solver>: the wool hang at 32^2 .. 512^2 for every CPU solver and
+// preconditioner (eigen_pcg block_jacobi, eigen_pcg sa_amg with the rigid-body or translation
+// near-null space and a prolongator (or the whole coarse hierarchy) rebuilt every step or every
+// 10th, eigen_ldlt up to 128^2; *_cold: warm_start off, each solve from dv = 0; *_extrapolated:
+// from 2 dv(n-1) - dv(n-2)),
+// with a timing wrapper around the solver: setup_ms (the first factorize: aggregation and
+// patterns + values), factorize_ms and solve_ms per step, iters per step, step_ms.
+//   bench_baraff_witkin --benchmark_filter=bw_solver --benchmark_counters_tabular=true
+//   LOOM_BENCH_SIZES=32,64,128,256,512 (default) selects the grids.
 #include <benchmark/benchmark.h>
 
+#include <chrono>
+#include <cstdlib>
 #include <memory>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include "baraff_witkin.hpp"
 #include "eigen_ldlt.hpp"
@@ -18,6 +32,48 @@
 #include "loom/scene.hpp"
 
 namespace {
+
+// A LinearSolver that times another one (first factorize = set-up, then per step).
+class Timed final : public loom::LinearSolver {
+ public:
+  explicit Timed(std::unique_ptr<loom::LinearSolver> s) : s_(std::move(s)) {}
+  std::string name() const override { return s_->name(); }
+  void analyze_pattern(const loom::BsrMatrix& A, const loom::Filter& S) override { s_->analyze_pattern(A, S); }
+  void set_coordinates(std::span<const double> x) override { s_->set_coordinates(x); }
+  bool factorize(const loom::BsrMatrix& A, const loom::Filter& S, loom::SolveReport& r) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    const bool ok = s_->factorize(A, S, r);
+    const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (factorizations++ == 0) setup = t;
+    else factorize_total += t;
+    return ok;
+  }
+  loom::SolveReport solve(const loom::BsrMatrix& A, const loom::Filter& S, std::span<const double> b,
+                          std::span<const double> z, std::span<double> dv) override {
+    // Linear extrapolation of the initial guess from the last two solutions (2 dv1 - dv0)
+    // instead of the integrator's warm start (dv1): measured here, not in the integrator.
+    if (extrapolate && prev0.size() == dv.size())
+      for (std::size_t k = 0; k < dv.size(); ++k) dv[k] = 2 * prev1[k] - prev0[k];
+    const auto t0 = std::chrono::steady_clock::now();
+    loom::SolveReport r = s_->solve(A, S, b, z, dv);
+    if (extrapolate) {
+      if (prev1.size() == dv.size()) prev0 = prev1;
+      prev1.assign(dv.begin(), dv.end());
+    }
+    solve_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    iterations += r.iterations;
+    ++solves;
+    return r;
+  }
+  void reset_counts() { factorize_total = solve_total = 0; iterations = 0; solves = 0; }
+  double setup = 0, factorize_total = 0, solve_total = 0;
+  long iterations = 0, solves = 0, factorizations = 0;
+  bool extrapolate = false;
+  std::vector<double> prev0, prev1;
+
+ private:
+  std::unique_ptr<loom::LinearSolver> s_;
+};
 
 std::unique_ptr<loom::Scene> wool_scene(int n, bool ldlt) {
   auto sc = std::make_unique<loom::Scene>();
@@ -89,6 +145,105 @@ void BM_MaterialForcesJacobians(benchmark::State& st) {
     benchmark::DoNotOptimize(dfdx.values().data());
   }
 }
+
+struct SolverVariant {
+  std::string name;
+  bool ldlt = false;
+  loom::PcgOptions pcg;
+  int max_n = 1 << 30;
+  bool warm_start = true;  // BaraffWitkinOptions::warm_start (start from the previous dv)
+  bool extrapolate = false;  // start from 2 dv(n-1) - dv(n-2) instead
+};
+
+std::vector<SolverVariant> variants() {
+  std::vector<SolverVariant> v;
+  loom::PcgOptions bj;
+  bj.tolerance = 1e-5;
+  bj.max_iterations = 100000;
+  v.push_back({"eigen_pcg_block_jacobi", false, bj});
+  v.push_back({"eigen_pcg_block_jacobi_cold", false, bj, 1 << 30, false});
+  v.push_back({"eigen_pcg_block_jacobi_extrapolated", false, bj, 1 << 30, true, true});
+  loom::PcgOptions amg = bj;
+  amg.preconditioner = loom::PcgPreconditioner::SaAmg;
+  v.push_back({"eigen_pcg_sa_amg_rigid", false, amg});
+  v.push_back({"eigen_pcg_sa_amg_rigid_cold", false, amg, 1 << 30, false});
+  v.push_back({"eigen_pcg_sa_amg_rigid_extrapolated", false, amg, 1 << 30, true, true});
+  amg.amg.prolongator_refresh_steps = 10;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10", false, amg});
+  amg.amg.prolongator_refresh_steps = 1;
+  amg.amg.hierarchy_refresh_steps = 10;
+  v.push_back({"eigen_pcg_sa_amg_rigid_hierarchy10", false, amg});
+  amg.amg.hierarchy_refresh_steps = 1;
+  amg.amg.near_null_modes = 3;
+  v.push_back({"eigen_pcg_sa_amg_translations", false, amg});
+  v.push_back({"eigen_ldlt", true, bj, 128});
+  return v;
+}
+
+// Wool hang with one solver: `warmup` steps from rest, then timed steps.
+void BM_WoolSolver(benchmark::State& st, SolverVariant var, int n, int warmup) {
+  auto sc = wool_scene(n, var.ldlt);
+  loom::EigenPcg* pcg = nullptr;
+  if (!var.ldlt) {
+    auto p = std::make_unique<loom::EigenPcg>(var.pcg);
+    pcg = p.get();
+    sc->solver = std::move(p);
+  }
+  auto timed = std::make_unique<Timed>(std::move(sc->solver));
+  Timed* t = timed.get();
+  t->extrapolate = var.extrapolate;
+  sc->solver = std::move(timed);
+  loom::BaraffWitkinOptions o;
+  o.kang_cho_damping = 0.01;
+  o.warm_start = var.warm_start;
+  loom::BaraffWitkin bw(o);
+  const double h = 0.01;
+  bw.prepare(*sc, h);
+  for (int k = 0; k < warmup; ++k) bw.step(*sc, h);
+  t->reset_counts();
+  double step_s = 0, assemble = 0;
+  long steps = 0;
+  for (auto _ : st) {
+    const auto t0 = std::chrono::steady_clock::now();
+    bw.step(*sc, h);
+    step_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    assemble += bw.last_step().assemble_seconds;
+    ++steps;
+  }
+  st.counters["vertices"] = n * n;
+  st.counters["setup_ms"] = 1e3 * t->setup;
+  st.counters["factorize_ms"] = 1e3 * t->factorize_total / std::max(1L, t->solves);
+  st.counters["solve_ms"] = 1e3 * t->solve_total / std::max(1L, t->solves);
+  st.counters["assemble_ms"] = 1e3 * assemble / steps;
+  st.counters["step_ms"] = 1e3 * step_s / steps;
+  st.counters["iters"] = static_cast<double>(t->iterations) / std::max(1L, t->solves);
+  if (pcg && pcg->amg()) {
+    st.counters["levels"] = static_cast<double>(pcg->amg()->levels().size());
+    st.counters["op_complexity"] = pcg->amg()->operator_complexity();
+  }
+}
+
+const bool registered_wool_solvers = [] {
+  std::vector<int> sizes{32, 64, 128, 256, 512};
+  if (const char* env = std::getenv("LOOM_BENCH_SIZES")) {
+    sizes.clear();
+    std::stringstream ss(env);
+    std::string tok;
+    while (std::getline(ss, tok, ',')) sizes.push_back(std::stoi(tok));
+  }
+  for (int n : sizes)
+    for (const SolverVariant& v : variants()) {
+      if (n > v.max_n) continue;
+      const int warmup = n <= 64 ? 10 : n <= 128 ? 5 : 2;
+      const int iters = n <= 64 ? 20 : n <= 128 ? 5 : n <= 256 ? 3 : 2;
+      benchmark::RegisterBenchmark(("bw_solver/wool" + std::to_string(n) + "/" + v.name).c_str(),
+                                   [v, n, warmup](benchmark::State& st) { BM_WoolSolver(st, v, n, warmup); })
+          ->Unit(benchmark::kMillisecond)
+          ->UseRealTime()
+          ->Iterations(iters);
+    }
+  return true;
+}();
 
 }  // namespace
 

@@ -33,6 +33,10 @@ class LinearSolver {
   /// Solve. dv holds the initial guess on entry (warm start) and the solution on exit.
   virtual SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                             std::span<const double> z, std::span<double> dv) = 0;
+  /// Vertex positions (3n), given before factorize() by integrators that have them. Solvers
+  /// that use geometry read them (the rigid-body near-null space of eigen_pcg's sa_amg and of
+  /// petsc's gamg / boomeramg); the others ignore them.
+  virtual void set_coordinates(std::span<const double> x) { (void)x; }
 };
 
 }  // namespace loom

@@ -25,7 +25,7 @@
 namespace loom {
 
 /// Bumped whenever an interface in framework/include/loom changes incompatibly.
-constexpr int kPluginAbiVersion = 1;
+constexpr int kPluginAbiVersion = 2;  // 2: LinearSolver::set_coordinates
 
 enum class PluginKind { Material, Integrator, Solver, Renderer };
 const char* to_string(PluginKind k);

@@ -31,6 +31,7 @@ const char* precond_name(PcgPreconditioner p) {
   switch (p) {
     case PcgPreconditioner::None: return "none";
     case PcgPreconditioner::Jacobi: return "jacobi";
+    case PcgPreconditioner::SaAmg: return "sa_amg";
     default: return "block_jacobi";
   }
 }
@@ -69,20 +70,54 @@ PcgOptions parse_pcg_options(const Params& p) {
   const std::int64_t it = p.get("max_iterations", static_cast<std::int64_t>(o.max_iterations));
   if (it < 1 || it > 100000000) p.child("max_iterations").fail("max_iterations must be between 1 and 1e8");
   o.max_iterations = static_cast<int>(it);
-  const std::string pc = p.get_choice("preconditioner", "block_jacobi", {"none", "jacobi", "block_jacobi"});
+  const std::string pc =
+      p.get_choice("preconditioner", "block_jacobi", {"none", "jacobi", "block_jacobi", "sa_amg"});
   const std::int64_t pm = p.get("parallel_min_rows", static_cast<std::int64_t>(o.parallel_min_rows));
   if (pm < 0 || pm > 1000000000) p.child("parallel_min_rows").fail("parallel_min_rows must be >= 0 (vertices)");
   o.parallel_min_rows = static_cast<Index>(pm);
   o.preconditioner = pc == "none"     ? PcgPreconditioner::None
                      : pc == "jacobi" ? PcgPreconditioner::Jacobi
+                     : pc == "sa_amg" ? PcgPreconditioner::SaAmg
                                       : PcgPreconditioner::BlockJacobi;
+  if (p.has("sa_amg")) {
+    const Params a = p.child("sa_amg");
+    if (o.preconditioner != PcgPreconditioner::SaAmg)
+      a.fail("the sa_amg: options apply only with preconditioner: sa_amg");
+    if (!a.is_map()) a.fail("sa_amg: must be a map, e.g. sa_amg: {near_null_space: rigid}");
+    amg::SaAmgOptions& m = o.amg;
+    const std::string nn = a.get_choice("near_null_space", "rigid", {"rigid", "translations"});
+    m.near_null_modes = nn == "rigid" ? 6 : 3;
+    m.strength_threshold = a.get_in_range("strength_threshold", m.strength_threshold, 0.0, 1.0);
+    const std::int64_t sw = a.get("smoothing_sweeps", static_cast<std::int64_t>(m.smoothing_sweeps));
+    if (sw < 1 || sw > 10) a.child("smoothing_sweeps").fail("smoothing_sweeps must be between 1 and 10");
+    m.smoothing_sweeps = static_cast<int>(sw);
+    const std::int64_t cd = a.get("coarse_dofs", static_cast<std::int64_t>(m.coarse_dofs));
+    if (cd < 6 || cd > 4000) a.child("coarse_dofs").fail("coarse_dofs must be between 6 and 4000 (dense Cholesky)");
+    m.coarse_dofs = static_cast<Index>(cd);
+    const std::int64_t ml = a.get("max_levels", static_cast<std::int64_t>(m.max_levels));
+    if (ml < 1 || ml > 30) a.child("max_levels").fail("max_levels must be between 1 and 30");
+    m.max_levels = static_cast<int>(ml);
+    const std::int64_t rs = a.get("prolongator_refresh_steps", static_cast<std::int64_t>(m.prolongator_refresh_steps));
+    if (rs < 1 || rs > 1000000)
+      a.child("prolongator_refresh_steps").fail("prolongator_refresh_steps must be >= 1 (1 = every step)");
+    m.prolongator_refresh_steps = static_cast<int>(rs);
+    const std::int64_t hs = a.get("hierarchy_refresh_steps", static_cast<std::int64_t>(m.hierarchy_refresh_steps));
+    if (hs < 1 || hs > 1000000)
+      a.child("hierarchy_refresh_steps").fail("hierarchy_refresh_steps must be >= 1 (1 = every step)");
+    m.hierarchy_refresh_steps = static_cast<int>(hs);
+    m.prolongator_damping = a.get_in_range("prolongator_damping", m.prolongator_damping, 0.0, 1.9);
+    a.check_unused();
+  }
   return o;
 }
 
 EigenPcg::EigenPcg(PcgOptions options) : options_(options) {}
 
+void EigenPcg::set_coordinates(std::span<const double> x) { coords_.assign(x.begin(), x.end()); }
+
 void EigenPcg::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   (void)S;
+  if (amg_) amg_->invalidate();
   n_ = A.rows();
   const std::size_t N = 3 * static_cast<std::size_t>(n_);
   pinv_.assign(9 * static_cast<std::size_t>(n_), 0.0);
@@ -99,6 +134,19 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
   const BsrPattern& P = A.pattern();
   const Index n = n_;
   const PcgPreconditioner pc = options_.preconditioner;
+  if (pc == PcgPreconditioner::SaAmg) {
+    if (!amg_) amg_ = std::make_unique<amg::SaAmg>(options_.amg);
+    std::span<const double> x;
+    if (coords_.size() == 3 * static_cast<std::size_t>(n)) x = coords_;
+    std::string msg;
+    const bool ok = amg_->setup(A, S, x, msg);
+    report.factorize_seconds = seconds_since(t0);
+    if (!ok) {
+      report.converged = false;
+      report.message = "eigen_pcg: " + msg;
+    }
+    return ok;
+  }
   Index bad = INT_MAX;
 #pragma omp parallel for schedule(static) reduction(min : bad) if (n >= solver::kParallelMinRows)
   for (Index i = 0; i < n; ++i) {
@@ -121,6 +169,7 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
           M[4 * a] = 1.0 / d;
         }
         break;
+      case PcgPreconditioner::SaAmg:  // handled above
       case PcgPreconditioner::BlockJacobi: {
         double B[9];
         solver::projected_block(S, i, i, D, B);
@@ -254,6 +303,72 @@ int EigenPcg::iterate(const BsrMatrix& A, const Filter& S, std::span<double> dv,
   return it_out;
 }
 
+int EigenPcg::iterate_amg(const BsrMatrix& A, const Filter& S, std::span<double> dv, double threshold2,
+                          int max_iterations, int& status, double& curvature) {
+  const BsrPattern& P = A.pattern();
+  const Index n = n_;
+  const Index* rp = P.row_ptr.data();
+  const Index* col = P.col.data();
+  const double* val = A.values().data();
+  double* r = r_.data();
+  double* c = c_.data();
+  double* q = q_.data();
+  double* s = s_.data();
+  double* x = dv.data();
+  const bool par = n >= options_.parallel_min_rows;
+  // s = S M r, returns r . s
+  auto precondition = [&]() {
+    amg_->apply(r, s);
+    solver::filter(S, s_);
+    double d = 0;
+#pragma omp parallel for schedule(static) reduction(+ : d) if (par)
+    for (Index i = 0; i < n; ++i) d += kernels::dot3(r + 3 * static_cast<std::size_t>(i), s + 3 * static_cast<std::size_t>(i));
+    return d;
+  };
+  double delta = precondition();
+  const std::size_t N = 3 * static_cast<std::size_t>(n);
+  std::copy(s, s + N, c);
+  double rr = rr_;
+  int it = 0;
+  status = 1;
+  curvature = 0;
+  for (;;) {
+    if (rr <= threshold2) { status = 0; break; }
+    if (it >= max_iterations) { status = 1; break; }
+    if (!(delta > 0) || !std::isfinite(delta)) { status = 3; curvature = delta; break; }
+    double cq = 0;
+#pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
+    for (Index i = 0; i < n; ++i) {
+      const std::size_t o = 3 * static_cast<std::size_t>(i);
+      row_multiply(rp, col, val, c, i, q + o);
+      const int f = S.free_dofs(i);
+      if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), q + o);
+      cq += kernels::dot3(c + o, q + o);
+    }
+    if (!(cq > 0) || !std::isfinite(cq)) { status = 2; curvature = cq; break; }
+    const double alpha = delta / cq;
+    double lr = 0;
+#pragma omp parallel for schedule(static) reduction(+ : lr) if (par)
+    for (Index i = 0; i < n; ++i) {
+      const std::size_t o = 3 * static_cast<std::size_t>(i);
+      for (int a = 0; a < 3; ++a) {
+        x[o + a] += alpha * c[o + a];
+        r[o + a] -= alpha * q[o + a];
+      }
+      lr += kernels::dot3(r + o, r + o);
+    }
+    rr = lr;
+    const double dnew = precondition();
+    const double beta = dnew / delta;
+    delta = dnew;
+#pragma omp parallel for schedule(static) if (par)
+    for (std::size_t k = 0; k < N; ++k) c[k] = s[k] + beta * c[k];
+    ++it;
+  }
+  rr_ = rr;
+  return it;
+}
+
 SolveReport EigenPcg::solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                             std::span<const double> z, std::span<double> dv) {
   const auto t0 = Clock::now();
@@ -308,7 +423,9 @@ SolveReport EigenPcg::solve(const BsrMatrix& A, const Filter& S, std::span<const
   int total = 0, status = 1;
   double curvature = 0, rel = 0;
   for (int attempt = 0; attempt < 3; ++attempt) {
-    total += iterate(A, S, dv, threshold2, options_.max_iterations - total, status, curvature);
+    total += options_.preconditioner == PcgPreconditioner::SaAmg
+                 ? iterate_amg(A, S, dv, threshold2, options_.max_iterations - total, status, curvature)
+                 : iterate(A, S, dv, threshold2, options_.max_iterations - total, status, curvature);
     if (status != 0) break;
     // The recursive residual has converged; check the true one (and restart from it if
     // rounding let the two drift apart).

@@ -2,16 +2,18 @@
 // with the Ascher-Boxerman start, run directly on the 3x3 block-sparse matrix.
 #pragma once
 
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
 
 #include "loom/linear_solver.hpp"
 #include "loom/params.hpp"
+#include "sa_amg.hpp"
 
 namespace loom {
 
-enum class PcgPreconditioner { None, Jacobi, BlockJacobi };
+enum class PcgPreconditioner { None, Jacobi, BlockJacobi, SaAmg };
 
 struct PcgOptions {
   PcgPreconditioner preconditioner = PcgPreconditioner::BlockJacobi;
@@ -21,9 +23,11 @@ struct PcgOptions {
   /// the per-iteration barriers cost more than they save, and far more when the machine is
   /// oversubscribed). 0 = always parallel.
   Index parallel_min_rows = 2048;
+  amg::SaAmgOptions amg;       ///< preconditioner: sa_amg (the `sa_amg:` map)
 };
 
-/// Read tolerance, max_iterations and preconditioner (none | jacobi | block_jacobi).
+/// Read tolerance, max_iterations, preconditioner (none | jacobi | block_jacobi | sa_amg) and the
+/// sa_amg: map.
 PcgOptions parse_pcg_options(const Params& p);
 
 class EigenPcg final : public LinearSolver {
@@ -34,7 +38,10 @@ class EigenPcg final : public LinearSolver {
   bool factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) override;
   SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                     std::span<const double> z, std::span<double> dv) override;
+  void set_coordinates(std::span<const double> x) override;
   const PcgOptions& options() const { return options_; }
+  /// The multigrid hierarchy (preconditioner: sa_amg), null before the first factorize().
+  amg::SaAmg* amg() { return amg_.get(); }
 
  private:
   // One PCG run from the current dv and residual r (in range(S)); returns the iterations
@@ -43,7 +50,13 @@ class EigenPcg final : public LinearSolver {
   int iterate(const BsrMatrix& A, const Filter& S, std::span<double> dv, double threshold2,
               int max_iterations, int& status, double& curvature);
 
+  // The same iteration with the V-cycle as preconditioner (s = S M r).
+  int iterate_amg(const BsrMatrix& A, const Filter& S, std::span<double> dv, double threshold2,
+                  int max_iterations, int& status, double& curvature);
+
   PcgOptions options_;
+  std::unique_ptr<amg::SaAmg> amg_;
+  std::vector<double> coords_;
   Index n_ = 0;
   std::vector<double> pinv_;  // 9 per vertex: S_i P_i^{-1} S_i
   std::vector<double> r_, c_, q_, s_;

@@ -128,7 +128,9 @@ int launcher_rank() {
 PetscSolverOptions PetscSolverOptions::from_params(const Params& p) {
   PetscSolverOptions o;
   o.ksp = p.get_choice("ksp", o.ksp, {"cg", "cr", "minres", "gmres", "fgmres", "bcgs", "pipecg", "preonly"});
-  o.pc = p.get_choice("pc", o.pc, {"jacobi", "bjacobi", "gamg", "none", "sor", "ilu", "icc", "hypre", "cholesky", "lu"});
+  o.pc = p.get_choice("pc", o.pc,
+                      {"jacobi", "bjacobi", "gamg", "none", "sor", "ilu", "icc", "hypre", "boomeramg", "cholesky", "lu"});
+  o.near_null_space = p.get_choice("near_null_space", o.near_null_space, {"auto", "rigid", "none"});
   o.tolerance = p.get_positive("tolerance", o.tolerance);
   const std::int64_t it = p.get("max_iterations", std::int64_t{o.max_iterations});
   if (it < 1 || it > 100000000) p.child("max_iterations").fail("max_iterations must be an integer >= 1");
@@ -150,6 +152,7 @@ struct PetscSolver::Impl {
   std::vector<std::string> option_names;
   bool options_checked = false;
   bool aij = false;  // AIJ with block size 3 instead of BAIJ
+  bool amg_pc = false;  // gamg / hypre / ml: takes a near-null space
 
   Mat M = nullptr;
   Vec x = nullptr, rhs = nullptr, res = nullptr, xall = nullptr;
@@ -164,6 +167,8 @@ struct PetscSolver::Impl {
   std::vector<Index> cons_list;
   bool have_values = false;
   bool have_pc = false;
+  std::vector<double> coords;        // vertex positions from set_coordinates (3n)
+  bool nullspace_attached = false;
   int since_setup = 0;
   int setups = 0;
   double t_assemble = 0, t_setup = 0;
@@ -223,6 +228,8 @@ PetscSolver::PetscSolver(const PetscSolverOptions& options, MPI_Comm comm) : imp
 PetscSolver::~PetscSolver() = default;
 
 int PetscSolver::rank() const { return impl_->rank; }
+bool PetscSolver::has_near_null_space() const { return impl_->nullspace_attached; }
+void PetscSolver::set_coordinates(std::span<const double> x) { impl_->coords.assign(x.begin(), x.end()); }
 int PetscSolver::ranks() const { return impl_->size; }
 Index PetscSolver::row_begin() const { return impl_->rb; }
 Index PetscSolver::row_end() const { return impl_->re; }
@@ -273,7 +280,22 @@ void PetscSolver::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   LOOM_PETSC(KSPSetType(m.ksp, m.opt.ksp.c_str()));
   PC pc;
   LOOM_PETSC(KSPGetPC(m.ksp, &pc));
-  LOOM_PETSC(PCSetType(pc, m.opt.pc.c_str()));
+  if (m.opt.pc == "boomeramg") {
+    // hypre BoomerAMG for a block-3 system: nodal coarsening on the 3x3 blocks (Frobenius
+    // norms) and interpolation that also reproduces the near-null space vectors (the rigid
+    // modes attached in factorize). The scene's `options` can still override both.
+    LOOM_PETSC(PCSetType(pc, PCHYPRE));
+    LOOM_PETSC(PCHYPRESetType(pc, "boomeramg"));
+    for (auto [key, value] : {std::pair{"pc_hypre_boomeramg_nodal_coarsen", "6"},
+                              std::pair{"pc_hypre_boomeramg_vec_interp_variant", "2"}}) {
+      const std::string name = "-" + m.prefix + key;
+      PetscBool set = PETSC_FALSE;
+      LOOM_PETSC(PetscOptionsHasName(nullptr, nullptr, name.c_str(), &set));
+      if (!set) LOOM_PETSC(PetscOptionsSetValue(nullptr, name.c_str(), value));
+    }
+  } else {
+    LOOM_PETSC(PCSetType(pc, m.opt.pc.c_str()));
+  }
   LOOM_PETSC(KSPSetTolerances(m.ksp, m.opt.tolerance, 0.0, PETSC_DEFAULT, m.opt.max_iterations));
   // The relative residual Loom reports is unpreconditioned: |b^ - A~ y| / |b^|.
   if (m.opt.ksp == "cg" || m.opt.ksp == "pipecg" || m.opt.ksp == "cr")
@@ -288,6 +310,7 @@ void PetscSolver::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   LOOM_PETSC(PCGetType(pc_now, &pc_type_now));
   const std::string pct = pc_type_now ? pc_type_now : "";
   m.aij = m.opt.matrix == "aij" || (m.opt.matrix == "auto" && (pct == "gamg" || pct == "hypre" || pct == "ml"));
+  m.amg_pc = pct == "gamg" || pct == "hypre" || pct == "ml";
   const PetscInt nl = 3 * static_cast<PetscInt>(nloc), N = 3 * static_cast<PetscInt>(P.n);
   LOOM_PETSC(MatCreate(m.comm, &m.M));
   LOOM_PETSC(MatSetSizes(m.M, nl, nl, N, N));
@@ -390,6 +413,30 @@ bool PetscSolver::factorize(const BsrMatrix& A, const Filter& S, SolveReport& re
   LOOM_PETSC(KSPSetOperators(m.ksp, m.M, m.M));
   LOOM_PETSC(KSPSetReusePreconditioner(m.ksp, rebuild ? PETSC_FALSE : PETSC_TRUE));
   if (rebuild) {
+    // Rigid-body near-null space from the current positions (6 modes per vertex; the
+    // projected matrix's constrained rows are identity rows, decoupled from the rest).
+    const bool want = m.opt.near_null_space == "rigid" || (m.opt.near_null_space == "auto" && m.amg_pc);
+    m.nullspace_attached = false;
+    if (want && m.coords.size() == 3 * static_cast<std::size_t>(m.n)) {
+      Vec c;
+      LOOM_PETSC(VecDuplicate(m.x, &c));
+      LOOM_PETSC(VecSetBlockSize(c, 3));
+      PetscScalar* cv;
+      LOOM_PETSC(VecGetArray(c, &cv));
+      for (long k = 3L * m.rb; k < 3L * m.re; ++k) cv[k - 3L * m.rb] = m.coords[k];
+      LOOM_PETSC(VecRestoreArray(c, &cv));
+      MatNullSpace nsp;
+      LOOM_PETSC(MatNullSpaceCreateRigidBody(c, &nsp));
+      LOOM_PETSC(MatSetNearNullSpace(m.M, nsp));
+      LOOM_PETSC(MatNullSpaceDestroy(&nsp));
+      LOOM_PETSC(VecDestroy(&c));
+      m.nullspace_attached = true;
+    } else if (m.opt.near_null_space == "rigid") {
+      report.message = "petsc: near_null_space: rigid needs the vertex positions, but the integrator passed none "
+                       "(use near_null_space: auto or none)";
+      report.factorize_seconds = seconds_since(t0);
+      return false;
+    }
     PetscErrorCode ierr = KSPSetUp(m.ksp);
     if (ierr) {
       m.have_pc = false;

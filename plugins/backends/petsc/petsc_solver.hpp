@@ -16,12 +16,16 @@ namespace loom {
 
 struct PetscSolverOptions {
   std::string ksp = "cg";          ///< KSP type (cg, cr, minres, gmres, ...)
-  std::string pc = "bjacobi";      ///< jacobi | bjacobi | gamg | none | ... (any PC type name)
+  std::string pc = "bjacobi";      ///< jacobi | bjacobi | gamg | hypre | boomeramg | none | ... (any PC type name)
   double tolerance = 1e-8;         ///< relative residual |S(b - A dv)| / |S(b - A z)|
   int max_iterations = 10000;
   int reuse_preconditioner_steps = 1;  ///< rebuild the PC every N factorize() calls
   std::string options;             ///< PETSc options, e.g. "-ksp_type cg -pc_type gamg"
   std::string matrix = "auto";     ///< auto (BAIJ, AIJ for gamg/hypre) | baij | aij
+  /// auto: the rigid-body modes of the vertex positions (MatNullSpaceCreateRigidBody, 6 per
+  /// vertex) as the near-null space for gamg / hypre / boomeramg when the integrator passes
+  /// positions (set_coordinates); rigid: always (an error without positions); none: never.
+  std::string near_null_space = "auto";
   static PetscSolverOptions from_params(const Params& p);
 };
 
@@ -40,8 +44,11 @@ class PetscSolver final : public LinearSolver {
   bool factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) override;
   SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                     std::span<const double> z, std::span<double> dv) override;
+  void set_coordinates(std::span<const double> x) override;
 
   int rank() const;
+  /// Whether the last preconditioner set-up had the rigid-body near-null space attached.
+  bool has_near_null_space() const;
   int ranks() const;
   /// Block rows [begin, end) owned by this rank.
   Index row_begin() const;

@@ -272,6 +272,7 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
 
   auto solve_once = [&] {
     rep = SolveReport{};
+    scene.solver->set_coordinates(s.x);
     const bool ok = scene.solver->factorize(A_, S_, rep);
     if (ok) {
       if (!options_.warm_start) std::fill(dv_.begin(), dv_.end(), 0.0);

@@ -1,0 +1,795 @@
+#include "sa_amg.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <type_traits>
+
+#include "loom/solver_common.hpp"
+
+namespace loom::amg {
+
+namespace {
+
+using I3 = std::integral_constant<int, 3>;
+using I6 = std::integral_constant<int, 6>;
+
+// f(integral_constant<int, a>) for a in {3, 6}.
+template <class F>
+void with_size(int a, F&& f) {
+  if (a == 3)
+    f(I3{});
+  else
+    f(I6{});
+}
+template <class F>
+void with_sizes(int a, int b, F&& f) {
+  with_size(a, [&](auto A) { with_size(b, [&](auto B) { f(A, B); }); });
+}
+
+// y += M x, M is R x C row-major.
+template <int R, int C>
+inline void gemv_add(const double* M, const double* x, double* y) {
+  for (int a = 0; a < R; ++a) {
+    double s = 0;
+    for (int c = 0; c < C; ++c) s += M[a * C + c] * x[c];
+    y[a] += s;
+  }
+}
+// y -= M x
+template <int R, int C>
+inline void gemv_sub(const double* M, const double* x, double* y) {
+  for (int a = 0; a < R; ++a) {
+    double s = 0;
+    for (int c = 0; c < C; ++c) s += M[a * C + c] * x[c];
+    y[a] -= s;
+  }
+}
+// Cm += A B, A is R x K, B is K x C.
+template <int R, int K, int C>
+inline void gemm_add(const double* A, const double* B, double* Cm) {
+  for (int a = 0; a < R; ++a)
+    for (int k = 0; k < K; ++k) {
+      const double s = A[a * K + k];
+      for (int c = 0; c < C; ++c) Cm[a * C + c] += s * B[k * C + c];
+    }
+}
+
+// Inverse of a B x B SPD matrix by Cholesky; false when it is not (numerically) SPD.
+template <int B>
+bool spd_inverse(const double* A, double* Ainv) {
+  double L[B * B] = {};
+  for (int j = 0; j < B; ++j) {
+    double d = A[j * B + j];
+    for (int k = 0; k < j; ++k) d -= L[j * B + k] * L[j * B + k];
+    if (!(d > 0) || !std::isfinite(d)) return false;
+    const double ljj = std::sqrt(d);
+    L[j * B + j] = ljj;
+    for (int i = j + 1; i < B; ++i) {
+      double s = 0.5 * (A[i * B + j] + A[j * B + i]);
+      for (int k = 0; k < j; ++k) s -= L[i * B + k] * L[j * B + k];
+      L[i * B + j] = s / ljj;
+    }
+  }
+  // W = L^-1 (lower triangular), Ainv = W^T W.
+  double W[B * B] = {};
+  for (int c = 0; c < B; ++c) {
+    for (int i = c; i < B; ++i) {
+      double s = (i == c) ? 1.0 : 0.0;
+      for (int k = c; k < i; ++k) s -= L[i * B + k] * W[k * B + c];
+      W[i * B + c] = s / L[i * B + i];
+    }
+  }
+  for (int i = 0; i < B; ++i)
+    for (int j = 0; j < B; ++j) {
+      double s = 0;
+      for (int k = std::max(i, j); k < B; ++k) s += W[k * B + i] * W[k * B + j];
+      Ainv[i * B + j] = s;
+    }
+  return true;
+}
+
+double frob(const double* b, std::size_t n) {
+  double s = 0;
+  for (std::size_t k = 0; k < n; ++k) s += b[k] * b[k];
+  return std::sqrt(s);
+}
+
+}  // namespace
+
+double SaAmg::operator_complexity() const {
+  if (L_.empty()) return 0;
+  double total = 0;
+  for (const Level& L : L_) total += static_cast<double>(L.A.nnz()) * static_cast<double>(L.A.bsize());
+  return total / (static_cast<double>(L_[0].A.nnz()) * 9.0);
+}
+
+void SaAmg::fill_level0(const BsrMatrix& A, const Filter& S) {
+  Level& L = L_[0];
+  const BsrPattern& P = A.pattern();
+  const Index n = P.n;
+#pragma omp parallel for schedule(static) if (parallel(L))
+  for (Index i = 0; i < n; ++i)
+    for (Index k = P.row_ptr[i]; k < P.row_ptr[i + 1]; ++k) solver::projected_block(S, i, P.col[k], A.block(k), L.A.block(k));
+}
+
+bool SaAmg::invert_diagonal(std::size_t l, std::string& message) {
+  Level& L = L_[l];
+  const Index n = L.A.rows;
+  const int b = L.A.br;
+  L.dinv.resize(static_cast<std::size_t>(n) * b * b);
+  Index bad = n;
+  with_size(b, [&](auto Bc) {
+    constexpr int B = decltype(Bc)::value;
+#pragma omp parallel for schedule(static) reduction(min : bad) if (parallel(L))
+    for (Index i = 0; i < n; ++i)
+      if (!spd_inverse<B>(L.A.block(L.diag[i]), L.dinv.data() + static_cast<std::size_t>(B * B) * i)) bad = std::min(bad, i);
+  });
+  if (bad < n) {
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "sa_amg: diagonal block %d of level %zu is not positive definite", bad, l);
+    message = std::string(buf) +
+              (l == 0 ? " (that vertex's block of S A S), so the system matrix is not positive definite on the free DOFs"
+                      : " (the Galerkin product of an indefinite matrix)") +
+              "; reduce integrator.dt, enable the material's Jacobian clamp, or set integrator.on_solver_failure: "
+              "halve_step";
+    return false;
+  }
+  return true;
+}
+
+// Strength graph on the level's values, then the three aggregation phases of Vanek, Mandel
+// & Brezina (1996): (1) a node whose strong neighbours are all free seeds an aggregate with
+// them, (2) a node left over joins the phase-1 aggregate it is most strongly connected to,
+// (3) what is still left forms aggregates with its free strong neighbours. Nodes without
+// strong neighbours (fully constrained vertices, whose rows of A~ are the identity) stay out
+// of every aggregate: the smoother alone handles them.
+void SaAmg::aggregate(std::size_t l) {
+  Level& L = L_[l];
+  const Index n = L.A.rows;
+  const std::size_t bs = L.A.bsize();
+  std::vector<double> dnorm(n);
+  for (Index i = 0; i < n; ++i) dnorm[i] = frob(L.A.block(L.diag[i]), bs);
+  std::vector<Index> sp(n + 1, 0), sc;
+  std::vector<double> sw;
+  const double th = o_.strength_threshold;
+  for (Index i = 0; i < n; ++i) {
+    for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k) {
+      const Index j = L.A.ci[k];
+      if (j == i) continue;
+      const double s = frob(L.A.block(k), bs);
+      if (s > 0 && s > th * std::sqrt(dnorm[i] * dnorm[j])) {
+        sc.push_back(j);
+        sw.push_back(s / std::sqrt(dnorm[i] * dnorm[j]));
+      }
+    }
+    sp[i + 1] = static_cast<Index>(sc.size());
+  }
+  std::vector<Index> agg(n, -1);
+  Index na = 0;
+  for (Index i = 0; i < n; ++i) {
+    if (agg[i] >= 0 || sp[i] == sp[i + 1]) continue;
+    bool free = true;
+    for (Index k = sp[i]; k < sp[i + 1] && free; ++k) free = agg[sc[k]] < 0;
+    if (!free) continue;
+    agg[i] = na;
+    for (Index k = sp[i]; k < sp[i + 1]; ++k) agg[sc[k]] = na;
+    ++na;
+  }
+  const std::vector<Index> agg1 = agg;
+  for (Index i = 0; i < n; ++i) {
+    if (agg[i] >= 0) continue;
+    double best = -1;
+    for (Index k = sp[i]; k < sp[i + 1]; ++k)
+      if (agg1[sc[k]] >= 0 && sw[k] > best) {
+        best = sw[k];
+        agg[i] = agg1[sc[k]];
+      }
+  }
+  for (Index i = 0; i < n; ++i) {
+    if (agg[i] >= 0 || sp[i] == sp[i + 1]) continue;
+    agg[i] = na;
+    for (Index k = sp[i]; k < sp[i + 1]; ++k)
+      if (agg[sc[k]] < 0) agg[sc[k]] = na;
+    ++na;
+  }
+  L.agg = std::move(agg);
+}
+
+void SaAmg::colour(std::size_t l) {
+  Level& L = L_[l];
+  const Index n = L.A.rows;
+  std::vector<int> c(n, -1), seen;
+  int nc = 0;
+  for (Index i = 0; i < n; ++i) {
+    seen.assign(static_cast<std::size_t>(nc) + 1, 0);
+    for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k) {
+      const int cj = c[L.A.ci[k]];
+      if (cj >= 0) seen[cj] = 1;
+    }
+    int ci = 0;
+    while (seen[ci]) ++ci;
+    c[i] = ci;
+    nc = std::max(nc, ci + 1);
+  }
+  L.colour_ptr.assign(static_cast<std::size_t>(nc) + 1, 0);
+  for (Index i = 0; i < n; ++i) ++L.colour_ptr[c[i] + 1];
+  for (int k = 0; k < nc; ++k) L.colour_ptr[k + 1] += L.colour_ptr[k];
+  L.colour_rows.resize(n);
+  std::vector<Index> fill(L.colour_ptr.begin(), L.colour_ptr.end() - 1);
+  for (Index i = 0; i < n; ++i) L.colour_rows[fill[c[i]]++] = i;
+}
+
+// Patterns of P (row i: the aggregates of i's neighbours), R = P^T, A P and P^T A P; the
+// next level is appended with the Galerkin pattern.
+void SaAmg::build_patterns(std::size_t l) {
+  Index nc = 0;
+  for (Index a : L_[l].agg) nc = std::max(nc, a + 1);
+  Level& L = L_[l];
+  const Index n = L.A.rows;
+  const int b = L.A.br, m = m_;
+  std::vector<Index> mark(nc, -1);
+  auto sorted_union = [&](BlockMatrix& M, Index rows, auto&& each_row) {
+    M.rp.assign(static_cast<std::size_t>(rows) + 1, 0);
+    M.ci.clear();
+    for (Index i = 0; i < rows; ++i) {
+      const std::size_t start = M.ci.size();
+      each_row(i, [&](Index j) {
+        if (mark[j] != i) {
+          mark[j] = i;
+          M.ci.push_back(j);
+        }
+      });
+      std::sort(M.ci.begin() + static_cast<std::ptrdiff_t>(start), M.ci.end());
+      M.rp[i + 1] = static_cast<Index>(M.ci.size());
+    }
+  };
+  // P
+  L.P.rows = n;
+  L.P.cols = nc;
+  L.P.br = b;
+  L.P.bc = m;
+  sorted_union(L.P, n, [&](Index i, auto&& add) {
+    for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
+      if (L.agg[L.A.ci[k]] >= 0) add(L.agg[L.A.ci[k]]);
+  });
+  L.P.v.assign(L.P.ci.size() * L.P.bsize(), 0.0);
+  // R = P^T
+  L.R.rows = nc;
+  L.R.cols = n;
+  L.R.br = m;
+  L.R.bc = b;
+  L.R.rp.assign(static_cast<std::size_t>(nc) + 1, 0);
+  for (Index J : L.P.ci) ++L.R.rp[J + 1];
+  for (Index J = 0; J < nc; ++J) L.R.rp[J + 1] += L.R.rp[J];
+  L.R.ci.resize(L.P.ci.size());
+  L.r_from_p.resize(L.P.ci.size());
+  {
+    std::vector<Index> fill(L.R.rp.begin(), L.R.rp.end() - 1);
+    for (Index i = 0; i < n; ++i)
+      for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k) {
+        const Index q = fill[L.P.ci[k]]++;
+        L.R.ci[q] = i;
+        L.r_from_p[q] = k;
+      }
+  }
+  L.R.v.assign(L.R.ci.size() * L.R.bsize(), 0.0);
+  // A P
+  std::fill(mark.begin(), mark.end(), -1);
+  L.AP.rows = n;
+  L.AP.cols = nc;
+  L.AP.br = b;
+  L.AP.bc = m;
+  sorted_union(L.AP, n, [&](Index i, auto&& add) {
+    for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k) {
+      const Index j = L.A.ci[k];
+      for (Index q = L.P.rp[j]; q < L.P.rp[j + 1]; ++q) add(L.P.ci[q]);
+    }
+  });
+  L.AP.v.assign(L.AP.ci.size() * L.AP.bsize(), 0.0);
+  // P^T A P
+  Level C;
+  std::fill(mark.begin(), mark.end(), -1);
+  C.A.rows = C.A.cols = nc;
+  C.A.br = C.A.bc = m;
+  sorted_union(C.A, nc, [&](Index I, auto&& add) {
+    for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k) {
+      const Index i = L.R.ci[k];
+      for (Index q = L.AP.rp[i]; q < L.AP.rp[i + 1]; ++q) add(L.AP.ci[q]);
+    }
+  });
+  C.A.v.assign(C.A.ci.size() * C.A.bsize(), 0.0);
+  C.diag.resize(nc);
+  for (Index I = 0; I < nc; ++I) {
+    C.diag[I] = -1;
+    for (Index k = C.A.rp[I]; k < C.A.rp[I + 1]; ++k)
+      if (C.A.ci[k] == I) C.diag[I] = k;
+  }
+  C.B.assign(static_cast<std::size_t>(nc) * m * m, 0.0);
+  C.dead.assign(static_cast<std::size_t>(nc) * m, 0);
+  C.x.assign(static_cast<std::size_t>(nc) * m, 0.0);
+  C.b.assign(static_cast<std::size_t>(nc) * m, 0.0);
+  C.r.assign(static_cast<std::size_t>(nc) * m, 0.0);
+  L.T.assign(static_cast<std::size_t>(n) * b * m, 0.0);
+  L_.push_back(std::move(C));
+}
+
+// Rigid-body modes of each aggregate about its centroid, rows filtered by S_i (constraint-
+// aware near-null space: the coarse space lies in range(S)).
+void SaAmg::near_null_level0(const Filter& S, std::span<const double> x) {
+  Level& L = L_[0];
+  const Index n = L.A.rows;
+  const int m = m_;
+  Index na = 0;
+  for (Index a : L.agg) na = std::max(na, a + 1);
+  std::vector<double>& cen = centroid_;
+  cen.assign(4 * static_cast<std::size_t>(na), 0.0);
+  if (m == 6)
+    for (Index i = 0; i < n; ++i) {
+      const Index a = L.agg[i];
+      if (a < 0) continue;
+      for (int c = 0; c < 3; ++c) cen[4 * a + c] += x[3 * i + c];
+      cen[4 * a + 3] += 1;
+    }
+  L.B.assign(static_cast<std::size_t>(n) * 3 * m, 0.0);
+  for (Index i = 0; i < n; ++i) {
+    double* Bi = L.B.data() + static_cast<std::size_t>(3 * m) * i;
+    for (int a = 0; a < 3; ++a) Bi[a * m + a] = 1.0;
+    const Index g = L.agg[i];
+    if (m == 6 && g >= 0) {
+      const double w = 1.0 / cen[4 * g + 3];
+      const double dx = x[3 * i] - w * cen[4 * g], dy = x[3 * i + 1] - w * cen[4 * g + 1],
+                   dz = x[3 * i + 2] - w * cen[4 * g + 2];
+      // rotations about x, y, z: omega x d
+      Bi[0 * m + 3] = 0;
+      Bi[1 * m + 3] = -dz;
+      Bi[2 * m + 3] = dy;
+      Bi[0 * m + 4] = dz;
+      Bi[1 * m + 4] = 0;
+      Bi[2 * m + 4] = -dx;
+      Bi[0 * m + 5] = -dy;
+      Bi[1 * m + 5] = dx;
+      Bi[2 * m + 5] = 0;
+    }
+    const int f = S.free_dofs(i);
+    if (f == 3) continue;
+    if (f == 0) {
+      std::fill(Bi, Bi + 3 * m, 0.0);
+      continue;
+    }
+    const double* Sp = S.projector(i).data();
+    for (int c = 0; c < m; ++c) {
+      const double v[3] = {Bi[c], Bi[m + c], Bi[2 * m + c]};
+      for (int a = 0; a < 3; ++a) Bi[a * m + c] = Sp[3 * a] * v[0] + Sp[3 * a + 1] * v[1] + Sp[3 * a + 2] * v[2];
+    }
+  }
+}
+
+// Tentative prolongator: per aggregate a thin QR (modified Gram-Schmidt, twice) of the rows
+// of B; Q's rows become T, R becomes the next level's near-null space. A column that is
+// (numerically) dependent is dropped: its column of T is zero and the coarse DOF is marked
+// dead (its row and column of the coarse matrix are zero; the Galerkin step puts 1 on its
+// diagonal, as the filter does for constrained DOFs).
+void SaAmg::tentative(std::size_t l) {
+  Level& L = L_[l];
+  Level& C = L_[l + 1];
+  const int b = L.A.br, m = m_;
+  const Index nc = C.A.rows;
+  const std::size_t tb = static_cast<std::size_t>(b) * m;
+  std::copy(L.B.begin(), L.B.end(), L.T.begin());
+  for (Index i = 0; i < L.A.rows; ++i)
+    if (L.agg[i] < 0) std::fill(L.T.begin() + tb * i, L.T.begin() + tb * (i + 1), 0.0);
+  const bool par = parallel(L);
+#pragma omp parallel for schedule(dynamic, 64) if (par)
+  for (Index J = 0; J < nc; ++J) {
+    const Index* mem = L.members.data() + L.member_ptr[J];
+    const Index cnt = L.member_ptr[J + 1] - L.member_ptr[J];
+    double* Rj = C.B.data() + static_cast<std::size_t>(m) * m * J;
+    std::fill(Rj, Rj + m * m, 0.0);
+    auto col_dot = [&](int c, int d) {
+      double s = 0;
+      for (Index t = 0; t < cnt; ++t) {
+        const double* Ti = L.T.data() + tb * mem[t];
+        for (int a = 0; a < b; ++a) s += Ti[a * m + c] * Ti[a * m + d];
+      }
+      return s;
+    };
+    for (int c = 0; c < m; ++c) {
+      const double n0 = std::sqrt(col_dot(c, c));
+      for (int pass = 0; pass < 2; ++pass)
+        for (int d = 0; d < c; ++d) {
+          const double p = col_dot(c, d);
+          if (p == 0) continue;
+          Rj[d * m + c] += p;
+          for (Index t = 0; t < cnt; ++t) {
+            double* Ti = L.T.data() + tb * mem[t];
+            for (int a = 0; a < b; ++a) Ti[a * m + c] -= p * Ti[a * m + d];
+          }
+        }
+      const double nn = std::sqrt(col_dot(c, c));
+      const bool dead = !(nn > 1e-8 * n0) || !(n0 > 0);
+      C.dead[static_cast<std::size_t>(m) * J + c] = dead ? 1 : 0;
+      const double s = dead ? 0.0 : 1.0 / nn;
+      Rj[c * m + c] = dead ? 0.0 : nn;
+      if (dead)
+        for (int d = 0; d < c; ++d) Rj[d * m + c] = 0;
+      for (Index t = 0; t < cnt; ++t) {
+        double* Ti = L.T.data() + tb * mem[t];
+        for (int a = 0; a < b; ++a) Ti[a * m + c] *= s;
+      }
+    }
+  }
+}
+
+// Largest eigenvalue of D^-1 A by power iteration (for the prolongator smoother's weight):
+// 12 iterations on the first build, then 3 from the previous build's vector (the matrix
+// changes little from step to step).
+double SaAmg::lambda_max(std::size_t l) {
+  Level& L = L_[l];
+  const Index n = L.A.rows;
+  const int b = L.A.br;
+  const std::size_t N = static_cast<std::size_t>(n) * b;
+  std::vector<double>& v = L.ev;
+  std::vector<double>& w = L.r;
+  int iterations = 3;
+  if (v.size() != N) {
+    v.resize(N);
+    for (std::size_t k = 0; k < N; ++k) v[k] = 1.0 + 0.5 * std::sin(0.7 * static_cast<double>(k) + 0.3);
+    iterations = 12;
+  }
+  double lam = 0;
+  with_size(b, [&](auto Bc) {
+    constexpr int B = decltype(Bc)::value;
+    for (int it = 0; it < iterations; ++it) {
+      double nv = 0, nw = 0;
+#pragma omp parallel for schedule(static) reduction(+ : nv, nw) if (parallel(L))
+      for (Index i = 0; i < n; ++i) {
+        double t[B] = {};
+        for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
+          gemv_add<B, B>(L.A.block(k), v.data() + static_cast<std::size_t>(B) * L.A.ci[k], t);
+        double* wi = w.data() + static_cast<std::size_t>(B) * i;
+        std::fill(wi, wi + B, 0.0);
+        gemv_add<B, B>(L.dinv.data() + static_cast<std::size_t>(B * B) * i, t, wi);
+        for (int a = 0; a < B; ++a) {
+          nv += v[B * i + a] * v[B * i + a];
+          nw += wi[a] * wi[a];
+        }
+      }
+      lam = nv > 0 ? std::sqrt(nw / nv) : 0;
+      const double s = nw > 0 ? 1.0 / std::sqrt(nw) : 0;
+      for (std::size_t k = 0; k < N; ++k) v[k] = w[k] * s;
+    }
+  });
+  return lam;
+}
+
+// P = (I - omega D^-1 A) T, then R = P^T.
+void SaAmg::smooth_prolongator(std::size_t l) {
+  Level& L = L_[l];
+  const Index n = L.A.rows;
+  const double lam = lambda_max(l);
+  const double omega = lam > 0 ? o_.prolongator_damping / lam : 0.0;
+  with_sizes(L.A.br, m_, [&](auto Bc, auto Mc) {
+    constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
+    constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
+#pragma omp parallel for schedule(static) if (parallel(L))
+    for (Index i = 0; i < n; ++i) {
+      const Index p0 = L.P.rp[i], p1 = L.P.rp[i + 1];
+      std::fill(L.P.v.begin() + PB * p0, L.P.v.begin() + PB * p1, 0.0);
+      for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k) {
+        const Index j = L.A.ci[k];
+        const Index J = L.agg[j];
+        if (J < 0) continue;
+        Index q = p0;
+        while (L.P.ci[q] != J) ++q;
+        gemm_add<B, B, M>(L.A.block(k), L.T.data() + PB * j, L.P.v.data() + PB * q);
+      }
+      const double* Di = L.dinv.data() + static_cast<std::size_t>(B * B) * i;
+      for (Index q = p0; q < p1; ++q) {
+        double W[PB];
+        double* Pq = L.P.v.data() + PB * q;
+        std::copy(Pq, Pq + PB, W);
+        std::fill(Pq, Pq + PB, 0.0);
+        gemm_add<B, B, M>(Di, W, Pq);
+        for (std::size_t e = 0; e < PB; ++e) Pq[e] *= -omega;
+        if (L.P.ci[q] == L.agg[i])
+          for (std::size_t e = 0; e < PB; ++e) Pq[e] += L.T[PB * i + e];
+      }
+    }
+    const Index nr = L.R.nnz();
+#pragma omp parallel for schedule(static) if (parallel(L))
+    for (Index q = 0; q < nr; ++q) {
+      const double* Pk = L.P.v.data() + PB * L.r_from_p[q];
+      double* Rq = L.R.v.data() + PB * q;
+      for (int a = 0; a < B; ++a)
+        for (int c = 0; c < M; ++c) Rq[c * B + a] = Pk[a * M + c];
+    }
+  });
+}
+
+// A P, then the coarse matrix P^T A P (+ 1 on the diagonal of dead coarse DOFs).
+void SaAmg::galerkin(std::size_t l) {
+  Level& L = L_[l];
+  Level& C = L_[l + 1];
+  const Index n = L.A.rows, nc = C.A.rows;
+  const int nt = std::max(1, omp_get_max_threads());
+  if (static_cast<int>(marker_.size()) < nt) marker_.resize(nt);
+  for (auto& mk : marker_)
+    if (static_cast<Index>(mk.size()) < nc) mk.assign(nc, 0);
+  with_sizes(L.A.br, m_, [&](auto Bc, auto Mc) {
+    constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
+    constexpr std::size_t PB = static_cast<std::size_t>(B) * M, CB = static_cast<std::size_t>(M) * M;
+#pragma omp parallel if (parallel(L))
+    {
+      Index* mk = marker_[omp_get_thread_num()].data();
+#pragma omp for schedule(static)
+      for (Index i = 0; i < n; ++i) {
+        const Index a0 = L.AP.rp[i], a1 = L.AP.rp[i + 1];
+        for (Index q = a0; q < a1; ++q) mk[L.AP.ci[q]] = q;
+        std::fill(L.AP.v.begin() + PB * a0, L.AP.v.begin() + PB * a1, 0.0);
+        for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k) {
+          const Index j = L.A.ci[k];
+          for (Index q = L.P.rp[j]; q < L.P.rp[j + 1]; ++q)
+            gemm_add<B, B, M>(L.A.block(k), L.P.v.data() + PB * q, L.AP.v.data() + PB * mk[L.P.ci[q]]);
+        }
+      }
+#pragma omp for schedule(static)
+      for (Index I = 0; I < nc; ++I) {
+        const Index c0 = C.A.rp[I], c1 = C.A.rp[I + 1];
+        for (Index q = c0; q < c1; ++q) mk[C.A.ci[q]] = q;
+        std::fill(C.A.v.begin() + CB * c0, C.A.v.begin() + CB * c1, 0.0);
+        for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k) {
+          const Index i = L.R.ci[k];
+          const double* Rk = L.R.v.data() + PB * k;
+          for (Index q = L.AP.rp[i]; q < L.AP.rp[i + 1]; ++q)
+            gemm_add<M, B, M>(Rk, L.AP.v.data() + PB * q, C.A.v.data() + CB * mk[L.AP.ci[q]]);
+        }
+        double* D = C.A.block(C.diag[I]);
+        for (int c = 0; c < M; ++c)
+          if (C.dead[static_cast<std::size_t>(M) * I + c]) D[c * M + c] += 1.0;
+      }
+    }
+  });
+}
+
+bool SaAmg::factor_coarsest(std::string& message) {
+  Level& C = L_.back();
+  const Index N = C.A.rows * C.A.br;
+  coarse_direct_ = N <= 4000;
+  if (!coarse_direct_) return true;  // symmetric Gauss-Seidel sweeps instead (set up in build)
+  coarse_.setZero(N, N);
+  const int b = C.A.br;
+  for (Index i = 0; i < C.A.rows; ++i)
+    for (Index k = C.A.rp[i]; k < C.A.rp[i + 1]; ++k) {
+      const double* Bk = C.A.block(k);
+      for (int a = 0; a < b; ++a)
+        for (int c = 0; c < b; ++c) coarse_(b * i + a, b * C.A.ci[k] + c) = Bk[a * b + c];
+    }
+  llt_.compute(coarse_);
+  if (llt_.info() != Eigen::Success) {
+    message = "sa_amg: the coarsest matrix (" + std::to_string(N) +
+              " DOFs) is not positive definite, so the system matrix is not positive definite on the free DOFs; "
+              "reduce integrator.dt, enable the material's Jacobian clamp, or set integrator.on_solver_failure: "
+              "halve_step";
+    return false;
+  }
+  return true;
+}
+
+bool SaAmg::filter_changed(const Filter& S) const {
+  if (S.constrained() != s_constrained_) return true;
+  std::size_t o = 0;
+  for (Index i : S.constrained()) {
+    const auto& p = S.projector(i);
+    for (int e = 0; e < 9; ++e)
+      if (p[e] != s_proj_[o + e]) return true;
+    o += 9;
+  }
+  return false;
+}
+
+void SaAmg::remember_filter(const Filter& S) {
+  s_constrained_ = S.constrained();
+  s_proj_.resize(9 * s_constrained_.size());
+  std::size_t o = 0;
+  for (Index i : S.constrained()) {
+    const auto& p = S.projector(i);
+    std::copy(p.begin(), p.end(), s_proj_.begin() + o);
+    o += 9;
+  }
+}
+
+bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x, std::string& message) {
+  const bool coords = !x.empty() && o_.near_null_modes == 6;
+  if (!x.empty() && x.size() != 3 * static_cast<std::size_t>(A.rows()))
+    throw std::invalid_argument("sa_amg: the coordinates do not match the matrix");
+  const bool rebuild = !built_ || pattern_ != &A.pattern() || pattern_nnz_ != A.pattern().nnz_blocks() ||
+                       L_.empty() || L_[0].A.rows != A.rows() || coords != had_coordinates_;
+  ++refreshes_;
+  if (rebuild) {
+    built_ = false;
+    pattern_ = &A.pattern();
+    pattern_nnz_ = A.pattern().nnz_blocks();
+    had_coordinates_ = coords;
+    m_ = coords ? 6 : 3;
+    L_.clear();
+    L_.emplace_back();
+    Level& L0 = L_[0];
+    const BsrPattern& P = A.pattern();
+    L0.A.rows = L0.A.cols = P.n;
+    L0.A.br = L0.A.bc = 3;
+    L0.A.rp = P.row_ptr;
+    L0.A.ci = P.col;
+    L0.A.v.assign(9 * static_cast<std::size_t>(P.nnz_blocks()), 0.0);
+    L0.diag = P.diag;
+    L0.x.assign(3 * static_cast<std::size_t>(P.n), 0.0);
+    L0.b = L0.x;
+    L0.r = L0.x;
+  }
+  const bool s_changed = !rebuild && filter_changed(S);
+  fill_level0(A, S);
+  if (!rebuild && !s_changed && since_hierarchy_ + 1 < o_.hierarchy_refresh_steps) {
+    // Frozen coarse levels: only the smoother of level 0 follows the new matrix.
+    ++since_hierarchy_;
+    if (!invert_diagonal(0, message)) {
+      built_ = false;
+      return false;
+    }
+    return true;
+  }
+  since_hierarchy_ = 0;
+  ++hierarchy_builds_;
+  const bool new_p = rebuild || s_changed || since_prolongator_ + 1 >= o_.prolongator_refresh_steps;
+  for (std::size_t l = 0;; ++l) {
+    if (!invert_diagonal(l, message)) {
+      built_ = false;
+      return false;
+    }
+    if (rebuild) {
+      const Level& L = L_[l];
+      bool last = static_cast<Index>(L.A.rows) * L.A.br <= o_.coarse_dofs || static_cast<int>(l) + 1 >= o_.max_levels;
+      if (!last) {
+        aggregate(l);
+        Index na = 0;
+        for (Index a : L_[l].agg) na = std::max(na, a + 1);
+        last = na == 0 || static_cast<double>(na) * m_ >= 0.9 * static_cast<double>(L.A.rows) * L.A.br;
+        if (!last) {
+          Level& Lm = L_[l];
+          Lm.member_ptr.assign(static_cast<std::size_t>(na) + 1, 0);
+          for (Index a : Lm.agg)
+            if (a >= 0) ++Lm.member_ptr[a + 1];
+          for (Index a = 0; a < na; ++a) Lm.member_ptr[a + 1] += Lm.member_ptr[a];
+          Lm.members.resize(Lm.member_ptr[na]);
+          std::vector<Index> fill(Lm.member_ptr.begin(), Lm.member_ptr.end() - 1);
+          for (Index i = 0; i < Lm.A.rows; ++i)
+            if (Lm.agg[i] >= 0) Lm.members[fill[Lm.agg[i]]++] = i;
+          colour(l);
+          build_patterns(l);
+        }
+      }
+      if (last) {
+        L_[l].agg.clear();
+        if (static_cast<Index>(L_[l].A.rows) * L_[l].A.br > 4000) colour(l);
+        break;
+      }
+    } else if (l + 1 == L_.size()) {
+      break;
+    }
+    if (new_p) {
+      if (l == 0) near_null_level0(S, x);
+      tentative(l);
+      smooth_prolongator(l);
+    }
+    galerkin(l);
+  }
+  if (new_p) {
+    since_prolongator_ = 0;
+    ++prolongator_builds_;
+    remember_filter(S);
+  } else {
+    ++since_prolongator_;
+  }
+  if (!factor_coarsest(message)) {
+    built_ = false;
+    return false;
+  }
+  built_ = true;
+  info_.clear();
+  for (const Level& L : L_)
+    info_.push_back({L.A.rows, L.A.br, L.A.nnz(),
+                     L.colour_ptr.empty() ? 0 : static_cast<int>(L.colour_ptr.size()) - 1});
+  return true;
+}
+
+namespace {
+
+// One Gauss-Seidel sweep over the colours in the given direction: within a colour no two
+// rows are coupled, so its rows update in parallel without races.
+template <int B>
+void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::vector<Index>& cp,
+              const std::vector<Index>& cr, const double* b, double* x, bool forward, bool par) {
+  const int nc = static_cast<int>(cp.size()) - 1;
+#pragma omp parallel if (par)
+  for (int s = 0; s < nc; ++s) {
+    const int c = forward ? s : nc - 1 - s;
+#pragma omp for schedule(static)
+    for (Index t = cp[c]; t < cp[c + 1]; ++t) {
+      const Index i = cr[t];
+      double acc[B];
+      for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a];
+      for (Index k = A.rp[i]; k < A.rp[i + 1]; ++k)
+        gemv_sub<B, B>(A.block(k), x + static_cast<std::size_t>(B) * A.ci[k], acc);
+      gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+    }
+  }
+}
+
+}  // namespace
+
+void SaAmg::cycle(std::size_t l, const double* b, double* x) {
+  Level& L = L_[l];
+  const Index n = L.A.rows;
+  const int bs = L.A.br;
+  const std::size_t N = static_cast<std::size_t>(n) * bs;
+  const bool par = parallel(L);
+  if (l + 1 == L_.size()) {
+    if (coarse_direct_) {
+      Eigen::Map<Eigen::VectorXd> xv(x, static_cast<Eigen::Index>(N));
+      xv = Eigen::Map<const Eigen::VectorXd>(b, static_cast<Eigen::Index>(N));
+      llt_.matrixL().solveInPlace(xv);
+      llt_.matrixU().solveInPlace(xv);
+    } else {
+      std::fill(x, x + N, 0.0);
+      with_size(bs, [&](auto Bc) {
+        constexpr int B = decltype(Bc)::value;
+        for (int s = 0; s < 2; ++s) {
+          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, b, x, true, par);
+          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, b, x, false, par);
+        }
+      });
+    }
+    return;
+  }
+  Level& C = L_[l + 1];
+  std::fill(x, x + N, 0.0);
+  with_sizes(bs, m_, [&](auto Bc, auto Mc) {
+    constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
+    constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
+    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, b, x, true, par);
+    double* r = L.r.data();
+    const Index nc = C.A.rows;
+#pragma omp parallel if (par)
+    {
+#pragma omp for schedule(static)
+      for (Index i = 0; i < n; ++i) {
+        double* ri = r + static_cast<std::size_t>(B) * i;
+        for (int a = 0; a < B; ++a) ri[a] = b[static_cast<std::size_t>(B) * i + a];
+        for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
+          gemv_sub<B, B>(L.A.block(k), x + static_cast<std::size_t>(B) * L.A.ci[k], ri);
+      }
+#pragma omp for schedule(static)
+      for (Index I = 0; I < nc; ++I) {
+        double* bi = C.b.data() + static_cast<std::size_t>(M) * I;
+        std::fill(bi, bi + M, 0.0);
+        for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k)
+          gemv_add<M, B>(L.R.v.data() + PB * k, r + static_cast<std::size_t>(B) * L.R.ci[k], bi);
+      }
+    }
+    cycle(l + 1, C.b.data(), C.x.data());
+#pragma omp parallel for schedule(static) if (par)
+    for (Index i = 0; i < n; ++i)
+      for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k)
+        gemv_add<B, M>(L.P.v.data() + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
+                       x + static_cast<std::size_t>(B) * i);
+    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, b, x, false, par);
+  });
+}
+
+void SaAmg::apply(const double* r, double* z) {
+  if (!built_) throw std::logic_error("sa_amg: apply() before a successful setup()");
+  cycle(0, r, z);
+}
+
+}  // namespace loom::amg

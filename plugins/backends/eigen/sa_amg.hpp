@@ -1,0 +1,138 @@
+// sa_amg: a smoothed-aggregation algebraic multigrid preconditioner for the filtered 3x3-block
+// Baraff-Witkin system (NUMERICS.md 3.6), used by eigen_pcg (`preconditioner: sa_amg`).
+//
+// The hierarchy is built for the prefiltered matrix A~ = S A S + (I - S) (Tamstorf, Jones &
+// McCormick 2015), so constrained DOFs are decoupled, with the rigid-body near-null space
+// (3 translations + 3 rotations about the aggregate centroid, filtered by S) per aggregate.
+// One V-cycle: multicolour block Gauss-Seidel forward sweeps before the coarse correction,
+// the same sweeps backward after it (so the cycle is symmetric), a dense Cholesky solve on the
+// coarsest level. Symbolic set-up (aggregates, colourings, the patterns of P, R = P^T, A P and
+// P^T A P) runs once per sparsity pattern; refresh() recomputes only values.
+//
+// The apply is a handful of kernels over block-sparse matrices with 3x3, 3x6 and 6x6 blocks
+// (SpMV, block-row Gauss-Seidel per colour, restriction R r, prolongation x += P xc, a dense
+// triangular solve pair), each a loop over block rows that writes only its own rows.
+#pragma once
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "loom/bsr.hpp"
+#include "loom/common.hpp"
+
+namespace loom::amg {
+
+struct SaAmgOptions {
+  int near_null_modes = 6;        ///< 6: translations + rotations (needs coordinates), 3: translations
+  double strength_threshold = 0;  ///< block (i,j) strong if |A_ij|_F > theta sqrt(|A_ii|_F |A_jj|_F)
+  int smoothing_sweeps = 1;       ///< Gauss-Seidel sweeps before and after the coarse correction
+  Index coarse_dofs = 300;        ///< levels are added until a level has at most this many DOFs
+  int max_levels = 10;
+  int prolongator_refresh_steps = 1;  ///< rebuild T, P every k refreshes (the Galerkin product always)
+  /// Recompute the coarse levels (Galerkin products, coarsest factor) every k refreshes; in
+  /// between only level 0 (A~ and its diagonal blocks) follows the new matrix. Any k keeps the
+  /// V-cycle SPD (NUMERICS.md 3.6); a changed S always refreshes everything.
+  int hierarchy_refresh_steps = 1;
+  double prolongator_damping = 4.0 / 3.0;  ///< omega = damping / lambda_max(D^-1 A)
+  Index parallel_min_dofs = 6144;  ///< loops run on all OpenMP threads from this many DOFs on
+};
+
+/// Block-sparse matrix with BR x BC blocks (row-major, 9 or 18 or 36 doubles per block).
+struct BlockMatrix {
+  Index rows = 0, cols = 0;
+  int br = 3, bc = 3;
+  std::vector<Index> rp, ci;
+  std::vector<double> v;
+  std::size_t bsize() const { return static_cast<std::size_t>(br) * bc; }
+  Index nnz() const { return static_cast<Index>(ci.size()); }
+  double* block(Index k) { return v.data() + bsize() * static_cast<std::size_t>(k); }
+  const double* block(Index k) const { return v.data() + bsize() * static_cast<std::size_t>(k); }
+};
+
+struct LevelInfo {
+  Index rows = 0;     ///< block rows
+  int block = 3;      ///< block size
+  Index nnz_blocks = 0;
+  int colours = 0;
+};
+
+class SaAmg {
+ public:
+  explicit SaAmg(SaAmgOptions o = {}) : o_(o) {}
+
+  /// Build (first call, or after invalidate() / a new pattern) or refresh the hierarchy for
+  /// A~ = S A S + (I - S). `x` holds the vertex positions (3n) for the rotation modes; when it
+  /// is empty only the 3 translations are used. Returns false with `message` when a diagonal
+  /// block or the coarsest matrix is not positive definite.
+  bool setup(const BsrMatrix& A, const Filter& S, std::span<const double> x, std::string& message);
+  void invalidate() { built_ = false; }
+
+  /// z = M r: one symmetric V-cycle on A~ (r and z have 3n entries and must not alias).
+  void apply(const double* r, double* z);
+
+  const std::vector<LevelInfo>& levels() const { return info_; }
+  /// sum over levels of nnz scalars / nnz scalars of level 0.
+  double operator_complexity() const;
+  int refreshes() const { return refreshes_; }
+  int prolongator_builds() const { return prolongator_builds_; }
+  int hierarchy_builds() const { return hierarchy_builds_; }
+  const SaAmgOptions& options() const { return o_; }
+
+ private:
+  struct Level {
+    BlockMatrix A;                    // b x b blocks
+    std::vector<Index> diag;          // position of (i, i)
+    std::vector<double> dinv;         // b*b per row: inverse of the diagonal block
+    std::vector<Index> colour_ptr, colour_rows;
+    std::vector<Index> agg;           // aggregate of each row, -1 when in none
+    std::vector<Index> member_ptr, members;  // rows of each aggregate
+    std::vector<double> B;            // near-null space on this level: b x m per row
+    std::vector<double> T;            // tentative prolongator: b x m per row (its one block)
+    std::vector<std::uint8_t> dead;   // per scalar DOF of this level: a zero column of P above
+    BlockMatrix P, R, AP;             // to/from the next level: P (b x m), R = P^T, A P
+    std::vector<Index> r_from_p;      // block of P transposed into each block of R
+    std::vector<double> x, b, r;      // work vectors
+    std::vector<double> ev;           // last power-iteration vector of D^-1 A (warm start)
+  };
+
+  void build(const BsrMatrix& A, const Filter& S, std::span<const double> x);
+  void fill_level0(const BsrMatrix& A, const Filter& S);
+  bool invert_diagonal(std::size_t l, std::string& message);
+  void near_null_level0(const Filter& S, std::span<const double> x);
+  void tentative(std::size_t l);
+  double lambda_max(std::size_t l);
+  void smooth_prolongator(std::size_t l);
+  void galerkin(std::size_t l);
+  bool factor_coarsest(std::string& message);
+  void aggregate(std::size_t l);
+  void colour(std::size_t l);
+  void build_patterns(std::size_t l);
+  void cycle(std::size_t l, const double* b, double* x);
+  bool filter_changed(const Filter& S) const;
+  void remember_filter(const Filter& S);
+  bool parallel(const Level& L) const { return static_cast<Index>(L.A.rows) * L.A.br >= o_.parallel_min_dofs; }
+
+  SaAmgOptions o_;
+  bool built_ = false;
+  const BsrPattern* pattern_ = nullptr;
+  Index pattern_nnz_ = -1;
+  int m_ = 6;  // near-null modes in use
+  std::vector<Level> L_;
+  std::vector<LevelInfo> info_;
+  std::vector<double> centroid_;
+  std::vector<std::vector<Index>> marker_;  // per thread, for the sparse products
+  Eigen::MatrixXd coarse_;
+  Eigen::LLT<Eigen::MatrixXd> llt_;
+  bool coarse_direct_ = true;
+  int refreshes_ = 0, prolongator_builds_ = 0, since_prolongator_ = 0, since_hierarchy_ = 0, hierarchy_builds_ = 0;
+  std::vector<Index> s_constrained_;
+  std::vector<double> s_proj_;
+  bool had_coordinates_ = false;
+};
+
+}  // namespace loom::amg

@@ -1,0 +1,350 @@
+// sa_amg (smoothed-aggregation multigrid preconditioner for eigen_pcg, NUMERICS.md 3.6):
+// the V-cycle is a symmetric positive definite operator on range(S) (checked densely and on
+// random vectors), PCG with it decreases the A-norm error monotonically and reaches the dense
+// projected solution with pins, one- and two-direction (contact) constraints and a nonzero z,
+// the hierarchy refreshes numerically (same pattern, new values, new S), and on the real
+// wool-hang Baraff-Witkin system its iteration count grows by at most 2x from 32^2 to 128^2.
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "baraff_witkin.hpp"
+#include "eigen_pcg.hpp"
+#include "gnatv_material.hpp"
+#include "loom/mesh.hpp"
+#include "loom/params.hpp"
+#include "loom/scene.hpp"
+#include "loom/solver_common.hpp"
+#include "sa_amg.hpp"
+#include "solver_systems.hpp"
+
+namespace {
+
+using loom::Index;
+using loom::amg::SaAmg;
+using loom::amg::SaAmgOptions;
+namespace ts = loom::testsys;
+
+SaAmgOptions small_coarse(int modes = 6) {
+  SaAmgOptions o;
+  o.coarse_dofs = 24;  // force several levels on the small test systems
+  o.near_null_modes = modes;
+  return o;
+}
+
+loom::PcgOptions amg_pcg(double tol, int modes = 6, int maxit = 500) {
+  loom::PcgOptions o;
+  o.preconditioner = loom::PcgPreconditioner::SaAmg;
+  o.tolerance = tol;
+  o.max_iterations = maxit;
+  o.amg = small_coarse(modes);
+  return o;
+}
+
+// The test systems: random spring networks (pins, 1- and 2-direction constraints, nonzero z,
+// masses over 3 decades) and the hanging mass-spring cloth (pinned corners).
+std::vector<ts::System> systems() {
+  std::vector<ts::System> v;
+  v.push_back(ts::random_network(150, 3));
+  v.push_back(ts::random_network(200, 8, 0.01, 0.3, 2));
+  v.push_back(ts::cloth(12));
+  {
+    ts::System c = ts::cloth(14, 1e-3, 1e4, 2);
+    std::mt19937_64 rng(5);
+    ts::random_constraints(c, rng, 0.05, 0.1, 0.05, true);  // contacts on a cloth
+    v.push_back(std::move(c));
+  }
+  return v;
+}
+
+// Dense matrix of x -> S M S x (columns: the V-cycle applied to S e_k).
+Eigen::MatrixXd dense_preconditioner(SaAmg& M, const loom::Filter& S, Index n) {
+  const Index N = 3 * n;
+  Eigen::MatrixXd D(N, N);
+  std::vector<double> e(N), z(N);
+  for (Index k = 0; k < N; ++k) {
+    std::fill(e.begin(), e.end(), 0.0);
+    e[k] = 1.0;
+    loom::solver::filter(S, e);
+    M.apply(e.data(), z.data());
+    loom::solver::filter(S, z);
+    for (Index r = 0; r < N; ++r) D(r, k) = z[r];
+  }
+  return D;
+}
+
+}  // namespace
+
+TEST(SaAmg, VCycleIsSymmetricPositiveDefiniteOnRangeOfS) {
+  for (int modes : {6, 3}) {
+    for (ts::System& s : systems()) {
+      SaAmg M(small_coarse(modes));
+      std::string msg;
+      ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
+      ASSERT_GE(M.levels().size(), 3u) << "the test needs a real hierarchy";
+      const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
+      const double asym = (D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff();
+      EXPECT_LT(asym, 1e-11) << "modes " << modes << " n " << s.n;
+      // Positive on range(S): S M S + (I - S) has only positive eigenvalues.
+      const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
+      const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
+      EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "modes " << modes << " n " << s.n;
+      // Random vectors in range(S): x^T M y = y^T M x and x^T M x > 0.
+      std::mt19937_64 rng(11);
+      std::normal_distribution<double> g;
+      const std::size_t N = 3 * static_cast<std::size_t>(s.n);
+      std::vector<double> x(N), y(N), Mx(N), My(N);
+      for (int t = 0; t < 5; ++t) {
+        for (std::size_t k = 0; k < N; ++k) {
+          x[k] = g(rng);
+          y[k] = g(rng);
+        }
+        loom::solver::filter(s.S, x);
+        loom::solver::filter(s.S, y);
+        M.apply(x.data(), Mx.data());
+        M.apply(y.data(), My.data());
+        double yMx = 0, xMy = 0, xMx = 0, nx = 0, ny = 0;
+        for (std::size_t k = 0; k < N; ++k) {
+          yMx += y[k] * Mx[k];
+          xMy += x[k] * My[k];
+          xMx += x[k] * Mx[k];
+          nx += Mx[k] * Mx[k];
+          ny += y[k] * y[k];
+        }
+        EXPECT_LT(std::abs(yMx - xMy), 1e-11 * std::sqrt(nx * ny));
+        EXPECT_GT(xMx, 0.0);
+      }
+    }
+  }
+}
+
+TEST(SaAmg, PcgMatchesDenseProjectedSolveWithPinsAndContacts) {
+  for (ts::System& s : systems()) {
+    const Eigen::VectorXd ref = ts::dense_solution(s);
+    for (int modes : {6, 3}) {
+      loom::EigenPcg p(amg_pcg(1e-10, modes));
+      p.set_coordinates(s.x);
+      std::vector<double> dv(3 * s.n, 0.0);
+      p.analyze_pattern(s.A, s.S);
+      loom::SolveReport f;
+      ASSERT_TRUE(p.factorize(s.A, s.S, f)) << f.message;
+      const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
+      ASSERT_TRUE(rep.converged) << rep.message;
+      EXPECT_LE(rep.residual, 1e-10);
+      EXPECT_LT(ts::rel_diff(dv, ref), 1e-7) << "n " << s.n << " modes " << modes;
+      // (I - S) dv = z
+      for (Index i : s.S.constrained()) {
+        double c[3] = {dv[3 * i], dv[3 * i + 1], dv[3 * i + 2]};
+        loom::solver::filter_vertex(s.S, i, c);
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(dv[3 * i + a] - c[a], s.z[3 * i + a], 1e-13);
+      }
+      // Block Jacobi on the same system needs more iterations.
+      loom::PcgOptions bj;
+      bj.tolerance = 1e-10;
+      bj.max_iterations = 5000;
+      loom::EigenPcg q(bj);
+      std::vector<double> dq(3 * s.n, 0.0);
+      q.analyze_pattern(s.A, s.S);
+      ASSERT_TRUE(q.factorize(s.A, s.S, f));
+      const loom::SolveReport rq = q.solve(s.A, s.S, s.b, s.z, dq);
+      ASSERT_TRUE(rq.converged);
+      EXPECT_LT(rep.iterations, rq.iterations) << "n " << s.n;
+    }
+  }
+}
+
+// PCG with an SPD preconditioner minimises the A-norm of the error over a growing Krylov
+// space: ||dv_k - dv*||_A never increases. dv_k is the iterate after k iterations (the
+// solver stops at max_iterations = k and leaves its iterate in dv).
+TEST(SaAmg, PcgErrorDecreasesMonotonicallyInTheANorm) {
+  for (ts::System& s : systems()) {
+    const Eigen::VectorXd ref = ts::dense_solution(s);
+    const Eigen::MatrixXd At = ts::projected_matrix(s);
+    double prev = INFINITY;
+    int steps = 0;
+    for (int k = 1; k <= 40; ++k) {
+      loom::EigenPcg p(amg_pcg(1e-13, 6, k));
+      p.set_coordinates(s.x);
+      std::vector<double> dv(3 * s.n, 0.0);
+      p.analyze_pattern(s.A, s.S);
+      loom::SolveReport f;
+      ASSERT_TRUE(p.factorize(s.A, s.S, f));
+      const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
+      const Eigen::VectorXd e = Eigen::Map<const Eigen::VectorXd>(dv.data(), ref.size()) - ref;
+      const double ea = std::sqrt(std::max(0.0, e.dot(At * e)));
+      EXPECT_LE(ea, prev * (1 + 1e-9) + 1e-14) << "iteration " << k << " n " << s.n;
+      prev = ea;
+      ++steps;
+      if (rep.converged) break;
+    }
+    EXPECT_GT(steps, 2);
+  }
+}
+
+// New values on the same pattern and a different S: refresh() recomputes values only (no
+// new aggregation) and the answer is still the dense one. With prolongator_refresh_steps = 3
+// (stale P, fresh Galerkin product) or hierarchy_refresh_steps = 3 (stale coarse levels, only
+// level 0 follows A) the V-cycle stays symmetric positive definite and PCG reaches the same
+// answer; a changed S rebuilds everything at once.
+TEST(SaAmg, NumericRefreshAndStaleHierarchy) {
+  for (auto [prol, hier] : {std::pair{1, 1}, std::pair{3, 1}, std::pair{1, 3}}) {
+    ts::System s = ts::cloth(14, 1e-3, 1e3, 4);
+    auto o = amg_pcg(1e-10);
+    o.amg.prolongator_refresh_steps = prol;
+    o.amg.hierarchy_refresh_steps = hier;
+    loom::EigenPcg p(o);
+    p.analyze_pattern(s.A, s.S);
+    std::mt19937_64 rng(9);
+    for (int step = 0; step < 6; ++step) {
+      // move the cloth a little and reassemble
+      std::normal_distribution<double> g(0.0, 2e-3);
+      for (double& c : s.x) c += g(rng);
+      ts::assemble(s, true);
+      if (step == 4) ts::random_constraints(s, rng, 0.02, 0.05, 0.05, true);  // contacts appear
+      p.set_coordinates(s.x);
+      loom::SolveReport f;
+      ASSERT_TRUE(p.factorize(s.A, s.S, f)) << f.message;
+      std::vector<double> dv(3 * s.n, 0.0);
+      const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
+      ASSERT_TRUE(rep.converged) << rep.message;
+      EXPECT_LT(ts::rel_diff(dv, ts::dense_solution(s)), 1e-7);
+      if (step == 5) {  // after a refresh that may have kept stale parts
+        const Eigen::MatrixXd D = dense_preconditioner(*p.amg(), s.S, s.n);
+        EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11);
+        const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
+        const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
+        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
+        EXPECT_GT(es.eigenvalues().minCoeff(), 0.0);
+      }
+    }
+    EXPECT_EQ(p.amg()->refreshes(), 6);
+    // Every 3rd refresh (0, 3), plus step 4 because S changed.
+    EXPECT_EQ(p.amg()->hierarchy_builds(), hier == 1 ? 6 : 3);
+    EXPECT_EQ(p.amg()->prolongator_builds(), prol == 1 && hier == 1 ? 6 : 3);
+  }
+}
+
+TEST(SaAmg, SameAnswerOnOneAndTwoThreads) {
+  ts::System s = ts::cloth(24, 1e-3, 1e3, 21);
+  std::mt19937_64 rng(21);
+  ts::random_constraints(s, rng, 0.01, 0.05, 0.05, true);
+  const int saved = omp_get_max_threads();
+  std::vector<std::vector<double>> out;
+  for (int t : {1, 2}) {
+    omp_set_num_threads(t);
+    auto o = amg_pcg(1e-9);
+    o.parallel_min_rows = 0;       // the threaded loops, on a small system
+    o.amg.parallel_min_dofs = 0;
+    o.amg.coarse_dofs = 100;
+    loom::EigenPcg p(o);
+    p.set_coordinates(s.x);
+    p.analyze_pattern(s.A, s.S);
+    loom::SolveReport f;
+    ASSERT_TRUE(p.factorize(s.A, s.S, f)) << f.message;
+    out.emplace_back(3 * s.n, 0.0);
+    const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, out.back());
+    ASSERT_TRUE(rep.converged) << rep.message;
+  }
+  omp_set_num_threads(saved);
+  const Eigen::Map<const Eigen::VectorXd> b(out[1].data(), static_cast<Eigen::Index>(out[1].size()));
+  EXPECT_LT(ts::rel_diff(out[0], b), 1e-8);
+}
+
+TEST(SaAmg, IndefiniteSystemIsReported) {
+  // Compressed springs without the clamp: A is indefinite on range(S) (checked densely).
+  ts::System s = ts::random_network(120, 17, 0.05, 0.6, 3, false);
+  ASSERT_LT(ts::min_eig_on_range(s), 0.0);
+  loom::EigenPcg p(amg_pcg(1e-10));
+  p.set_coordinates(s.x);
+  p.analyze_pattern(s.A, s.S);
+  loom::SolveReport f;
+  bool ok = p.factorize(s.A, s.S, f);
+  if (ok) {
+    std::vector<double> dv(3 * s.n, 0.0);
+    f = p.solve(s.A, s.S, s.b, s.z, dv);
+    ok = f.converged;
+  }
+  EXPECT_FALSE(ok);
+  EXPECT_NE(f.message.find("positive"), std::string::npos) << f.message;
+}
+
+TEST(SaAmg, ParsesOptionsAndRejectsBadKeys) {
+  const auto o = loom::parse_pcg_options(loom::Params::from_string(
+      "preconditioner: sa_amg\nsa_amg: {near_null_space: translations, smoothing_sweeps: 2, coarse_dofs: 100, "
+      "prolongator_refresh_steps: 4}\n"));
+  EXPECT_EQ(o.preconditioner, loom::PcgPreconditioner::SaAmg);
+  EXPECT_EQ(o.amg.near_null_modes, 3);
+  EXPECT_EQ(o.amg.smoothing_sweeps, 2);
+  EXPECT_EQ(o.amg.coarse_dofs, 100);
+  EXPECT_EQ(o.amg.prolongator_refresh_steps, 4);
+  EXPECT_ANY_THROW(loom::parse_pcg_options(
+      loom::Params::from_string("preconditioner: sa_amg\nsa_amg: {smoothing_sweep: 2}\n")));
+  EXPECT_ANY_THROW(loom::parse_pcg_options(loom::Params::from_string("sa_amg: {smoothing_sweeps: 2}\n")));
+  EXPECT_ANY_THROW(loom::parse_pcg_options(
+      loom::Params::from_string("preconditioner: sa_amg\nsa_amg: {near_null_space: bending}\n")));
+}
+
+namespace {
+
+// First Baraff-Witkin step of scenes/wool_hanging_<n>.yaml (gnatv wool, 10 m x 10 m, top
+// corners pinned, h = 0.01, Kang-Cho c_d = 0.01) with eigen_pcg at tolerance 1e-5.
+int wool_iterations(int n, loom::PcgPreconditioner pc, int steps = 1) {
+  loom::Scene sc;
+  sc.mesh = loom::make_grid(n, n, 10.0, 10.0, loom::GridPlane::XY);
+  const loom::Params p = loom::Params::from_string(
+      "material_file: " + std::string(LOOM_SOURCE_DIR) + "/materials/wool.yaml\n", "<test>");
+  sc.material = std::make_unique<loom::gnatv::GnatvMaterial>(p, sc.mesh);
+  loom::State& s = sc.state;
+  s.resize(sc.mesh.num_vertices());
+  std::copy(sc.mesh.positions.begin(), sc.mesh.positions.end(), s.x.begin());
+  sc.material->compute_masses(s.mass);
+  s.pin((n - 1) * n);
+  s.pin(n * n - 1);
+  s.update_inverse_masses();
+  sc.gravity = {0, -9.81, 0};
+  loom::PcgOptions o;
+  o.tolerance = 1e-5;
+  o.max_iterations = 5000;
+  o.preconditioner = pc;
+  sc.solver = std::make_unique<loom::EigenPcg>(o);
+  loom::BaraffWitkinOptions bo;
+  bo.kang_cho_damping = 0.01;
+  loom::BaraffWitkin bw(bo);
+  bw.prepare(sc, 0.01);
+  int it = 0;
+  auto* pcg = static_cast<loom::EigenPcg*>(sc.solver.get());
+  for (int k = 0; k < steps; ++k) {
+    bw.step(sc, 0.01);
+    it = bw.last_step().linear_iterations;
+    EXPECT_GT(it, 0);
+    EXPECT_LE(bw.last_step().linear_residual, 1e-5);
+  }
+  if (pcg->amg()) {
+    std::printf("wool %d^2 sa_amg levels (rows x block, nnz blocks, colours):", n);
+    for (const auto& l : pcg->amg()->levels()) std::printf(" [%d x %d, %d, %d]", l.rows, l.block, l.nnz_blocks, l.colours);
+    std::printf(", operator complexity %.2f\n", pcg->amg()->operator_complexity());
+  }
+  return it;
+}
+
+}  // namespace
+
+// Serial: on the shared 2-core machine every OpenMP barrier of a loaded run can cost a
+// scheduler time slice (the threaded paths are checked by SameAnswerOnOneAndTwoThreads).
+TEST(SaAmg, WoolHangIterationsNearlyFlat) {
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const int a32 = wool_iterations(32, loom::PcgPreconditioner::SaAmg, 2);
+  const int a128 = wool_iterations(128, loom::PcgPreconditioner::SaAmg, 2);
+  const int j32 = wool_iterations(32, loom::PcgPreconditioner::BlockJacobi, 2);
+  std::printf("wool hang, 2nd step: sa_amg %d (32^2) %d (128^2); block_jacobi %d (32^2)\n", a32, a128, j32);
+  omp_set_num_threads(saved);
+  EXPECT_LE(a128, 2 * a32);
+  EXPECT_LT(a32, j32);
+}
