@@ -1,4 +1,5 @@
 #include "loom/simulation.hpp"
+#include "loom/bending.hpp"
 
 #include <omp.h>
 
@@ -217,7 +218,9 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   // A material describes the cloth (masses, elements, curves); execution backends read that
   // description, so a material without a backend-specific version is used as is.
   const bool material_on_backend = loader.registry().has(PluginKind::Material, material_name_, sc.backend);
+  const Params bending = mat.child("bending");  // framework-level hinge bending (loom/bending.hpp)
   sc.material = loader.registry().make_material(material_name_, material_on_backend ? sc.backend : "cpu", mat, sc.mesh);
+  sc.material = add_bending(std::move(sc.material), bending, sc.mesh, sc.backend);
 
   // ---- state ----
   State& st = sc.state;
