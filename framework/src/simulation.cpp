@@ -1,4 +1,6 @@
 #include "loom/simulation.hpp"
+#include "loom/bending.hpp"
+#include "loom/fabric_library.hpp"
 
 #include <omp.h>
 
@@ -160,7 +162,10 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   // A material describes the cloth (masses, elements, curves); execution backends read that
   // description, so a material without a backend-specific version is used as is.
   const bool material_on_backend = loader.registry().has(PluginKind::Material, material_name_, sc.backend);
+  const Params fabric_bending = apply_fabric(mat, material_name_);  // measured-fabric library (loom/fabric_library.hpp)
+  const Params bending = mat.has("bending") ? mat.child("bending") : fabric_bending;  // hinge bending (loom/bending.hpp)
   sc.material = loader.registry().make_material(material_name_, material_on_backend ? sc.backend : "cpu", mat, sc.mesh);
+  sc.material = add_bending(std::move(sc.material), bending, sc.mesh, sc.backend);
 
   // ---- state ----
   State& st = sc.state;

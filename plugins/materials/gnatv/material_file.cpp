@@ -161,7 +161,8 @@ MaterialData read_material_file(const std::string& path, CurveInterpolation kind
   if (!root.is_map()) root.fail("a material file must be a YAML mapping (see materials/README.md)");
   MaterialData m;
   m.path = path;
-  for (const char* k : {"name", "source", "units", "provenance", "notes"})
+  // "bending" (hinge bending data of a measured fabric) is read by the framework (loom/fabric_library.hpp).
+  for (const char* k : {"name", "source", "units", "provenance", "notes", "bending"})
     if (root.has(k)) root.mark_used(k);
   if (root.has("name")) m.name = root.child("name").as_string();
   if (!root.has("areal_density")) root.fail("missing 'areal_density' (kg/m^2)");
