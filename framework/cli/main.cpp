@@ -18,6 +18,7 @@
 #include "loom/stability.hpp"
 #include "loom/study.hpp"
 #include "loom/threads.hpp"
+#include "check_cmd.hpp"
 #include "render_cmd.hpp"
 
 namespace {
@@ -45,6 +46,10 @@ usage:
       time), DIR/reference.txt and DIR/study.png (default DIR: out/study_<study name>).
       --stability: instead, the study's stability atlas: the largest stable step of each
       combo by bisection, over a swept key (stiffness, mass, ...): DIR/stability.csv.
+  loom check RUN_DIR [--allow] [--list] [--quiet]
+      Count the intersecting non-adjacent triangle pairs of every frame of a run (exact
+      test; touching counts). Exit 5 when any frame has some, unless --allow; --list
+      prints the pairs (triangle indices, from 0).
   loom plugins
       List the plugins on the plugin path (kind, name, backend, version, description).
   loom --help | --version
@@ -64,7 +69,8 @@ environment:
                     (idle threads spin briefly, then sleep: see docs/ARCHITECTURE.md)
 
 exit codes: 0 ok, 1 internal error, 2 bad input (scene, mesh, flags), 3 diverged,
-            4 linear solver failed, 130 interrupted (Ctrl-C; frames written so far kept)
+            4 linear solver failed, 5 loom check found intersecting triangles,
+            130 interrupted (Ctrl-C; frames written so far kept)
 )";
 
 struct Args {
@@ -74,6 +80,7 @@ struct Args {
   bool stability = false;
   bool render = false;
   bool overwrite = false;
+  bool allow = false, list = false;
   std::vector<std::string> sets;
 };
 
@@ -94,11 +101,11 @@ Args parse_args(int argc, char** argv) {
     std::cout << "loom " << LOOM_VERSION_STRING << " (plugin ABI " << loom::kPluginAbiVersion << ")\n";
     std::exit(0);
   }
-  const std::vector<std::string> commands = {"run", "validate", "plugins", "render", "view", "study"};
+  const std::vector<std::string> commands = {"run", "validate", "plugins", "render", "view", "study", "check"};
   if (std::find(commands.begin(), commands.end(), a.command) == commands.end()) {
     const std::string hint = loom::closest_match(a.command, commands);
     usage_error("unknown command '" + a.command + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
-                "; commands: run, validate, study, render, view, plugins");
+                "; commands: run, validate, study, render, view, check, plugins");
   }
   for (int i = 2; i < argc; ++i) {
     const std::string s = argv[i];
@@ -131,6 +138,8 @@ Args parse_args(int argc, char** argv) {
       a.render = true;
     } else if (a.command == "run" && s == "--overwrite") {
       a.overwrite = true;
+    } else if (a.command == "check" && (s == "--allow" || s == "--list")) {
+      (s == "--allow" ? a.allow : a.list) = true;
     } else if (a.command == "study" && s == "--stability") {
       a.stability = true;
     } else if (s == "--quiet" || s == "-q") {
@@ -149,6 +158,7 @@ Args parse_args(int argc, char** argv) {
   if (a.command == "study" && (a.scene.empty() || a.study.empty()))
     usage_error("study needs a scene and a study file, e.g. loom study scenes/hanging_10x10.yaml studies/hanging_k2000.yaml");
   if (a.command == "render" && a.scene.empty()) usage_error("render needs the output folder of a run, e.g. loom render out/hanging_cloth");
+  if (a.command == "check" && a.scene.empty()) usage_error("check needs the output folder of a run, e.g. loom check out/hanging_cloth");
   if (a.command == "view" && a.scene.empty()) usage_error("view needs the output folder of a run, e.g. loom view out/hanging_cloth");
   if (a.command != "plugins" && a.scene.empty()) usage_error(a.command + " needs a scene file, e.g. loom " + a.command + " scenes/hanging_cloth.yaml");
   if (a.command == "plugins" && !a.scene.empty()) usage_error("plugins takes no scene file");
@@ -205,6 +215,7 @@ int main(int argc, char** argv) {
       loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
       return loom::cli::render_command(r);
     }
+    if (args.command == "check") return loom::cli::check_command({args.scene, args.allow, args.list, args.quiet});
     if (args.command == "view") {
       loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
       return loom::cli::view_command(r);

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+
+#include "loom/mesh_collider.hpp"
 
 namespace loom {
 
@@ -118,7 +121,17 @@ Collider::Frame Collider::frame_at(double t) const {
   f.center = add(point, motion.displacement(t));
   f.omega = scale(motion.axis, motion.spin(t));
   f.vlin = motion.linear_velocity(t);
-  f.normal = shape == Shape::Plane ? rotate(normal, motion.axis, motion.angle(t)) : normal;
+  const double angle = motion.angle(t);
+  f.normal = shape == Shape::Plane ? rotate(normal, motion.axis, angle) : normal;
+  if (shape == Shape::Mesh && angle != 0.0) {
+    // Columns: the rotated unit vectors.
+    for (int c = 0; c < 3; ++c) {
+      Vec3 e{0, 0, 0};
+      e[c] = 1;
+      const Vec3 r = rotate(e, motion.axis, angle);
+      for (int k = 0; k < 3; ++k) f.rot[3 * k + c] = r[k];
+    }
+  }
   return f;
 }
 
@@ -131,6 +144,22 @@ Collider::Contact Collider::query(const Frame& f, const double xp[3]) const {
     ct.normal = len > 1e-300 ? scale(r, 1.0 / len) : Vec3{0, 1, 0};
     ct.distance = len - radius - thickness;
     ct.velocity = add(f.vlin, cross(f.omega, scale(ct.normal, radius)));
+  } else if (shape == Shape::Mesh) {
+    // Into the body frame: y = R^T (x - c(t)) + c0; the answer back: R n, R (q - c0) + c(t).
+    const Vec3 r = sub(x, f.center);
+    const double* R = f.rot;
+    const double y[3] = {R[0] * r[0] + R[3] * r[1] + R[6] * r[2] + point[0],
+                         R[1] * r[0] + R[4] * r[1] + R[7] * r[2] + point[1],
+                         R[2] * r[0] + R[5] * r[1] + R[8] * r[2] + point[2]};
+    double nb[3], qb[3];
+    const double sd = body->signed_distance(y, nb, qb);
+    const Vec3 q{qb[0] - point[0], qb[1] - point[1], qb[2] - point[2]};
+    ct.normal = {R[0] * nb[0] + R[1] * nb[1] + R[2] * nb[2], R[3] * nb[0] + R[4] * nb[1] + R[5] * nb[2],
+                 R[6] * nb[0] + R[7] * nb[1] + R[8] * nb[2]};
+    const Vec3 arm{R[0] * q[0] + R[1] * q[1] + R[2] * q[2], R[3] * q[0] + R[4] * q[1] + R[5] * q[2],
+                   R[6] * q[0] + R[7] * q[1] + R[8] * q[2]};
+    ct.distance = sd - thickness;
+    ct.velocity = add(f.vlin, cross(f.omega, arm));
   } else {
     ct.normal = f.normal;
     ct.distance = dot(sub(x, f.center), ct.normal) - thickness;
@@ -215,16 +244,16 @@ Vec3 unit(const Params& p, const std::string& key, Vec3 v) {
 
 }  // namespace
 
-ColliderSet ColliderSet::parse(const Params& list) {
+ColliderSet ColliderSet::parse(const Params& list, const std::string& base_dir) {
   ColliderSet set;
   if (!list.valid()) return set;
   if (!list.is_sequence()) list.fail("must be a list of colliders, e.g. colliders: [{type: plane, point: [0,0,0], normal: [0,1,0]}].");
   for (std::size_t k = 0; k < list.size(); ++k) {
     const Params p = list.at(k);
-    if (!p.is_map()) p.fail("a collider is a mapping with 'type' (sphere or plane).");
+    if (!p.is_map()) p.fail("a collider is a mapping with 'type' (sphere, plane or mesh).");
     Collider c;
-    const std::string type = p.get_choice("type", "", {"sphere", "plane"});
-    if (type.empty()) p.fail("missing 'type': sphere or plane.");
+    const std::string type = p.get_choice("type", "", {"sphere", "plane", "mesh"});
+    if (type.empty()) p.fail("missing 'type': sphere, plane or mesh.");
     c.name = p.get("name", type + " " + std::to_string(k));
     if (type == "sphere") {
       c.shape = Collider::Shape::Sphere;
@@ -233,6 +262,21 @@ ColliderSet ColliderSet::parse(const Params& list) {
       if (!r.valid()) p.fail("a sphere needs 'radius' (m, > 0).");
       c.radius = r.as_double();
       if (!std::isfinite(c.radius) || c.radius <= 0) r.fail("radius must be a finite number > 0 (got " + std::to_string(c.radius) + ").");
+    } else if (type == "mesh") {
+      c.shape = Collider::Shape::Mesh;
+      Params obj = p.child("obj");
+      if (!obj.valid()) p.fail("a mesh collider needs 'obj': the path of a triangle mesh (OBJ, relative to the scene file).");
+      std::string path = obj.as_string();
+      if (!path.empty() && !base_dir.empty() && std::filesystem::path(path).is_relative())
+        path = (std::filesystem::path(base_dir) / path).lexically_normal().string();
+      const double scale = p.get_positive("scale", 1.0);
+      const Vec3 offset = read_vec3(p, "offset", {0, 0, 0});
+      try {
+        c.body = MeshBody::load(path, scale, offset);
+      } catch (const InputError& e) {
+        obj.fail(std::string("mesh collider: ") + e.what());
+      }
+      c.point = read_vec3(p, "pivot", c.body->box_center());
     } else {
       c.shape = Collider::Shape::Plane;
       c.point = read_vec3(p, "point", {0, 0, 0});

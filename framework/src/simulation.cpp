@@ -234,7 +234,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   }
 
   // ---- colliders (only when declared) ----
-  sc.colliders = ColliderSet::parse(root.child("colliders"));
+  sc.colliders = ColliderSet::parse(root.child("colliders"), base_dir);
 
   // ---- integrator ----
   Params integ = root.child("integrator");

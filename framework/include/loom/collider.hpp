@@ -8,6 +8,7 @@
 #pragma once
 
 #include <array>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -18,6 +19,8 @@
 #include "loom/state.hpp"
 
 namespace loom {
+
+class MeshBody;
 
 using Vec3 = std::array<double, 3>;
 
@@ -52,14 +55,17 @@ struct RigidMotion {
 RigidMotion parse_rigid_motion(const Params& m, const std::vector<std::string>& also_known = {});
 
 struct Collider {
-  enum class Shape { Sphere, Plane } shape = Shape::Plane;
-  Vec3 point{0, 0, 0};     ///< sphere centre, or a point on the plane (the reference point c0)
+  enum class Shape { Sphere, Plane, Mesh } shape = Shape::Plane;
+  Vec3 point{0, 0, 0};     ///< sphere centre, a point on the plane, or the mesh's pivot (the reference point c0)
   Vec3 normal{0, 1, 0};    ///< plane normal at t = 0 (unit), pointing to the free side
   double radius = 0;       ///< sphere radius
   double thickness = 0;    ///< contact offset: vertices are kept this far outside the surface
   double mu_static = 0, mu_kinetic = 0;
   RigidMotion motion;
   std::string name;        ///< for messages
+  /// Mesh: the body (positions at t = 0, BVH), shared by copies. Queries transform the point
+  /// into the body frame (rigid motion) and back.
+  std::shared_ptr<const MeshBody> body;
 
   struct Contact {
     double distance;   ///< signed distance to the offset surface (< 0: inside)
@@ -72,6 +78,7 @@ struct Collider {
     Vec3 normal;    ///< plane normal at t
     Vec3 omega;     ///< angular velocity vector
     Vec3 vlin;      ///< linear velocity of the reference point
+    double rot[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< mesh: rotation body -> world (row major)
   };
   Frame frame_at(double t) const;
   /// Signed distance, normal and surface velocity at position x for a placement.
@@ -88,8 +95,9 @@ class ColliderSet {
   const std::vector<Collider>& colliders() const { return colliders_; }
   void add(const Collider& c) { colliders_.push_back(c); }
 
-  /// Parse the scene's `colliders:` list (InputError with file:line on bad input).
-  static ColliderSet parse(const Params& list);
+  /// Parse the scene's `colliders:` list (InputError with file:line on bad input). Mesh
+  /// colliders' OBJ paths resolve against base_dir when relative.
+  static ColliderSet parse(const Params& list, const std::string& base_dir = "");
 
   /// After an explicit step of size h ending at time t: vertices inside a collider are moved
   /// to its surface and their velocity relative to the surface loses its inward normal part,

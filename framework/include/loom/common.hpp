@@ -26,7 +26,8 @@ enum ExitCode : int {
   kExitInternal = 1,   ///< unexpected failure (a bug or an I/O error while running)
   kExitBadInput = 2,   ///< scene, mesh, material file or CLI flag rejected
   kExitDiverged = 3,   ///< the simulation diverged (NaN/Inf or a bound exceeded)
-  kExitSolverFailed = 4  ///< a linear solve failed and the scene's policy says stop
+  kExitSolverFailed = 4,  ///< a linear solve failed and the scene's policy says stop
+  kExitIntersections = 5  ///< `loom check`: some frame has intersecting triangle pairs
 };
 
 /// Bad input: a scene file, mesh, material file or CLI flag. The message names the

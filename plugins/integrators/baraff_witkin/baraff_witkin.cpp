@@ -109,8 +109,10 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
   contacts_.clear();
   if (!contacts) return;
   // A free vertex inside a collider's offset surface, or predicted to enter it during the
-  // step, loses its normal DOF: its normal velocity is prescribed to the surface's, plus
-  // what takes it out of any penetration within the step (Baraff & Witkin 1998, sec. 5).
+  // step, loses its normal DOF (Baraff & Witkin 1998, sec. 5). Its normal velocity is
+  // prescribed to the surface's minus the remaining distance over h, so that it ends the
+  // step exactly on the surface: a vertex still in the air closes the gap within the step
+  // (lands), a vertex on the surface moves with it, one inside leaves the penetration.
   const double t0 = s.time, t1 = s.time + h;
   const auto& cols = scene.colliders.colliders();
   for (std::size_t c = 0; c < cols.size(); ++c) {
@@ -158,10 +160,13 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
     const double vpn = vp[0] * ct.normal[0] + vp[1] * ct.normal[1] + vp[2] * ct.normal[2];
     const double sn = ct.surface_velocity[0] * ct.normal[0] + ct.surface_velocity[1] * ct.normal[1] +
                       ct.surface_velocity[2] * ct.normal[2];
-    const double out = bc.distance < 0 ? -bc.distance / h : 0.0;  // leave the penetration within this step
-    if (vpn > sn + out) continue;  // leaving by itself within the step: no constraint needed
+    const double target = sn - bc.distance / h;  // normal velocity that ends the step on the surface
+    if (vpn > target) continue;  // does not reach the surface within the step: no constraint
+    // In contact now (friction acts) or landing during the step (no friction: the cloth is in
+    // the air until the end of the step, and the impact impulse makes none either).
+    ct.landing = bc.distance > kContactTolerance;
     S_.constrain_direction(i, ct.normal);
-    ct.dvn = sn + out - vn;
+    ct.dvn = target - vn;
     double* zi = &z_[3 * static_cast<std::size_t>(i)];
     for (int k = 0; k < 3; ++k) zi[k] = ct.dvn * ct.normal[k];
     contacts_.push_back(ct);
@@ -212,7 +217,7 @@ bool BaraffWitkin::release_pulling_contacts(const Scene& scene, double h) {
 void BaraffWitkin::apply_friction(const Scene& scene) {
   const State& s = scene.state;
   for (const Contact& ct : contacts_) {
-    if (ct.mu_static <= 0 && ct.mu_kinetic <= 0) continue;
+    if (ct.landing || (ct.mu_static <= 0 && ct.mu_kinetic <= 0)) continue;
     const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
     const double j = std::max(0.0, ct.impulse) * s.inv_mass[ct.vertex];
     double vrel[3];
@@ -225,6 +230,23 @@ void BaraffWitkin::apply_friction(const Scene& scene) {
     if (len <= ct.mu_static * j) keep = 0.0;
     else if (len > 0) keep = std::max(0.0, 1.0 - ct.mu_kinetic * j / len);
     for (int k = 0; k < 3; ++k) dv_[o + k] -= (1.0 - keep) * vt[k];
+  }
+}
+
+// A vertex that landed during the step arrives on the surface with its approach velocity
+// (the one that closed the gap). The impact is inelastic: at the end of the step its normal
+// velocity becomes the surface's, as resolve_contacts does for the explicit integrators, so
+// that the next step does not see the approach speed as a push into the surface (whose
+// impulse would then make a spurious friction). The tangential velocity is kept.
+void BaraffWitkin::stop_landed(Scene& scene) {
+  State& s = scene.state;
+  for (const Contact& ct : contacts_) {
+    if (!ct.landing) continue;
+    double* v = &s.v[3 * static_cast<std::size_t>(ct.vertex)];
+    const double rel = (v[0] - ct.surface_velocity[0]) * ct.normal[0] + (v[1] - ct.surface_velocity[1]) * ct.normal[1] +
+                       (v[2] - ct.surface_velocity[2]) * ct.normal[2];
+    if (rel < 0)
+      for (int k = 0; k < 3; ++k) v[k] -= rel * ct.normal[k];
   }
 }
 
@@ -309,6 +331,7 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
   }
   // Moving pins: x0 + h v1 equals p(t + h) up to rounding; store it exactly.
   scene.pins.apply_positions(s, t0_ + h);
+  if (!contacts_.empty()) stop_landed(scene);
   if (!scene.colliders.empty()) project_positions(scene, s.time + h);
   return true;
 }

@@ -68,6 +68,11 @@ class BaraffWitkin final : public Integrator {
   void apply_friction(const Scene& scene);
   void project_positions(Scene& scene, double t);
   void record_pin_forces(Scene& scene, double h);
+  void stop_landed(Scene& scene);
+
+  /// A vertex within this distance (m) of a collider's offset surface at the start of a step
+  /// is in contact (friction acts); one farther out but predicted to reach it is landing.
+  static constexpr double kContactTolerance = 1e-9;
 
   // One contact per vertex (the deepest collider): Baraff & Witkin's 2-DOF constraint.
   struct Contact {
@@ -77,6 +82,7 @@ class BaraffWitkin final : public Integrator {
     double mu_static, mu_kinetic;
     double dvn;      // prescribed normal velocity change (z = dvn * normal)
     double impulse;  // normal constraint impulse (A dv - b).n after the solve (>= 0 when pushing)
+    bool landing;    // outside the surface at the step start: lands at its end, no friction
   };
   std::vector<Contact> contacts_;   // capacity reserved in prepare()
   std::vector<Collider::Frame> frames0_, frames1_;  // collider placements at step start / end
