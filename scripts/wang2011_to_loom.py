@@ -54,6 +54,20 @@ def shear_curve(rows):
     return out
 
 
+def monotone_envelope(values, start):
+    """Hold the peak where the secant stress would fall with strain (a negative stiffness,
+    which Loom's curves refuse): running maximum upward from zero strain, running minimum
+    downward. Changes only the shear of ivory-rib-knit and navy-sparkle-sweat, beyond
+    |eps_uv| ~ 0.2."""
+    out = list(values)
+    zero = int(round(-start / STRAIN_STEP))
+    for i in range(zero + 1, len(out)):
+        out[i] = max(out[i], out[i - 1])
+    for i in range(zero - 1, -1, -1):
+        out[i] = min(out[i], out[i + 1])
+    return out
+
+
 def fmt_list(values):
     return "[" + ", ".join("%.9g" % v for v in values) + "]"
 
@@ -83,11 +97,11 @@ def convert(path, out_dir):
     # curves are the model's own second Piola-Kirchhoff stress against Green-Lagrange strain.
     text.append("curves:")
     text.append("  weft: {measure: green_pk2, start: %.9g, step: %.9g, stress: %s}" % (AXIAL_RANGE[0], STRAIN_STEP,
-                                                                    fmt_list(axial_curve(rows, 1, 0))))
+                                                                    fmt_list(monotone_envelope(axial_curve(rows, 1, 0), AXIAL_RANGE[0]))))
     text.append("  warp: {measure: green_pk2, start: %.9g, step: %.9g, stress: %s}" % (AXIAL_RANGE[0], STRAIN_STEP,
-                                                                    fmt_list(axial_curve(rows, 5, 2))))
+                                                                    fmt_list(monotone_envelope(axial_curve(rows, 5, 2), AXIAL_RANGE[0]))))
     text.append("  shear: {measure: green_pk2, start: %.9g, step: %.9g, stress: %s}" % (SHEAR_RANGE[0], STRAIN_STEP,
-                                                                     fmt_list(shear_curve(rows))))
+                                                                     fmt_list(monotone_envelope(shear_curve(rows), SHEAR_RANGE[0]))))
     text.append("bending: {stiffness: {weft: %.9g, warp: %.9g, bias: %.9g}}" % (b_weft, b_warp, b_bias))
     with open(os.path.join(out_dir, name + ".yaml"), "w") as f:
         f.write("\n".join(text) + "\n")

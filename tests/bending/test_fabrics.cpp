@@ -92,18 +92,46 @@ TEST(Wang2011, ConvertedCurvesReproduceTheModelAlongWeftWarpAndShear) {
     const Table t = read_table(name);
     const auto m = loom::gnatv::read_material_file(kDir + "/" + name + ".yaml", loom::CurveInterpolation::MonotoneCubic);
     double worst = 0;
-    for (double e : {-0.15, -0.05, 0.01, 0.03, 0.08, 0.12, 0.2, 0.4}) {
+    // The model's stress along each path, held at its peak where it would fall (the
+    // monotone envelope: Loom refuses a negative stiffness), from a fine strain walk.
+    auto path = [&](int which, double e) {
       double S[2][2];
-      const double Gw[2][2] = {{e, 0}, {0, 0}};
-      model_stress(t, Gw, S);
-      worst = std::max(worst, std::fabs(m.weft.stress(e) - S[0][0]) / std::fabs(S[0][0]));
-      const double Gv[2][2] = {{0, 0}, {0, e}};
-      model_stress(t, Gv, S);
-      worst = std::max(worst, std::fabs(m.warp.stress(e) - S[1][1]) / std::fabs(S[1][1]));
-      const double Gs[2][2] = {{0, e / 2}, {e / 2, 0}};  // eps_uv = u.v = 2 G01
-      model_stress(t, Gs, S);
-      worst = std::max(worst, std::fabs(m.shear.stress(e) - S[0][1]) / std::fabs(S[0][1]));
+      if (which == 0) {
+        const double G[2][2] = {{e, 0}, {0, 0}};
+        model_stress(t, G, S);
+        return S[0][0];
+      }
+      if (which == 1) {
+        const double G[2][2] = {{0, 0}, {0, e}};
+        model_stress(t, G, S);
+        return S[1][1];
+      }
+      const double G[2][2] = {{0, e / 2}, {e / 2, 0}};  // eps_uv = u.v = 2 G01
+      model_stress(t, G, S);
+      return S[0][1];
+    };
+    auto envelope = [&](int which, double e) {
+      double best = 0;
+      const int steps = 4000;
+      for (int q = 1; q <= steps; ++q) {
+        const double v = path(which, e * q / steps);
+        best = e > 0 ? std::max(best, v) : std::min(best, v);
+      }
+      return best;
+    };
+    int held = 0;
+    for (double e : {-0.3, -0.15, -0.05, 0.01, 0.03, 0.08, 0.12, 0.2, 0.3, 0.4}) {
+      const loom::Curve* curve[3] = {&m.weft, &m.warp, &m.shear};
+      for (int which = 0; which < 3; ++which) {
+        const double env = envelope(which, e);
+        worst = std::max(worst, std::fabs(curve[which]->stress(e) - env) / std::fabs(env));
+        if (std::fabs(env - path(which, e)) > 1e-3 * std::fabs(env)) ++held;
+      }
     }
+    const std::string n(name);
+    // Only the shear of these two knits softens in the model (beyond |eps_uv| ~ 0.2).
+    if (n == "ivory-rib-knit" || n == "navy-sparkle-sweat") EXPECT_GT(held, 0) << name;
+    else EXPECT_EQ(held, 0) << name;
     EXPECT_LT(worst, 2e-3) << name;
     const loom::Params f = loom::Params::from_file(kDir + "/" + name + ".yaml");
     EXPECT_DOUBLE_EQ(m.areal_density, loom::Params::from_file(kDir + "/data/" + name + ".json").child("density").as_double());
