@@ -263,6 +263,8 @@ TEST(Cli, ValidateWarnsWhenDtExceedsTheStableStep) {
   const auto b = text.find("```", a + 8);
   ASSERT_NE(a, std::string::npos);
   const auto dir = scratch("validate_readme");
+  // The template names files relative to the scene's folder as the shipped scenes do (meshes/).
+  fs::create_directory_symlink(std::string(LOOM_SOURCE_DIR) + "/scenes/meshes", dir / "meshes");
   const std::string scene = write_scene(dir, text.substr(a + 8, b - a - 8), "readme.yaml");
   Result r = run("validate " + scene, false);
   EXPECT_EQ(r.code, 0) << r.out;
