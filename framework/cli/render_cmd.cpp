@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -12,6 +13,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "loom/collider_geometry.hpp"
 #include "loom/output.hpp"
 #include "loom/registry.hpp"
 #include "loom/renderer.hpp"
@@ -25,7 +27,7 @@ namespace {
 
 // Positions of an OBJ frame written by `loom run` (only 'v' lines are read: simulated
 // frames may contain crumpled triangles, which are fine to draw).
-void read_frame_positions(const std::string& path, std::vector<double>& x) {
+void read_frame_positions(const std::string& path, std::vector<double>& x, double* time = nullptr) {
   std::ifstream in(path);
   if (!in) throw InputError(path + ": cannot open frame");
   x.clear();
@@ -33,6 +35,8 @@ void read_frame_positions(const std::string& path, std::vector<double>& x) {
   int lineno = 0;
   while (std::getline(in, line)) {
     ++lineno;
+    // `loom run` writes "# Loom frame: t = 0.25 s" first: the time the colliders are placed at.
+    if (time && lineno == 1 && line.rfind("# Loom frame: t = ", 0) == 0) *time = std::atof(line.c_str() + 18);
     if (line.size() < 2 || line[0] != 'v' || line[1] != ' ') continue;
     std::istringstream ls(line.substr(2));
     double a, b, c;
@@ -143,11 +147,43 @@ int render_command(const RenderArgs& args) {
 
   Mesh mesh = first_frame_mesh(in);
   renderer->begin(mesh);
+  // The scene's colliders, drawn with the cloth at each frame's time (a plane as a square
+  // around the first frame's cloth).
+  ColliderSet colliders;
+  if (Params cp = in.root.child("colliders"); cp.valid()) colliders = ColliderSet::parse(cp, in.base_dir);
+  double focus[3] = {0, 0, 0}, plane_size = 1.0;
+  {
+    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+    for (Index i = 0; i < mesh.num_vertices(); ++i)
+      for (int c = 0; c < 3; ++c) {
+        lo[c] = std::min(lo[c], mesh.positions[3 * i + c]);
+        hi[c] = std::max(hi[c], mesh.positions[3 * i + c]);
+      }
+    for (int c = 0; c < 3; ++c) focus[c] = 0.5 * (lo[c] + hi[c]);
+    plane_size = std::max(1e-3, 2.0 * std::hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]));
+  }
+  // The module's optional obstacle entry point (renderer.hpp); without it the cloth only.
+  RendererObstaclesFn set_obstacles = nullptr;
+  if (!colliders.empty())
+    for (const auto& info : registry.list())
+      if (info.kind == PluginKind::Renderer && info.name == type && !info.module_path.empty())
+        if (void* h = ::dlopen(info.module_path.c_str(), RTLD_NOW | RTLD_NOLOAD)) {
+          set_obstacles = reinterpret_cast<RendererObstaclesFn>(::dlsym(h, kRendererObstaclesSymbol));
+          ::dlclose(h);
+        }
+  std::vector<float> obstacle_pos, obstacle_nrm;
   std::vector<double> x;
   int k = 0;
   for (const auto& f : frames) {
-    read_frame_positions(f.string(), x);
+    double t = 0;
+    read_frame_positions(f.string(), x, &t);
     check_frame_size(f, x, mesh);
+    if (set_obstacles) {
+      obstacle_pos.clear();
+      obstacle_nrm.clear();
+      collider_triangles(colliders, t, focus, plane_size, obstacle_pos, obstacle_nrm);
+      set_obstacles(renderer.get(), obstacle_pos.data(), obstacle_nrm.data(), obstacle_pos.size());
+    }
     const std::string png = (out_dir / (f.stem().string() + ".png")).string();
     renderer->render(x, png);
     ++k;

@@ -160,3 +160,32 @@ TEST_F(Landing, TiltedPlaneDoesNotTearTheCloth) {
     }
   }
 }
+
+TEST_F(Landing, FrictionKeepsActingOnAVertexSlidingOverACurvedSurface) {
+  // A 2 cm patch resting on top of a ball of radius 0.3 spinning about z at 2 rad/s: the top
+  // moves along +x at 0.6 m/s. The vertices are in contact at every step (not landing), so
+  // friction (mu 0.9 > the slope they reach) drags the patch until it moves with the surface
+  // and then carries it around the ball against the pull of gravity along the slope.
+  const std::string yaml = R"(
+mesh: {grid: {nx: 3, ny: 3, width: 0.02, height: 0.02, plane: xz}}
+material: {type: mass_spring, stiffness: 100, density: 1.0}
+integrator: {type: baraff_witkin, dt: 2.0e-3}
+solver: {type: eigen_ldlt}
+threads: 1
+colliders: [{type: sphere, center: [0.01, -0.3, -0.01], radius: 0.3, friction: 0.9,
+             motion: {type: rotate, axis: [0, 0, 1], angular_velocity: -2.0}}]
+)";
+  auto sim = loom::Simulation::from_string(yaml, "ball.yaml", LOOM_SOURCE_DIR, {}, loader);
+  for (int k = 0; k < 100; ++k) sim->step();  // 0.2 s
+  const loom::State& s = sim->scene().state;
+  const auto& col = sim->scene().colliders.colliders()[0];
+  double rel = 0;
+  for (loom::Index i = 0; i < s.size(); ++i) {
+    const auto ct = col.query(&s.x[3 * i], s.time);
+    ASSERT_LT(std::abs(ct.distance), 1e-4) << "vertex " << i << " left the ball";
+    double d2 = 0;
+    for (int k = 0; k < 3; ++k) d2 += (s.v[3 * i + k] - ct.velocity[k]) * (s.v[3 * i + k] - ct.velocity[k]);
+    rel = std::max(rel, std::sqrt(d2));
+  }
+  EXPECT_LT(rel, 0.01) << "the patch slides on the ball instead of being carried (surface speed 0.6 m/s)";
+}

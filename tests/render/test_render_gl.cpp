@@ -469,3 +469,32 @@ TEST(GlRendererCli, VideoWithFfmpegWritesAnMp4) {
   }
   fs::remove_all(dir);
 }
+
+TEST(GlRendererCli, DrawsTheColliders) {
+  // The same frames with and without a sphere collider through the cloth's centre (half of
+  // it in front of the cloth whichever side the camera is on): the ball must show.
+  const std::string plain = make_run_dir("no_collider");
+  const std::string ball = make_run_dir("collider");
+  std::ofstream(ball + "/scene.yaml", std::ios::app)
+      << "colliders: [{type: sphere, center: [0.5, 0.5, 0.0], radius: 0.3}, {type: plane, point: [0, -0.2, 0]}]\n";
+  std::string out;
+  int rc = run(std::string(LOOM_EXE) + " render " + plain + " --quiet", out);
+  if (rc != 0 && out.find("EGL") != std::string::npos) GTEST_SKIP() << "no EGL context: " << out;
+  ASSERT_EQ(rc, 0) << out;
+  rc = run(std::string(LOOM_EXE) + " render " + ball + " --quiet", out);
+  ASSERT_EQ(rc, 0) << out;
+  int w = 0, h = 0, w2 = 0, h2 = 0;
+  const auto a = read_png(plain + "/render/frame_00000.png", w, h);
+  const auto b = read_png(ball + "/render/frame_00000.png", w2, h2);
+  ASSERT_EQ(a.size(), b.size());
+  std::size_t differ = 0, grey = 0;
+  for (std::size_t p = 0; p + 2 < a.size(); p += 3) {
+    differ += a[p] != b[p] || a[p + 1] != b[p + 1] || a[p + 2] != b[p + 2];
+    // the colliders' grey (0.55, 0.57, 0.60) x light: nearly equal channels, blue a little higher
+    grey += a[p] != b[p] && std::abs(int(b[p]) - int(b[p + 1])) <= 12 && b[p + 2] >= b[p] && b[p] > 20;
+  }
+  EXPECT_GT(differ, a.size() / 3 / 20) << "the colliders changed fewer than 5% of the pixels";
+  EXPECT_GT(grey, differ / 4);
+  fs::remove_all(plain);
+  fs::remove_all(ball);
+}

@@ -21,6 +21,14 @@ class Renderer {
   virtual void render(std::span<const double> x, const std::string& png_path) = 0;
 };
 
+/// Optional: a renderer module that can draw rigid obstacles (the scene's colliders) exports
+/// `extern "C" void loom_renderer_set_obstacles(loom::Renderer*, const float* positions,
+/// const float* normals, std::size_t floats)` (found by dlsym, like the viewer; no change to
+/// the plugin ABI): a triangle soup, 9 floats per triangle, a unit normal per vertex, drawn with
+/// the following render() calls of that renderer. Modules without it draw the cloth only.
+using RendererObstaclesFn = void (*)(Renderer*, const float*, const float*, std::size_t);
+inline constexpr const char* kRendererObstaclesSymbol = "loom_renderer_set_obstacles";
+
 /// What `loom view` hands a renderer module's optional interactive viewer. A module that has
 /// one exports `extern "C" int loom_renderer_view(const loom::RendererViewArgs&)` (found by
 /// dlsym; see kRendererViewSymbol); it returns an exit code and throws InputError on bad input.

@@ -88,6 +88,7 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
   scene.pins.constraint_forces().assign(3 * s.pin_list.size(), 0.0);
   contacts_.clear();
   if (!scene.colliders.empty()) contacts_.reserve(n);
+  in_contact_.assign(scene.colliders.empty() ? 0 : n, 0);
   frames0_.resize(scene.colliders.size());
   frames1_.resize(scene.colliders.size());
   scene.solver->analyze_pattern(A_, S_);
@@ -164,7 +165,7 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
     if (vpn > target) continue;  // does not reach the surface within the step: no constraint
     // In contact now (friction acts) or landing during the step (no friction: the cloth is in
     // the air until the end of the step, and the impact impulse makes none either).
-    ct.landing = bc.distance > kContactTolerance;
+    ct.landing = bc.distance > kContactTolerance && !in_contact_[i];
     S_.constrain_direction(i, ct.normal);
     ct.dvn = target - vn;
     double* zi = &z_[3 * static_cast<std::size_t>(i)];
@@ -332,6 +333,10 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
   // Moving pins: x0 + h v1 equals p(t + h) up to rounding; store it exactly.
   scene.pins.apply_positions(s, t0_ + h);
   if (!contacts_.empty()) stop_landed(scene);
+  if (!in_contact_.empty()) {
+    std::fill(in_contact_.begin(), in_contact_.end(), 0);
+    for (const Contact& ct : contacts_) in_contact_[ct.vertex] = 1;
+  }
   if (!scene.colliders.empty()) project_positions(scene, s.time + h);
   return true;
 }

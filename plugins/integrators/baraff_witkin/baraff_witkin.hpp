@@ -70,8 +70,11 @@ class BaraffWitkin final : public Integrator {
   void record_pin_forces(Scene& scene, double h);
   void stop_landed(Scene& scene);
 
-  /// A vertex within this distance (m) of a collider's offset surface at the start of a step
-  /// is in contact (friction acts); one farther out but predicted to reach it is landing.
+  /// A vertex constrained by a collider at the end of the previous step, or within this
+  /// distance (m) of a collider's offset surface (or inside) at the start of a step, is in
+  /// contact (friction acts); one farther out but predicted to reach it is landing. (The
+  /// first condition keeps a vertex sliding over a curved surface in contact: a step along
+  /// the tangent plane ends it a little outside a convex surface.)
   static constexpr double kContactTolerance = 1e-9;
 
   // One contact per vertex (the deepest collider): Baraff & Witkin's 2-DOF constraint.
@@ -85,6 +88,7 @@ class BaraffWitkin final : public Integrator {
     bool landing;    // outside the surface at the step start: lands at its end, no friction
   };
   std::vector<Contact> contacts_;   // capacity reserved in prepare()
+  std::vector<char> in_contact_;    // per vertex: constrained by a collider at the end of the last step
   std::vector<Collider::Frame> frames0_, frames1_;  // collider placements at step start / end
   BaraffWitkinOptions options_;
   ConstraintHook hook_;

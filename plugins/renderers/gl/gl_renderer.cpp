@@ -64,6 +64,26 @@ void main() {
 }
 )";
 
+// Colliders: plain grey, Lambert with the scene's light, lit from whichever side faces the eye.
+const char* kObstacleFragment = R"(#version 300 es
+precision highp float;
+uniform vec3 u_eye;
+uniform vec3 u_light_dir;
+uniform vec3 u_light;
+uniform vec3 u_ambient;
+in vec3 v_pos;
+in vec3 v_normal;
+in vec3 v_tangent;
+in vec2 v_uv;
+out vec4 o_color;
+void main() {
+  vec3 n = normalize(v_normal);
+  if (dot(n, u_eye - v_pos) < 0.0) n = -n;
+  vec3 c = vec3(0.55, 0.57, 0.60) * (u_ambient + u_light * max(dot(n, u_light_dir), 0.0));
+  o_color = vec4(pow(clamp(c, 0.0, 1.0), vec3(1.0 / 2.2)), 1.0);
+}
+)";
+
 const char* egl_error_name(EGLint e) {
   switch (e) {
     case EGL_SUCCESS: return "EGL_SUCCESS";
@@ -180,6 +200,9 @@ GlRenderer::GlRenderer(RenderSettings settings, bool external_context)
 GlRenderer::~GlRenderer() {
   if (egl_ && egl_->try_make_current()) {
     if (program_) glDeleteProgram(program_);
+    if (obstacle_program_) glDeleteProgram(obstacle_program_);
+    if (obstacle_vao_) glDeleteVertexArrays(1, &obstacle_vao_);
+    if (obstacle_vao_) glDeleteBuffers(2, obstacle_vbo_);
     if (vao_) glDeleteVertexArrays(1, &vao_);
     glDeleteBuffers(4, vbo_);
     if (ebo_) glDeleteBuffers(1, &ebo_);
@@ -240,6 +263,21 @@ void GlRenderer::create_gl_objects() {
       char log[4096];
       glGetProgramInfoLog(program_, sizeof(log), nullptr, log);
       throw std::runtime_error(std::string("gl renderer: program link failed (a bug in Loom):\n") + log);
+    }
+    {
+      const GLuint ovs = compile_shader(GL_VERTEX_SHADER, kVertexShader);
+      const GLuint ofs = compile_shader(GL_FRAGMENT_SHADER, kObstacleFragment);
+      obstacle_program_ = glCreateProgram();
+      glAttachShader(obstacle_program_, ovs);
+      glAttachShader(obstacle_program_, ofs);
+      glLinkProgram(obstacle_program_);
+      glDeleteShader(ovs);
+      glDeleteShader(ofs);
+      GLint linked = 0;
+      glGetProgramiv(obstacle_program_, GL_LINK_STATUS, &linked);
+      if (!linked) throw std::runtime_error("gl renderer: obstacle program link failed (a bug in Loom)");
+      glGenVertexArrays(1, &obstacle_vao_);
+      glGenBuffers(2, obstacle_vbo_);
     }
     glGenVertexArrays(1, &vao_);
     glGenBuffers(4, vbo_);
@@ -306,6 +344,30 @@ void GlRenderer::set_uniforms() {
   glUniform3fv(loc("u_eye"), 1, glm::value_ptr(camera_.eye));
   const glm::mat4 vp = camera_.proj * camera_.view;
   glUniformMatrix4fv(loc("u_view_proj"), 1, GL_FALSE, glm::value_ptr(vp));
+  glUseProgram(obstacle_program_);
+  auto oloc = [&](const char* name) { return glGetUniformLocation(obstacle_program_, name); };
+  glUniform3fv(oloc("u_light"), 1, glm::value_ptr(light));
+  glUniform3fv(oloc("u_ambient"), 1, glm::value_ptr(ambient));
+  glUniform3fv(oloc("u_light_dir"), 1, glm::value_ptr(light_dir_));
+  glUniform3fv(oloc("u_eye"), 1, glm::value_ptr(camera_.eye));
+  glUniformMatrix4fv(oloc("u_view_proj"), 1, GL_FALSE, glm::value_ptr(vp));
+}
+
+void GlRenderer::set_obstacles(std::span<const float> positions, std::span<const float> normals) {
+  if (!begun_) throw std::logic_error("gl renderer: set_obstacles() before begin()");
+  if (positions.size() != normals.size() || positions.size() % 9 != 0)
+    throw std::logic_error("gl renderer: set_obstacles() needs 9 floats per triangle and a normal per vertex");
+  if (egl_) egl_->make_current();
+  obstacle_vertices_ = positions.size() / 3;
+  glBindVertexArray(obstacle_vao_);
+  const std::span<const float> attrs[2] = {positions, normals};
+  for (int a = 0; a < 2; ++a) {
+    glBindBuffer(GL_ARRAY_BUFFER, obstacle_vbo_[a]);
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(attrs[a].size() * sizeof(float)), attrs[a].data(), GL_DYNAMIC_DRAW);
+    glVertexAttribPointer(GLuint(a), 3, GL_FLOAT, GL_FALSE, 0, nullptr);
+    glEnableVertexAttribArray(GLuint(a));
+  }
+  glBindVertexArray(0);
 }
 
 void GlRenderer::upload(std::span<const double> x) {
@@ -334,6 +396,11 @@ void GlRenderer::draw(unsigned fbo, int w, int h) {
   glUseProgram(program_);
   glBindVertexArray(vao_);
   glDrawElements(GL_TRIANGLES, GLsizei(triangles_.size()), GL_UNSIGNED_INT, nullptr);
+  if (obstacle_vertices_ > 0) {
+    glUseProgram(obstacle_program_);
+    glBindVertexArray(obstacle_vao_);
+    glDrawArrays(GL_TRIANGLES, 0, GLsizei(obstacle_vertices_));
+  }
   glBindVertexArray(0);
 }
 
@@ -345,6 +412,9 @@ void GlRenderer::set_camera(const Camera& cam) {
   glUniform3fv(glGetUniformLocation(program_, "u_eye"), 1, glm::value_ptr(camera_.eye));
   const glm::mat4 vp = camera_.proj * camera_.view;
   glUniformMatrix4fv(glGetUniformLocation(program_, "u_view_proj"), 1, GL_FALSE, glm::value_ptr(vp));
+  glUseProgram(obstacle_program_);
+  glUniform3fv(glGetUniformLocation(obstacle_program_, "u_eye"), 1, glm::value_ptr(camera_.eye));
+  glUniformMatrix4fv(glGetUniformLocation(obstacle_program_, "u_view_proj"), 1, GL_FALSE, glm::value_ptr(vp));
 }
 
 const std::vector<unsigned char>& GlRenderer::render_image(std::span<const double> x) {

@@ -93,6 +93,9 @@ class GlRenderer final : public Renderer {
   std::string name() const override { return "gl"; }
   void begin(const Mesh& mesh) override;
   void render(std::span<const double> x, const std::string& png_path) override;
+  /// Colliders to draw (plain grey, Lambert) with the following frames (the module's
+  /// loom_renderer_set_obstacles; see renderer.hpp).
+  void set_obstacles(std::span<const float> positions, std::span<const float> normals);
 
   /// Render positions x into the RGB image returned (width*height*3 bytes, top row first).
   const std::vector<unsigned char>& render_image(std::span<const double> x);
@@ -120,6 +123,8 @@ class GlRenderer final : public Renderer {
   std::vector<float> uv_, pos_, normals_, tangents_;
   std::vector<unsigned char> readback_, image_;
   unsigned program_ = 0, vao_ = 0, vbo_[4] = {0, 0, 0, 0}, ebo_ = 0, fbo_ = 0, rb_color_ = 0, rb_depth_ = 0;
+  unsigned obstacle_program_ = 0, obstacle_vao_ = 0, obstacle_vbo_[2] = {0, 0};
+  std::size_t obstacle_vertices_ = 0;
   bool begun_ = false;
   bool external_context_ = false;
 };

@@ -10,3 +10,10 @@ static void register_gl(loom::Registry& r) {
                  });
 }
 LOOM_PLUGIN(register_gl)
+
+// Colliders for `loom render` (renderer.hpp: kRendererObstaclesSymbol), found by dlsym.
+LOOM_PLUGIN_EXPORT void loom_renderer_set_obstacles(loom::Renderer* r, const float* positions,
+                                                       const float* normals, std::size_t floats) {
+  if (auto* gl = dynamic_cast<loom::render::GlRenderer*>(r))
+    gl->set_obstacles({positions, floats}, {normals, floats});
+}
