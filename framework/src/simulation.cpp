@@ -235,6 +235,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
 
   // ---- colliders (only when declared) ----
   sc.colliders = ColliderSet::parse(root.child("colliders"), base_dir);
+  sc.self_collision = SelfCollision::parse(root.child("self_collision"), sc.mesh, st.x);
 
   // ---- integrator ----
   Params integ = root.child("integrator");
@@ -380,6 +381,9 @@ std::vector<std::string> Simulation::describe() const {
     for (std::size_t k = 0; k < sc.colliders.size(); ++k) c += (k ? ", " : "") + sc.colliders.colliders()[k].name;
     lines.push_back(c);
   }
+  if (sc.self_collision)
+    lines.push_back("self-collision: thickness " + fmt(sc.self_collision->options().thickness) + " m, friction " +
+                    fmt(sc.self_collision->options().friction));
   lines.push_back("gravity:    [" + fmt(sc.gravity[0]) + ", " + fmt(sc.gravity[1]) + ", " + fmt(sc.gravity[2]) + "]");
   lines.push_back("frames:     " + std::to_string(frames_) + " (" + fmt(static_cast<double>(frames_) * substeps_ * dt_) + " s simulated)");
   lines.push_back("output:     " + (output_.dir.empty() ? std::string("none") : output_.dir));
@@ -433,9 +437,11 @@ void Simulation::step() {
   if (g_stop_requested)
     throw Interrupted("interrupted at step " + std::to_string(scene_->state.step) + " (t = " + fmt(scene_->state.time) + " s)");
   const auto t0 = std::chrono::steady_clock::now();
+  if (scene_->self_collision) scene_->self_collision->begin_step(scene_->state);
   integrator_->step(*scene_, dt_);
   if (!scene_->colliders.empty() && !integrator_->handles_contacts())
     scene_->colliders.resolve_contacts(scene_->state, scene_->state.time, dt_);
+  if (scene_->self_collision) scene_->self_collision->resolve(scene_->state, dt_);  // after colliders: last word
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   step_seconds_ += secs;
   step_seconds_total_ += secs;

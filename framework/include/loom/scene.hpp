@@ -12,6 +12,7 @@
 #include "loom/mesh.hpp"
 #include "loom/params.hpp"
 #include "loom/pins.hpp"
+#include "loom/self_collision.hpp"
 #include "loom/state.hpp"
 
 namespace loom {
@@ -25,6 +26,7 @@ struct Scene {
   std::unique_ptr<LinearSolver> solver;    ///< set only when the integrator needs one
   ColliderSet colliders;                   ///< empty unless the scene declares colliders
   PinSet pins;                             ///< pin groups (motions, reactions); empty: fixed pins only
+  std::unique_ptr<SelfCollision> self_collision;  ///< null unless the scene declares self_collision
   std::string backend = "cpu";
   int threads = 1;                         ///< resolved thread count (loom/threads.hpp)
 };

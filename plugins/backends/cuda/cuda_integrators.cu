@@ -33,6 +33,10 @@ void check_device_scene(const Scene& scene, const char* integrator) {
     throw InputError(scene.source + ": integrator " + integrator +
                      " on backend cuda does not implement pins with a prescribed motion (the device keeps pinned "
                      "vertices where they are). Fix: set backend: cpu for scenes whose pins have a 'motion'.");
+  if (scene.self_collision)
+    throw InputError(scene.source + ": integrator " + integrator +
+                     " on backend cuda does not handle self_collision yet (it is resolved on the host state, which "
+                     "the device would not see). Fix: set backend: cpu for scenes with self_collision.");
 }
 
 /// Reads host_sync_every (>= 1): copy x, v back into scene.state after every n-th step.

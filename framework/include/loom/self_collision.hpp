@@ -1,0 +1,183 @@
+// Self-collision of the cloth: proximity repulsion with Coulomb friction, continuous collision
+// detection (CCD) impulses and a fail-safe, after Bridson, Fedkiw & Anderson 2002.
+//
+// The framework calls begin_step() before an integrator step (it saves the start positions)
+// and resolve() after it (after the colliders): resolve() changes the step's displacement
+// d = x1 - x0 and the end velocity so that no vertex-triangle or edge-edge pair of
+// non-adjacent elements (sharing no vertex) crosses during the step. It exists only when the
+// scene declares `self_collision: {thickness: ..., friction: ...}`. docs/CONTACT.md says what
+// it guarantees; docs/NUMERICS.md describes the algorithm.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "loom/common.hpp"
+#include "loom/mesh.hpp"
+#include "loom/params.hpp"
+#include "loom/state.hpp"
+
+namespace loom {
+
+namespace selfcol {
+
+/// Closest point of triangle (a, b, c) to p: returns the distance and the barycentric
+/// weights w of the closest point (w[0] a + w[1] b + w[2] c).
+double point_triangle_distance(const double* p, const double* a, const double* b, const double* c, double w[3]);
+/// Closest points of segments (p0, p1) and (q0, q1): returns the distance; s, t in [0, 1]
+/// are the parameters of the closest points p0 + s (p1 - p0), q0 + t (q1 - q0).
+double segment_segment_distance(const double* p0, const double* p1, const double* q0, const double* q1, double& s,
+                                double& t);
+
+/// Continuous collision detection for linear motion x(t) = x0 + t (x1 - x0), t in [0, 1].
+/// Vertex-triangle: points are {p, a, b, c}; edge-edge: {p0, p1, q0, q1}. A collision is the
+/// earliest t in (0, 1] at which the four points are coplanar (a root of the cubic
+/// coplanarity polynomial) and the element distance is <= tol. Returns false if none.
+bool ccd_vertex_triangle(const double x0[4][3], const double x1[4][3], double tol, double& t);
+bool ccd_edge_edge(const double x0[4][3], const double x1[4][3], double tol, double& t);
+
+/// Real roots in [0, 1] of c0 + c1 t + c2 t^2 + c3 t^3 at which the sign changes, plus the
+/// critical points in (0, 1) and t = 1 (where a double root / touching can hide); sorted.
+/// Returns the number written to out (at most 7).
+int cubic_candidate_times(double c0, double c1, double c2, double c3, double out[7]);
+
+/// Axis-aligned bounding box hierarchy over the triangles of a mesh: built once (median
+/// splits of the rest centroids), refit every time the boxes change.
+class TriangleBvh {
+ public:
+  struct Node {
+    double lo[3], hi[3];
+    Index left = -1, right = -1;  ///< children (-1 for a leaf)
+    Index tri = -1;               ///< triangle of a leaf
+  };
+  /// Build the topology from triangle centroids (3 * num_triangles doubles).
+  void build(const std::vector<double>& centroids);
+  /// Refit: leaf boxes from tri_lo/tri_hi (3 per triangle) inflated by pad, inner nodes as unions.
+  void refit(const double* tri_lo, const double* tri_hi, double pad);
+  /// All pairs of distinct leaves whose boxes overlap, each once (a < b not implied).
+  template <class F>
+  void self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack) const;
+  const std::vector<Node>& nodes() const { return nodes_; }
+
+ private:
+  std::vector<Node> nodes_;
+};
+
+template <class F>
+void TriangleBvh::self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack) const {
+  if (nodes_.empty()) return;
+  auto overlap = [](const Node& a, const Node& b) {
+    return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
+           a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
+  };
+  auto extent = [](const Node& a) { return (a.hi[0] - a.lo[0]) + (a.hi[1] - a.lo[1]) + (a.hi[2] - a.lo[2]); };
+  stack.clear();
+  stack.push_back({0, 0});  // {a, a}: the pairs inside node a; {a, b}: pairs between a and b
+  while (!stack.empty()) {
+    const auto [a, b] = stack.back();
+    stack.pop_back();
+    const Node& A = nodes_[a];
+    if (a == b) {
+      if (A.tri >= 0) continue;
+      stack.push_back({A.left, A.left});
+      stack.push_back({A.right, A.right});
+      stack.push_back({A.left, A.right});
+      continue;
+    }
+    const Node& B = nodes_[b];
+    if (!overlap(A, B)) continue;
+    if (A.tri >= 0 && B.tri >= 0) {
+      emit(A.tri, B.tri);
+    } else if (B.tri >= 0 || (A.tri < 0 && extent(A) >= extent(B))) {
+      stack.push_back({A.left, b});
+      stack.push_back({A.right, b});
+    } else {
+      stack.push_back({a, B.left});
+      stack.push_back({a, B.right});
+    }
+  }
+}
+
+}  // namespace selfcol
+
+/// Counters of the last resolve() call (and the seconds it spent in each phase).
+struct SelfCollisionStats {
+  bool rebuilt = false;          ///< the broad phase ran (refit + traversal) this step
+  Index candidates_vt = 0, candidates_ee = 0;
+  Index proximity = 0;           ///< repulsion / friction impulses
+  Index ccd_collisions = 0;      ///< CCD impulses, all iterations
+  int ccd_iterations = 0;        ///< CCD passes over the candidates
+  Index frozen = 0;              ///< vertices the fail-safe returned to their start position
+  double broad_seconds = 0, narrow_seconds = 0, response_seconds = 0;
+};
+
+class SelfCollision {
+ public:
+  struct Options {
+    double thickness = 0;   ///< m: pairs closer than this are pushed apart
+    double friction = 0;    ///< Coulomb coefficient between cloth layers
+  };
+  /// Parse the scene's `self_collision` mapping (nullptr when absent). Checks the keys, and
+  /// that the thickness is below the smallest distance between non-adjacent elements of the
+  /// cloth as built (x), since otherwise neighbours in the sheet would repel each other.
+  static std::unique_ptr<SelfCollision> parse(const Params& p, const Mesh& mesh, const std::vector<double>& x);
+  SelfCollision(const Options& o, const Mesh& mesh);
+
+  const Options& options() const { return opt_; }
+  /// Save the start-of-step positions.
+  void begin_step(const State& s);
+  /// After a step of size h: s.x and s.v are the integrator's end of step; modify them.
+  void resolve(State& s, double h);
+  const SelfCollisionStats& last_stats() const { return stats_; }
+
+  /// Smallest distance between non-adjacent vertex-triangle and edge-edge pairs at positions
+  /// x, among pairs closer than `within` (returns `within` if none): for tests and the check above.
+  double min_distance(const std::vector<double>& x, double within);
+  /// The candidate pairs of the broad phase for displacement zero at positions x with the
+  /// given inflation, as sorted lists (for tests against brute force).
+  void candidate_pairs(const std::vector<double>& x, double inflate, std::vector<std::array<Index, 2>>& vt,
+                       std::vector<std::array<Index, 2>>& ee);
+
+ private:
+  struct Pair {
+    Index a, b;         ///< vertex, triangle  or  edge, edge
+    double dist_ref;    ///< distance at the broad phase's start positions
+  };
+  void broad_phase(const double* x0, const double* d, double margin, double reach);
+  bool candidates_valid(const double* x0, const double* d) const;
+  // The 4 vertex indices of a pair (vertex, triangle's 3) or (edge's 2, edge's 2).
+  void pair_vertices(bool vt, const Pair& p, Index idx[4]) const;
+  double pair_distance(bool vt, const Index idx[4], const double* x, double w[4], double n[3]) const;
+  bool pair_ccd(bool vt, const Index idx[4], double tol, double& t) const;
+  // Apply: separation push dpos (>= 0, displacement units) along n with weights w; velocity:
+  // remove approach along n, Coulomb friction on the tangential part. Returns true if changed.
+  bool respond(const Index idx[4], const double w[4], const double n[3], double dpos, double h, State& s);
+  Index freeze_pass(State& s);
+
+  Options opt_;
+  double margin_ = 0;
+  Index nv_ = 0, nt_ = 0;
+  std::vector<Index> tris_;                      ///< 3 per triangle
+  std::vector<std::array<Index, 2>> edges_;
+  std::vector<std::array<Index, 3>> own_verts_;  ///< vertices owned by each triangle (-1 = none)
+  std::vector<std::array<Index, 3>> own_edges_;  ///< edges owned by each triangle (-1 = none)
+  selfcol::TriangleBvh bvh_;
+
+  // Work arrays, sized in the constructor.
+  std::vector<double> x0_, d_, inv_mass_;
+  std::vector<double> vlo_, vhi_, tlo_, thi_;    ///< swept boxes of vertices / triangles
+  std::vector<double> ref_x_;                    ///< start positions at the last broad phase
+  std::vector<double> moved_;                    ///< per vertex |x0 - ref_x| this step
+  std::vector<double> step_len_;                 ///< per vertex |d| this step
+  std::vector<Pair> vt_, ee_;
+  std::vector<std::uint8_t> vt_near_, ee_near_;  ///< could be in proximity or collide this step
+  std::vector<std::array<Index, 2>> stack_;
+  std::vector<std::uint8_t> frozen_;
+  bool have_candidates_ = false;
+  SelfCollisionStats stats_;
+};
+
+}  // namespace loom

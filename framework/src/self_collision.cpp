@@ -1,0 +1,832 @@
+#include "loom/self_collision.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <numeric>
+#include <sstream>
+
+namespace loom {
+
+namespace selfcol {
+
+namespace {
+
+inline void sub(const double* a, const double* b, double* r) {
+  r[0] = a[0] - b[0];
+  r[1] = a[1] - b[1];
+  r[2] = a[2] - b[2];
+}
+inline double dot(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline void cross(const double* a, const double* b, double* r) {
+  r[0] = a[1] * b[2] - a[2] * b[1];
+  r[1] = a[2] * b[0] - a[0] * b[2];
+  r[2] = a[0] * b[1] - a[1] * b[0];
+}
+inline double clamp01(double v) { return v < 0 ? 0 : (v > 1 ? 1 : v); }
+
+// Closest point on segment (a, b) to p: parameter in [0, 1].
+double point_segment_param(const double* p, const double* a, const double* b) {
+  double ab[3], ap[3];
+  sub(b, a, ab);
+  sub(p, a, ap);
+  const double l2 = dot(ab, ab);
+  return l2 > 0 ? clamp01(dot(ap, ab) / l2) : 0.0;
+}
+
+// Coefficients of the coplanarity polynomial (u x w) . r with u = u0 + t du, etc.
+void coplanarity_cubic(const double* u0, const double* du, const double* w0, const double* dw, const double* r0,
+                       const double* dr, double c[4]) {
+  double a[3], b1[3], b2[3], e[3];
+  cross(u0, w0, a);
+  cross(u0, dw, b1);
+  cross(du, w0, b2);
+  const double b[3] = {b1[0] + b2[0], b1[1] + b2[1], b1[2] + b2[2]};
+  cross(du, dw, e);
+  c[0] = dot(a, r0);
+  c[1] = dot(a, dr) + dot(b, r0);
+  c[2] = dot(b, dr) + dot(e, r0);
+  c[3] = dot(e, dr);
+}
+
+template <class Dist>
+bool first_contact(const double c[4], double tol, Dist&& dist, double& t_out) {
+  double ts[7];
+  const int k = cubic_candidate_times(c[0], c[1], c[2], c[3], ts);
+  for (int i = 0; i < k; ++i)
+    if (dist(ts[i]) <= tol) {
+      t_out = ts[i];
+      return true;
+    }
+  return false;
+}
+
+void lerp4(const double x0[4][3], const double x1[4][3], double t, double out[4][3]) {
+  for (int i = 0; i < 4; ++i)
+    for (int k = 0; k < 3; ++k) out[i][k] = x0[i][k] + t * (x1[i][k] - x0[i][k]);
+}
+
+}  // namespace
+
+double point_triangle_distance(const double* p, const double* a, const double* b, const double* c, double w[3]) {
+  // Voronoi regions of the triangle (Ericson, Real-Time Collision Detection, 5.1.5).
+  double ab[3], ac[3], ap[3], bp[3], cp[3];
+  sub(b, a, ab);
+  sub(c, a, ac);
+  sub(p, a, ap);
+  auto finish = [&](double wa, double wb, double wc) {
+    w[0] = wa;
+    w[1] = wb;
+    w[2] = wc;
+    double q[3];
+    for (int k = 0; k < 3; ++k) q[k] = p[k] - (wa * a[k] + wb * b[k] + wc * c[k]);
+    return std::sqrt(dot(q, q));
+  };
+  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= 0 && d2 <= 0) return finish(1, 0, 0);
+  sub(p, b, bp);
+  const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= 0 && d4 <= d3) return finish(0, 1, 0);
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    const double v = d1 / (d1 - d3);
+    return finish(1 - v, v, 0);
+  }
+  sub(p, c, cp);
+  const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= 0 && d5 <= d6) return finish(0, 0, 1);
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    const double v = d2 / (d2 - d6);
+    return finish(1 - v, 0, v);
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    const double v = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    return finish(0, 1 - v, v);
+  }
+  const double den = va + vb + vc;
+  if (!(den > 0) || !std::isfinite(1.0 / den)) {
+    // Degenerate (zero-area) triangle: the closest of the three edges.
+    double best = 1e300;
+    const double* v[3] = {a, b, c};
+    for (int e = 0; e < 3; ++e) {
+      const double s = point_segment_param(p, v[e], v[(e + 1) % 3]);
+      double ww[3] = {0, 0, 0};
+      ww[e] = 1 - s;
+      ww[(e + 1) % 3] = s;
+      double q[3];
+      for (int k = 0; k < 3; ++k) q[k] = p[k] - (ww[0] * a[k] + ww[1] * b[k] + ww[2] * c[k]);
+      const double dd = std::sqrt(dot(q, q));
+      if (dd < best) {
+        best = dd;
+        w[0] = ww[0], w[1] = ww[1], w[2] = ww[2];
+      }
+    }
+    return best;
+  }
+  const double v = vb / den, u = vc / den;
+  return finish(1 - v - u, v, u);
+}
+
+double segment_segment_distance(const double* p0, const double* p1, const double* q0, const double* q1, double& s,
+                                double& t) {
+  // Ericson 5.1.9, with relative tolerances for degenerate and parallel segments.
+  double d1[3], d2[3], r[3];
+  sub(p1, p0, d1);
+  sub(q1, q0, d2);
+  sub(p0, q0, r);
+  const double a = dot(d1, d1), e = dot(d2, d2), f = dot(d2, r);
+  const double tiny = 1e-30;
+  if (a <= tiny && e <= tiny) {
+    s = t = 0;
+  } else if (a <= tiny) {
+    s = 0;
+    t = clamp01(f / e);
+  } else {
+    const double c = dot(d1, r);
+    if (e <= tiny) {
+      t = 0;
+      s = clamp01(-c / a);
+    } else {
+      const double b = dot(d1, d2);
+      const double den = a * e - b * b;
+      s = den > 1e-14 * a * e ? clamp01((b * f - c * e) / den) : 0.0;
+      t = (b * s + f) / e;
+      if (t < 0) {
+        t = 0;
+        s = clamp01(-c / a);
+      } else if (t > 1) {
+        t = 1;
+        s = clamp01((b - c) / a);
+      }
+    }
+  }
+  double q[3];
+  for (int k = 0; k < 3; ++k) q[k] = (p0[k] + s * d1[k]) - (q0[k] + t * d2[k]);
+  return std::sqrt(dot(q, q));
+}
+
+int cubic_candidate_times(double c0, double c1, double c2, double c3, double out[7]) {
+  auto f = [&](double t) { return ((c3 * t + c2) * t + c1) * t + c0; };
+  // Critical points: roots of 3 c3 t^2 + 2 c2 t + c1 in (0, 1).
+  double pts[4];
+  int np = 0;
+  pts[np++] = 0.0;
+  const double A = 3 * c3, B = 2 * c2, C = c1;
+  const double scale = std::abs(A) + std::abs(B) + std::abs(C);
+  double crit[2];
+  int nc = 0;
+  if (scale > 0) {
+    if (std::abs(A) <= 1e-14 * scale) {
+      if (B != 0) crit[nc++] = -C / B;
+    } else {
+      const double disc = B * B - 4 * A * C;
+      if (disc >= 0) {
+        const double q = -0.5 * (B + std::copysign(std::sqrt(disc), B));
+        crit[nc++] = q / A;
+        if (q != 0) crit[nc++] = C / q;
+      }
+    }
+  }
+  if (nc == 2 && crit[0] > crit[1]) std::swap(crit[0], crit[1]);
+  for (int i = 0; i < nc; ++i)
+    if (crit[i] > 0 && crit[i] < 1) pts[np++] = crit[i];
+  pts[np++] = 1.0;
+  int n = 0;
+  for (int i = 0; i + 1 < np; ++i) {
+    double lo = pts[i], hi = pts[i + 1];
+    double flo = f(lo), fhi = f(hi);
+    if ((flo < 0 && fhi > 0) || (flo > 0 && fhi < 0)) {
+      // f is monotone on [lo, hi]: bisection to full precision.
+      for (int it = 0; it < 200 && hi - lo > 1e-16; ++it) {
+        const double mid = 0.5 * (lo + hi);
+        const double fm = f(mid);
+        if (fm == 0) {
+          lo = hi = mid;
+          break;
+        }
+        if ((fm < 0) == (flo < 0)) {
+          lo = mid;
+          flo = fm;
+        } else {
+          hi = mid;
+        }
+      }
+      out[n++] = 0.5 * (lo + hi);
+    }
+    if (i + 1 < np - 1) out[n++] = pts[i + 1];  // interior critical point (touching)
+  }
+  out[n++] = 1.0;
+  std::sort(out, out + n);
+  return n;
+}
+
+bool ccd_vertex_triangle(const double x0[4][3], const double x1[4][3], double tol, double& t) {
+  double u0[3], w0[3], r0[3], du[3], dw[3], dr[3], e[4][3];
+  for (int i = 0; i < 4; ++i) sub(x1[i], x0[i], e[i]);
+  sub(x0[2], x0[1], u0);
+  sub(x0[3], x0[1], w0);
+  sub(x0[0], x0[1], r0);
+  sub(e[2], e[1], du);
+  sub(e[3], e[1], dw);
+  sub(e[0], e[1], dr);
+  double c[4];
+  coplanarity_cubic(u0, du, w0, dw, r0, dr, c);
+  return first_contact(
+      c, tol,
+      [&](double s) {
+        double x[4][3], w[3];
+        lerp4(x0, x1, s, x);
+        return point_triangle_distance(x[0], x[1], x[2], x[3], w);
+      },
+      t);
+}
+
+bool ccd_edge_edge(const double x0[4][3], const double x1[4][3], double tol, double& t) {
+  double u0[3], w0[3], r0[3], du[3], dw[3], dr[3], e[4][3];
+  for (int i = 0; i < 4; ++i) sub(x1[i], x0[i], e[i]);
+  sub(x0[1], x0[0], u0);
+  sub(x0[3], x0[2], w0);
+  sub(x0[2], x0[0], r0);
+  sub(e[1], e[0], du);
+  sub(e[3], e[2], dw);
+  sub(e[2], e[0], dr);
+  double c[4];
+  coplanarity_cubic(u0, du, w0, dw, r0, dr, c);
+  return first_contact(
+      c, tol,
+      [&](double s) {
+        double x[4][3], a, b;
+        lerp4(x0, x1, s, x);
+        return segment_segment_distance(x[0], x[1], x[2], x[3], a, b);
+      },
+      t);
+}
+
+void TriangleBvh::build(const std::vector<double>& centroids) {
+  const Index nt = static_cast<Index>(centroids.size() / 3);
+  nodes_.clear();
+  if (nt == 0) return;
+  nodes_.reserve(2 * static_cast<std::size_t>(nt));
+  std::vector<Index> ids(nt);
+  std::iota(ids.begin(), ids.end(), 0);
+  // Pre-order: a parent's index is below its children's (refit runs backwards).
+  struct Builder {
+    std::vector<Node>& nodes;
+    const std::vector<double>& c;
+    Index make(Index* first, Index* last) {
+      const Index me = static_cast<Index>(nodes.size());
+      nodes.emplace_back();
+      if (last - first == 1) {
+        nodes[me].tri = *first;
+        return me;
+      }
+      double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+      for (Index* p = first; p != last; ++p)
+        for (int k = 0; k < 3; ++k) {
+          lo[k] = std::min(lo[k], c[3 * *p + k]);
+          hi[k] = std::max(hi[k], c[3 * *p + k]);
+        }
+      int axis = 0;
+      for (int k = 1; k < 3; ++k)
+        if (hi[k] - lo[k] > hi[axis] - lo[axis]) axis = k;
+      Index* mid = first + (last - first) / 2;
+      std::nth_element(first, mid, last, [&](Index a, Index b) { return c[3 * a + axis] < c[3 * b + axis]; });
+      const Index l = make(first, mid);
+      const Index r = make(mid, last);
+      nodes[me].left = l;
+      nodes[me].right = r;
+      return me;
+    }
+  } b{nodes_, centroids};
+  b.make(ids.data(), ids.data() + nt);
+}
+
+void TriangleBvh::refit(const double* tri_lo, const double* tri_hi, double pad) {
+  for (std::size_t i = nodes_.size(); i-- > 0;) {
+    Node& n = nodes_[i];
+    if (n.tri >= 0) {
+      for (int k = 0; k < 3; ++k) {
+        n.lo[k] = tri_lo[3 * n.tri + k] - pad;
+        n.hi[k] = tri_hi[3 * n.tri + k] + pad;
+      }
+    } else {
+      const Node& l = nodes_[n.left];
+      const Node& r = nodes_[n.right];
+      for (int k = 0; k < 3; ++k) {
+        n.lo[k] = std::min(l.lo[k], r.lo[k]);
+        n.hi[k] = std::max(l.hi[k], r.hi[k]);
+      }
+    }
+  }
+}
+
+}  // namespace selfcol
+
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+std::string fmt(double v) {
+  std::ostringstream os;
+  os.precision(4);
+  os << v;
+  return os.str();
+}
+
+// Tuning of the response (see docs/NUMERICS.md, "Self-collision").
+constexpr double kRepulsionFraction = 0.25;  ///< of the missing thickness restored per step
+constexpr double kCcdTolerance = 1e-3;       ///< CCD contact distance, times the thickness
+constexpr double kCcdSeparation = 0.1;       ///< CCD impulses leave this gap, times the thickness
+constexpr int kCcdIterations = 16;           ///< CCD impulse passes before the fail-safe
+
+}  // namespace
+
+std::unique_ptr<SelfCollision> SelfCollision::parse(const Params& p, const Mesh& mesh, const std::vector<double>& x) {
+  if (!p.valid()) return nullptr;
+  if (!p.is_map()) p.fail("must be a mapping like {thickness: 0.002, friction: 0.3} (thickness in m).");
+  Options o;
+  Params th = p.child("thickness");
+  if (!th.valid()) p.fail("missing 'thickness' (m, > 0): the gap kept between layers of cloth, e.g. thickness: 0.002.");
+  o.thickness = th.as_double();
+  if (!std::isfinite(o.thickness) || o.thickness <= 0)
+    th.fail("thickness must be a finite number > 0 (got " + fmt(o.thickness) +
+            "). Fix: give the gap kept between cloth layers in m, e.g. 0.002 (a quarter of the edge length or less).");
+  Params fr = p.child("friction");
+  if (fr.valid()) {
+    o.friction = fr.as_double();
+    if (!std::isfinite(o.friction) || o.friction < 0)
+      fr.fail("friction must be a finite number >= 0 (got " + fmt(o.friction) +
+              "). Fix: give a Coulomb coefficient, e.g. 0.3 (0 = frictionless).");
+  }
+  p.check_unused();
+  auto sc = std::make_unique<SelfCollision>(o, mesh);
+  const double dmin = sc->min_distance(x, o.thickness);
+  if (dmin < o.thickness)
+    th.fail("thickness " + fmt(o.thickness) + " m exceeds the smallest distance between non-adjacent elements of the cloth as built (" +
+            fmt(dmin) + " m): neighbours in the sheet would repel each other. Fix: use a thickness below " +
+            fmt(dmin) + " m (about half of it is a good choice), or refine the mesh.");
+  return sc;
+}
+
+SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
+  nv_ = mesh.num_vertices();
+  nt_ = mesh.num_triangles();
+  tris_ = mesh.triangles;
+  edges_ = mesh.edges();
+  margin_ = o.thickness;
+  // Ownership: each vertex and edge is tested by the first triangle that contains it, so that a
+  // pair of overlapping triangles yields every element pair exactly once.
+  own_verts_.assign(nt_, {-1, -1, -1});
+  own_edges_.assign(nt_, {-1, -1, -1});
+  std::vector<std::uint8_t> vseen(nv_, 0), eseen(edges_.size(), 0);
+  std::vector<double> centroids(3 * static_cast<std::size_t>(nt_));
+  for (Index t = 0; t < nt_; ++t) {
+    const Index* v = &tris_[3 * t];
+    int nvo = 0, neo = 0;
+    for (int k = 0; k < 3; ++k) {
+      if (!vseen[v[k]]) {
+        vseen[v[k]] = 1;
+        own_verts_[t][nvo++] = v[k];
+      }
+      const std::array<Index, 2> e = {std::min(v[k], v[(k + 1) % 3]), std::max(v[k], v[(k + 1) % 3])};
+      const auto it = std::lower_bound(edges_.begin(), edges_.end(), e);
+      const auto ei = static_cast<std::size_t>(it - edges_.begin());
+      if (!eseen[ei]) {
+        eseen[ei] = 1;
+        own_edges_[t][neo++] = static_cast<Index>(ei);
+      }
+      for (int q = 0; q < 3; ++q) centroids[3 * t + q] += mesh.positions[3 * v[k] + q] / 3.0;
+    }
+  }
+  bvh_.build(centroids);
+  const std::size_t n3 = 3 * static_cast<std::size_t>(nv_);
+  x0_.assign(n3, 0.0);
+  d_.assign(n3, 0.0);
+  inv_mass_.assign(nv_, 0.0);
+  vlo_.assign(n3, 0.0);
+  vhi_.assign(n3, 0.0);
+  tlo_.assign(3 * static_cast<std::size_t>(nt_), 0.0);
+  thi_.assign(3 * static_cast<std::size_t>(nt_), 0.0);
+  ref_x_.assign(n3, 0.0);
+  moved_.assign(nv_, 0.0);
+  step_len_.assign(nv_, 0.0);
+  frozen_.assign(nv_, 0);
+  vt_.reserve(8 * static_cast<std::size_t>(nv_));
+  ee_.reserve(16 * static_cast<std::size_t>(nv_));
+  stack_.reserve(256);
+}
+
+void SelfCollision::begin_step(const State& s) { std::memcpy(x0_.data(), s.x.data(), x0_.size() * sizeof(double)); }
+
+void SelfCollision::pair_vertices(bool vt, const Pair& p, Index idx[4]) const {
+  if (vt) {
+    idx[0] = p.a;
+    idx[1] = tris_[3 * p.b];
+    idx[2] = tris_[3 * p.b + 1];
+    idx[3] = tris_[3 * p.b + 2];
+  } else {
+    idx[0] = edges_[p.a][0];
+    idx[1] = edges_[p.a][1];
+    idx[2] = edges_[p.b][0];
+    idx[3] = edges_[p.b][1];
+  }
+}
+
+// Distance of a pair at positions x; w are the weights of the relative position
+// sum_i w_i x_i (vertex minus triangle point, or second edge point minus first), n its direction.
+double SelfCollision::pair_distance(bool vt, const Index idx[4], const double* x, double w[4], double n[3]) const {
+  const double* p[4] = {&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]]};
+  double dist;
+  if (vt) {
+    double b[3];
+    dist = selfcol::point_triangle_distance(p[0], p[1], p[2], p[3], b);
+    w[0] = 1;
+    w[1] = -b[0];
+    w[2] = -b[1];
+    w[3] = -b[2];
+  } else {
+    double s, t;
+    dist = selfcol::segment_segment_distance(p[0], p[1], p[2], p[3], s, t);
+    w[0] = -(1 - s);
+    w[1] = -s;
+    w[2] = 1 - t;
+    w[3] = t;
+  }
+  for (int k = 0; k < 3; ++k) n[k] = w[0] * p[0][k] + w[1] * p[1][k] + w[2] * p[2][k] + w[3] * p[3][k];
+  const double len = std::sqrt(selfcol::dot(n, n));
+  if (len > 1e-12 * opt_.thickness) {
+    for (int k = 0; k < 3; ++k) n[k] /= len;
+  } else {
+    // Touching: the normal of the triangle, or of the two edges.
+    double a[3], b[3];
+    if (vt) {
+      selfcol::sub(p[2], p[1], a);
+      selfcol::sub(p[3], p[1], b);
+    } else {
+      selfcol::sub(p[1], p[0], a);
+      selfcol::sub(p[3], p[2], b);
+    }
+    selfcol::cross(a, b, n);
+    const double l = std::sqrt(selfcol::dot(n, n));
+    if (l > 0)
+      for (int k = 0; k < 3; ++k) n[k] /= l;
+    else
+      n[0] = 1, n[1] = n[2] = 0;
+  }
+  return dist;
+}
+
+bool SelfCollision::pair_ccd(bool vt, const Index idx[4], double tol, double& t) const {
+  double a[4][3], b[4][3];
+  for (int i = 0; i < 4; ++i)
+    for (int k = 0; k < 3; ++k) {
+      a[i][k] = x0_[3 * idx[i] + k];
+      b[i][k] = a[i][k] + d_[3 * idx[i] + k];
+    }
+  return vt ? selfcol::ccd_vertex_triangle(a, b, tol, t) : selfcol::ccd_edge_edge(a, b, tol, t);
+}
+
+bool SelfCollision::respond(const Index idx[4], const double w[4], const double n[3], double dpos, double h, State& s) {
+  double W = 0;
+  for (int i = 0; i < 4; ++i) W += w[i] * w[i] * inv_mass_[idx[i]];
+  if (!(W > 0)) return false;
+  bool changed = false;
+  if (dpos > 0) {
+    const double I = dpos / W;
+    for (int i = 0; i < 4; ++i) {
+      const double c = w[i] * inv_mass_[idx[i]] * I;
+      for (int k = 0; k < 3; ++k) d_[3 * idx[i] + k] += c * n[k];
+    }
+    changed = true;
+  }
+  double vrel[3] = {0, 0, 0};
+  for (int i = 0; i < 4; ++i)
+    for (int k = 0; k < 3; ++k) vrel[k] += w[i] * s.v[3 * idx[i] + k];
+  const double vn = selfcol::dot(vrel, n);
+  if (vn < 0) {
+    // Inelastic: the relative normal velocity becomes zero.
+    const double J = -vn / W;
+    for (int i = 0; i < 4; ++i) {
+      const double c = w[i] * inv_mass_[idx[i]] * J;
+      for (int k = 0; k < 3; ++k) s.v[3 * idx[i] + k] += c * n[k];
+    }
+    // Coulomb friction: the relative tangential velocity loses up to mu times the normal change.
+    double vt[3];
+    for (int k = 0; k < 3; ++k) vt[k] = vrel[k] - vn * n[k];
+    const double vtl = std::sqrt(selfcol::dot(vt, vt));
+    if (opt_.friction > 0 && vtl > 0) {
+      const double dvt = std::min(vtl, opt_.friction * -vn);
+      const double Jt = dvt / (W * vtl);
+      for (int i = 0; i < 4; ++i) {
+        const double c = -w[i] * inv_mass_[idx[i]] * Jt;
+        for (int k = 0; k < 3; ++k) {
+          s.v[3 * idx[i] + k] += c * vt[k];
+          d_[3 * idx[i] + k] += h * c * vt[k];  // move as the corrected velocity would have
+        }
+      }
+    }
+    changed = true;
+  }
+  if (changed)
+    for (int i = 0; i < 4; ++i) {
+      const double* di = &d_[3 * idx[i]];
+      step_len_[idx[i]] = std::sqrt(selfcol::dot(di, di));
+    }
+  return changed;
+}
+
+void SelfCollision::broad_phase(const double* x0, const double* d, double margin, double reach) {
+  const double pad = 2 * margin + reach;
+  for (Index i = 0; i < nv_; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double a = x0[3 * i + k], b = a + d[3 * i + k];
+      vlo_[3 * i + k] = std::min(a, b);
+      vhi_[3 * i + k] = std::max(a, b);
+    }
+  for (Index t = 0; t < nt_; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const Index* v = &tris_[3 * t];
+      tlo_[3 * t + k] = std::min({vlo_[3 * v[0] + k], vlo_[3 * v[1] + k], vlo_[3 * v[2] + k]});
+      thi_[3 * t + k] = std::max({vhi_[3 * v[0] + k], vhi_[3 * v[1] + k], vhi_[3 * v[2] + k]});
+    }
+  bvh_.refit(tlo_.data(), thi_.data(), margin + reach);
+  std::memcpy(ref_x_.data(), x0, ref_x_.size() * sizeof(double));
+  vt_.clear();
+  ee_.clear();
+  auto overlap = [&](const double* alo, const double* ahi, const double* blo, const double* bhi) {
+    return alo[0] - pad <= bhi[0] && blo[0] <= ahi[0] + pad && alo[1] - pad <= bhi[1] && blo[1] <= ahi[1] + pad &&
+           alo[2] - pad <= bhi[2] && blo[2] <= ahi[2] + pad;
+  };
+  auto vert_tri = [&](Index v, Index t) {
+    const Index* tv = &tris_[3 * t];
+    if (v == tv[0] || v == tv[1] || v == tv[2]) return;
+    if (overlap(&vlo_[3 * v], &vhi_[3 * v], &tlo_[3 * t], &thi_[3 * t])) vt_.push_back({v, t, 0.0});
+  };
+  auto edge_box = [&](Index e, double* lo, double* hi) {
+    const Index a = edges_[e][0], b = edges_[e][1];
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(vlo_[3 * a + k], vlo_[3 * b + k]);
+      hi[k] = std::max(vhi_[3 * a + k], vhi_[3 * b + k]);
+    }
+  };
+  bvh_.self_pairs(
+      [&](Index A, Index B) {
+        for (Index v : own_verts_[A])
+          if (v >= 0) vert_tri(v, B);
+        for (Index v : own_verts_[B])
+          if (v >= 0) vert_tri(v, A);
+        for (Index e : own_edges_[A]) {
+          if (e < 0) continue;
+          double elo[3], ehi[3];
+          edge_box(e, elo, ehi);
+          for (Index f : own_edges_[B]) {
+            if (f < 0) continue;
+            const auto& E = edges_[e];
+            const auto& F = edges_[f];
+            if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+            double flo[3], fhi[3];
+            edge_box(f, flo, fhi);
+            if (overlap(elo, ehi, flo, fhi)) ee_.push_back({std::min(e, f), std::max(e, f), 0.0});
+          }
+        }
+      },
+      stack_);
+  const Index nvt = static_cast<Index>(vt_.size()), nee = static_cast<Index>(ee_.size());
+#pragma omp parallel for schedule(static) if (nvt + nee >= 4 * kParallelMinVertices)
+  for (Index q = 0; q < nvt + nee; ++q) {
+    const bool vt = q < nvt;
+    Pair& p = vt ? vt_[q] : ee_[q - nvt];
+    Index idx[4];
+    double w[4], n[3];
+    pair_vertices(vt, p, idx);
+    p.dist_ref = pair_distance(vt, idx, x0, w, n);
+  }
+  std::fill(moved_.begin(), moved_.end(), 0.0);
+  have_candidates_ = true;
+  stats_.rebuilt = true;
+}
+
+bool SelfCollision::candidates_valid(const double* x0, const double* d) const {
+  if (!have_candidates_) return false;
+  const double m = margin_;
+  Index bad = 0;
+#pragma omp parallel for reduction(+ : bad) schedule(static) if (nv_ >= kParallelMinVertices)
+  for (Index i = 0; i < nv_; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double a = x0[3 * i + k], b = a + d[3 * i + k];
+      const double lo = vlo_[3 * i + k] - m, hi = vhi_[3 * i + k] + m;
+      if (a < lo || a > hi || b < lo || b > hi) ++bad;
+    }
+  return bad == 0;
+}
+
+double SelfCollision::min_distance(const std::vector<double>& x, double within) {
+  std::fill(d_.begin(), d_.end(), 0.0);
+  broad_phase(x.data(), d_.data(), 0.0, within);
+  have_candidates_ = false;  // built for another reach: the next step rebuilds
+  double m = within;
+  for (const Pair& p : vt_) m = std::min(m, p.dist_ref);
+  for (const Pair& p : ee_) m = std::min(m, p.dist_ref);
+  return m;
+}
+
+void SelfCollision::candidate_pairs(const std::vector<double>& x, double inflate, std::vector<std::array<Index, 2>>& vt,
+                                    std::vector<std::array<Index, 2>>& ee) {
+  std::fill(d_.begin(), d_.end(), 0.0);
+  broad_phase(x.data(), d_.data(), 0.0, inflate);
+  have_candidates_ = false;
+  vt.clear();
+  ee.clear();
+  for (const Pair& p : vt_) vt.push_back({p.a, p.b});
+  for (const Pair& p : ee_) ee.push_back({p.a, p.b});
+  std::sort(vt.begin(), vt.end());
+  std::sort(ee.begin(), ee.end());
+}
+
+Index SelfCollision::freeze_pass(State& s) {
+  // Fail-safe: every vertex of a pair that still collides returns to its start position and
+  // stops. A pass ends when no collision remains; each pass freezes at least one moving vertex.
+  const double tol = kCcdTolerance * opt_.thickness;
+  Index frozen = 0;
+  for (;;) {
+    Index found = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+      const bool vt = pass == 0;
+      const std::vector<Pair>& list = vt ? vt_ : ee_;
+      for (const Pair& p : list) {
+        Index idx[4];
+        pair_vertices(vt, p, idx);
+        const double motion = vt ? step_len_[idx[0]] + std::max({step_len_[idx[1]], step_len_[idx[2]], step_len_[idx[3]]})
+                                 : std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
+        if (motion == 0) continue;
+        const double mv = vt ? moved_[idx[0]] + std::max({moved_[idx[1]], moved_[idx[2]], moved_[idx[3]]})
+                             : std::max(moved_[idx[0]], moved_[idx[1]]) + std::max(moved_[idx[2]], moved_[idx[3]]);
+        if (p.dist_ref - mv - motion > tol) continue;
+        double t;
+        if (!pair_ccd(vt, idx, tol, t)) continue;
+        ++found;
+        for (int i = 0; i < 4; ++i) {
+          const Index v = idx[i];
+          if (s.pinned[v] || frozen_[v]) continue;
+          frozen_[v] = 1;
+          ++frozen;
+          inv_mass_[v] = 0;
+          step_len_[v] = 0;
+          for (int k = 0; k < 3; ++k) {
+            d_[3 * v + k] = 0;
+            s.v[3 * v + k] = 0;
+          }
+        }
+      }
+    }
+    if (found == 0) break;
+  }
+  return frozen;
+}
+
+void SelfCollision::resolve(State& s, double h) {
+  stats_ = SelfCollisionStats{};
+  auto t0 = Clock::now();
+  const Index n = nv_;
+  const double th = opt_.thickness;
+  double* x = s.x.data();
+#pragma omp parallel for schedule(static) if (n >= kParallelMinVertices)
+  for (Index i = 0; i < n; ++i) {
+    double l2 = 0, m2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double dk = x[3 * i + k] - x0_[3 * i + k];
+      const double mk = x0_[3 * i + k] - ref_x_[3 * i + k];
+      d_[3 * i + k] = dk;
+      l2 += dk * dk;
+      m2 += mk * mk;
+    }
+    step_len_[i] = std::sqrt(l2);
+    moved_[i] = std::sqrt(m2);
+    inv_mass_[i] = s.inv_mass[i];
+    frozen_[i] = 0;
+  }
+  // Broad phase: reuse the candidate pairs while every vertex's motion this step stays inside
+  // the box it had when they were found, grown by the margin; otherwise refit and traverse.
+  if (!candidates_valid(x0_.data(), d_.data())) broad_phase(x0_.data(), d_.data(), margin_, th);
+  stats_.candidates_vt = static_cast<Index>(vt_.size());
+  stats_.candidates_ee = static_cast<Index>(ee_.size());
+  stats_.broad_seconds = seconds_since(t0);
+  t0 = Clock::now();
+
+  // Narrow phase (proximity at the start positions): a pair can only come within the
+  // thickness if its distance at the broad phase, less the motion since and during the step,
+  // is below it (distance is 1-Lipschitz in each vertex position).
+  const auto bound = [&](bool vt, const Index idx[4]) {
+    if (vt)
+      return moved_[idx[0]] + std::max({moved_[idx[1]], moved_[idx[2]], moved_[idx[3]]}) + step_len_[idx[0]] +
+             std::max({step_len_[idx[1]], step_len_[idx[2]], step_len_[idx[3]]});
+    return std::max(moved_[idx[0]], moved_[idx[1]]) + std::max(moved_[idx[2]], moved_[idx[3]]) +
+           std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
+  };
+  Index proximity = 0;
+  for (int pass = 0; pass < 2; ++pass) {
+    const bool vt = pass == 0;
+    for (const Pair& p : vt ? vt_ : ee_) {
+      Index idx[4];
+      pair_vertices(vt, p, idx);
+      if (p.dist_ref - bound(vt, idx) >= th) continue;
+      double w[4], nrm[3];
+      const double dist = pair_distance(vt, idx, x0_.data(), w, nrm);
+      double dn = 0;
+      for (int i = 0; i < 4; ++i)
+        for (int k = 0; k < 3; ++k) dn += w[i] * d_[3 * idx[i] + k] * nrm[k];
+      const double gap = dist + dn;  // linearised distance at the end of the step
+      const double target = dist < th ? dist + kRepulsionFraction * (th - dist) : th;
+      if (dist >= th && gap >= target) continue;
+      if (respond(idx, w, nrm, std::max(0.0, target - gap), h, s)) ++proximity;
+    }
+  }
+  stats_.proximity = proximity;
+  stats_.narrow_seconds = seconds_since(t0);
+  t0 = Clock::now();
+
+  // CCD impulse iterations (Gauss-Seidel over the pairs), then the fail-safe.
+  const double tol = kCcdTolerance * th;
+  bool clean = false;
+  for (int it = 0; it < kCcdIterations && !clean; ++it) {
+    if (!candidates_valid(x0_.data(), d_.data())) {
+      broad_phase(x0_.data(), d_.data(), margin_, th);
+      for (Index i = 0; i < n; ++i) moved_[i] = 0;
+    }
+    ++stats_.ccd_iterations;
+    Index hits = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+      const bool vt = pass == 0;
+      for (const Pair& p : vt ? vt_ : ee_) {
+        Index idx[4];
+        pair_vertices(vt, p, idx);
+        if (p.dist_ref - bound(vt, idx) > tol) continue;
+        double t;
+        if (!pair_ccd(vt, idx, tol, t)) continue;
+        ++hits;
+        // Normal and weights at the collision time, oriented from the start-of-step side.
+        double xt[4][3], w[4], nrm[3];
+        for (int i = 0; i < 4; ++i)
+          for (int k = 0; k < 3; ++k) xt[i][k] = x0_[3 * idx[i] + k] + t * d_[3 * idx[i] + k];
+        double a[3], b[3];
+        if (vt) {
+          double bc[3];
+          selfcol::point_triangle_distance(xt[0], xt[1], xt[2], xt[3], bc);
+          w[0] = 1, w[1] = -bc[0], w[2] = -bc[1], w[3] = -bc[2];
+          selfcol::sub(xt[2], xt[1], a);
+          selfcol::sub(xt[3], xt[1], b);
+        } else {
+          double ss, tt;
+          selfcol::segment_segment_distance(xt[0], xt[1], xt[2], xt[3], ss, tt);
+          w[0] = -(1 - ss), w[1] = -ss, w[2] = 1 - tt, w[3] = tt;
+          selfcol::sub(xt[1], xt[0], a);
+          selfcol::sub(xt[3], xt[2], b);
+        }
+        selfcol::cross(a, b, nrm);
+        double len = std::sqrt(selfcol::dot(nrm, nrm));
+        double sep0 = 0, dn = 0;
+        if (!(len > 1e-12 * std::sqrt(selfcol::dot(a, a) * selfcol::dot(b, b)))) {
+          // Parallel edges (or a degenerate triangle): the direction between the closest points at the start.
+          double ww[4];
+          pair_distance(vt, idx, x0_.data(), ww, nrm);
+          len = 1;
+        } else {
+          for (int k = 0; k < 3; ++k) nrm[k] /= len;
+        }
+        for (int i = 0; i < 4; ++i)
+          for (int k = 0; k < 3; ++k) {
+            sep0 += w[i] * x0_[3 * idx[i] + k] * nrm[k];
+            dn += w[i] * d_[3 * idx[i] + k] * nrm[k];
+          }
+        if (sep0 < 0 || (sep0 == 0 && dn > 0)) {
+          for (int k = 0; k < 3; ++k) nrm[k] = -nrm[k];
+          sep0 = -sep0;
+          dn = -dn;
+        }
+        const double dpos = std::max(kCcdSeparation * th - (sep0 + dn), 0.05 * th);
+        respond(idx, w, nrm, dpos, h, s);
+      }
+    }
+    stats_.ccd_collisions += hits;
+    clean = hits == 0;
+  }
+  if (!clean) {
+    if (!candidates_valid(x0_.data(), d_.data())) {
+      broad_phase(x0_.data(), d_.data(), margin_, th);
+      for (Index i = 0; i < n; ++i) moved_[i] = 0;
+    }
+    stats_.frozen = freeze_pass(s);
+  }
+#pragma omp parallel for schedule(static) if (n >= kParallelMinVertices)
+  for (Index i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) x[3 * i + k] = x0_[3 * i + k] + d_[3 * i + k];
+  stats_.response_seconds = seconds_since(t0);
+}
+
+}  // namespace loom

@@ -1,0 +1,265 @@
+// Self-collision building blocks: exact CCD times for constructed motions, closest-point
+// distances against independent computations, and the refit BVH against brute force.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "loom/mesh.hpp"
+#include "loom/self_collision.hpp"
+#include "tri_tri.hpp"
+
+using namespace loom;
+using namespace loom::selfcol;
+
+namespace {
+
+void set4(double x[4][3], std::initializer_list<std::array<double, 3>> pts) {
+  int i = 0;
+  for (const auto& p : pts) {
+    for (int k = 0; k < 3; ++k) x[i][k] = p[k];
+    ++i;
+  }
+}
+
+double norm3(const double* a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); }
+
+// Point-segment distance by projection (independent of the library's Voronoi-region code).
+double point_segment(const double* p, const double* a, const double* b) {
+  double ab[3], ap[3];
+  for (int k = 0; k < 3; ++k) ab[k] = b[k] - a[k], ap[k] = p[k] - a[k];
+  double t = (ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / (ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]);
+  t = std::clamp(t, 0.0, 1.0);
+  double q[3];
+  for (int k = 0; k < 3; ++k) q[k] = p[k] - (a[k] + t * ab[k]);
+  return norm3(q);
+}
+
+// Point-triangle distance: the plane distance when the projection is inside (barycentric
+// coordinates by solving the 2x2 normal equations), otherwise the nearest edge.
+double brute_point_triangle(const double* p, const double* a, const double* b, const double* c) {
+  double e1[3], e2[3], r[3];
+  for (int k = 0; k < 3; ++k) e1[k] = b[k] - a[k], e2[k] = c[k] - a[k], r[k] = p[k] - a[k];
+  auto d = [](const double* u, const double* v) { return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]; };
+  const double A = d(e1, e1), B = d(e1, e2), C = d(e2, e2), D = d(e1, r), E = d(e2, r);
+  const double det = A * C - B * B;
+  const double u = (C * D - B * E) / det, v = (A * E - B * D) / det;
+  if (u >= 0 && v >= 0 && u + v <= 1) {
+    double q[3];
+    for (int k = 0; k < 3; ++k) q[k] = r[k] - u * e1[k] - v * e2[k];
+    return norm3(q);
+  }
+  return std::min({point_segment(p, a, b), point_segment(p, b, c), point_segment(p, c, a)});
+}
+
+// Segment-segment distance: golden-section search on the convex function s -> dist(p(s), seg q).
+double brute_segment_segment(const double* p0, const double* p1, const double* q0, const double* q1) {
+  auto f = [&](double s) {
+    double p[3];
+    for (int k = 0; k < 3; ++k) p[k] = p0[k] + s * (p1[k] - p0[k]);
+    return point_segment(p, q0, q1);
+  };
+  double lo = 0, hi = 1;
+  const double g = (std::sqrt(5.0) - 1) / 2;
+  for (int it = 0; it < 200; ++it) {
+    const double m1 = hi - g * (hi - lo), m2 = lo + g * (hi - lo);
+    if (f(m1) < f(m2)) hi = m2; else lo = m1;
+  }
+  return std::min({f(0.5 * (lo + hi)), f(0.0), f(1.0)});
+}
+
+}  // namespace
+
+TEST(SelfCollisionCcd, VertexFallingThroughAFixedTriangleHitsAtTheCrossingTime) {
+  double x0[4][3], x1[4][3];
+  // p: z = 1 - 2t crosses the triangle z = 0 at t = 1/2.
+  set4(x0, {{{0.2, 0.2, 1}}, {{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 0}}});
+  set4(x1, {{{0.2, 0.2, -1}}, {{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 0}}});
+  double t = -1;
+  ASSERT_TRUE(ccd_vertex_triangle(x0, x1, 1e-9, t));
+  EXPECT_NEAR(t, 0.5, 1e-12);
+}
+
+TEST(SelfCollisionCcd, VertexMeetsATiltingTriangleAtTheRootOfTheCoplanarityCubic) {
+  // a = 0, b = (1,0,0) fixed, c(t) = (0, 1, 2t): the plane is z = 2t y. p(t) = (1/4, 1/4, 1 - 2t)
+  // lies on it when 1 - 2t = t/2, t = 0.4, where p = (1/4, 1/4, 1/5) is inside the triangle.
+  double x0[4][3], x1[4][3];
+  set4(x0, {{{0.25, 0.25, 1}}, {{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 0}}});
+  set4(x1, {{{0.25, 0.25, -1}}, {{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 2}}});
+  double t = -1;
+  ASSERT_TRUE(ccd_vertex_triangle(x0, x1, 1e-9, t));
+  EXPECT_NEAR(t, 0.4, 1e-12);
+  // Both moving: triangle rises z = -0.5 + t, vertex falls z = 1 - 3t: meet at t = 3/8.
+  set4(x0, {{{0.3, 0.3, 1}}, {{0, 0, -0.5}}, {{1, 0, -0.5}}, {{0, 1, -0.5}}});
+  set4(x1, {{{0.3, 0.3, -2}}, {{0, 0, 0.5}}, {{1, 0, 0.5}}, {{0, 1, 0.5}}});
+  ASSERT_TRUE(ccd_vertex_triangle(x0, x1, 1e-9, t));
+  EXPECT_NEAR(t, 0.375, 1e-12);
+}
+
+TEST(SelfCollisionCcd, VertexPassingBesideTheTriangleIsNoCollision) {
+  double x0[4][3], x1[4][3];
+  set4(x0, {{{0.8, 0.8, 1}}, {{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 0}}});  // x + y = 1.6 > 1: outside
+  set4(x1, {{{0.8, 0.8, -1}}, {{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 0}}});
+  double t;
+  EXPECT_FALSE(ccd_vertex_triangle(x0, x1, 1e-9, t));
+  // Stops short of the plane.
+  set4(x1, {{{0.2, 0.2, 0.01}}, {{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 0}}});
+  set4(x0, {{{0.2, 0.2, 1}}, {{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 0}}});
+  EXPECT_FALSE(ccd_vertex_triangle(x0, x1, 1e-9, t));
+}
+
+TEST(SelfCollisionCcd, EdgesCrossingAtAnalyticTimes) {
+  double x0[4][3], x1[4][3];
+  // Edge 1 on the x axis, edge 2 parallel to y at z = 1 - 4t: they meet at t = 1/4.
+  set4(x0, {{{-1, 0, 0}}, {{1, 0, 0}}, {{0.3, -1, 1}}, {{0.3, 1, 1}}});
+  set4(x1, {{{-1, 0, 0}}, {{1, 0, 0}}, {{0.3, -1, -3}}, {{0.3, 1, -3}}});
+  double t = -1;
+  ASSERT_TRUE(ccd_edge_edge(x0, x1, 1e-9, t));
+  EXPECT_NEAR(t, 0.25, 1e-12);
+  // Edge 2 (the line y = -x at z = 0.5) stays, edge 1 rises z = t: the cubic is linear with its
+  // root at t = 1/2, where the two edges cross at (0, 0, 0.5).
+  set4(x0, {{{-1, 0, 0}}, {{1, 0, 0}}, {{-1, 1, 0.5}}, {{1, -1, 0.5}}});
+  set4(x1, {{{-1, 0, 1}}, {{1, 0, 1}}, {{-1, 1, 0.5}}, {{1, -1, 0.5}}});
+  ASSERT_TRUE(ccd_edge_edge(x0, x1, 1e-9, t));
+  EXPECT_NEAR(t, 0.5, 1e-12);
+  // Edge 2 passes beyond the end of edge 1: no collision.
+  set4(x0, {{{-1, 0, 0}}, {{1, 0, 0}}, {{1.5, -1, 1}}, {{1.5, 1, 1}}});
+  set4(x1, {{{-1, 0, 0}}, {{1, 0, 0}}, {{1.5, -1, -3}}, {{1.5, 1, -3}}});
+  EXPECT_FALSE(ccd_edge_edge(x0, x1, 1e-9, t));
+}
+
+TEST(SelfCollisionCcd, CubicCandidateTimesContainTheRootsOfAKnownCubic) {
+  // (t - 0.2)(t - 0.5)(t - 0.9) = t^3 - 1.6 t^2 + 0.73 t - 0.09
+  double ts[7];
+  const int n = cubic_candidate_times(-0.09, 0.73, -1.6, 1.0, ts);
+  for (double r : {0.2, 0.5, 0.9}) {
+    double best = 1;
+    for (int i = 0; i < n; ++i) best = std::min(best, std::abs(ts[i] - r));
+    EXPECT_LT(best, 1e-14) << r;
+  }
+  EXPECT_TRUE(std::is_sorted(ts, ts + n));
+}
+
+TEST(SelfCollisionDistance, PointTriangleAndSegmentSegmentMatchIndependentComputations) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int trial = 0; trial < 2000; ++trial) {
+    double p[3], a[3], b[3], c[3], w[3];
+    for (int k = 0; k < 3; ++k) p[k] = 2 * u(rng), a[k] = u(rng), b[k] = u(rng), c[k] = u(rng);
+    const double d = point_triangle_distance(p, a, b, c, w);
+    EXPECT_NEAR(d, brute_point_triangle(p, a, b, c), 1e-12);
+    // The weights describe the closest point.
+    double q[3];
+    for (int k = 0; k < 3; ++k) q[k] = p[k] - (w[0] * a[k] + w[1] * b[k] + w[2] * c[k]);
+    EXPECT_NEAR(norm3(q), d, 1e-12);
+    EXPECT_NEAR(w[0] + w[1] + w[2], 1.0, 1e-12);
+    double s, t;
+    const double e = segment_segment_distance(p, a, b, c, s, t);
+    EXPECT_NEAR(e, brute_segment_segment(p, a, b, c), 1e-9);
+  }
+}
+
+TEST(SelfCollisionBvh, RefitCandidatesEqualBruteForceOnRandomlyMovedMeshes) {
+  // Build once on a grid, then move the vertices at random (refit, no rebuild) and compare the
+  // candidate pairs with an all-pairs test of the same inflated boxes.
+  Mesh mesh = make_grid(9, 7, 1.0, 0.8, GridPlane::XZ);
+  SelfCollision sc({0.01, 0.0}, mesh);
+  std::mt19937 rng(3);
+  std::normal_distribution<double> nd(0.0, 0.15);
+  const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
+  const auto edges = mesh.edges();
+  for (int trial = 0; trial < 5; ++trial) {
+    std::vector<double> x = mesh.positions;
+    for (double& c : x) c += nd(rng);
+    const double inflate = 0.05 + 0.05 * trial;
+    std::vector<std::array<Index, 2>> vt, ee;
+    sc.candidate_pairs(x, inflate, vt, ee);
+    auto box = [&](std::initializer_list<Index> vs, double* lo, double* hi) {
+      for (int k = 0; k < 3; ++k) lo[k] = 1e300, hi[k] = -1e300;
+      for (Index v : vs)
+        for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], x[3 * v + k]), hi[k] = std::max(hi[k], x[3 * v + k]);
+    };
+    auto overlap = [&](const double* alo, const double* ahi, const double* blo, const double* bhi) {
+      for (int k = 0; k < 3; ++k)
+        if (alo[k] - inflate > bhi[k] || blo[k] > ahi[k] + inflate) return false;
+      return true;
+    };
+    std::vector<std::array<Index, 2>> bvt, bee;
+    for (Index v = 0; v < nv; ++v)
+      for (Index t = 0; t < nt; ++t) {
+        const Index* tv = &mesh.triangles[3 * t];
+        if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
+        double alo[3], ahi[3], blo[3], bhi[3];
+        box({v}, alo, ahi);
+        box({tv[0], tv[1], tv[2]}, blo, bhi);
+        if (overlap(alo, ahi, blo, bhi)) bvt.push_back({v, t});
+      }
+    for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
+      for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
+        const auto &E = edges[e], &F = edges[f];
+        if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+        double alo[3], ahi[3], blo[3], bhi[3];
+        box({E[0], E[1]}, alo, ahi);
+        box({F[0], F[1]}, blo, bhi);
+        if (overlap(alo, ahi, blo, bhi)) bee.push_back({e, f});
+      }
+    EXPECT_EQ(vt, bvt) << "trial " << trial;
+    EXPECT_EQ(ee, bee) << "trial " << trial;
+    EXPECT_GT(bvt.size(), 50u);
+  }
+}
+
+TEST(SelfCollisionBvh, MinDistanceMatchesBruteForce) {
+  Mesh mesh = make_grid(6, 6, 1.0, 1.0, GridPlane::XZ);
+  SelfCollision sc({0.01, 0.0}, mesh);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> nd(0.0, 0.05);
+  std::vector<double> x = mesh.positions;
+  for (double& c : x) c += nd(rng);
+  double brute = 1e300;
+  const Index nt = mesh.num_triangles();
+  for (Index v = 0; v < mesh.num_vertices(); ++v)
+    for (Index t = 0; t < nt; ++t) {
+      const Index* tv = &mesh.triangles[3 * t];
+      if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
+      brute = std::min(brute, brute_point_triangle(&x[3 * v], &x[3 * tv[0]], &x[3 * tv[1]], &x[3 * tv[2]]));
+    }
+  const auto edges = mesh.edges();
+  for (std::size_t e = 0; e < edges.size(); ++e)
+    for (std::size_t f = e + 1; f < edges.size(); ++f) {
+      const auto &E = edges[e], &F = edges[f];
+      if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+      brute = std::min(brute, brute_segment_segment(&x[3 * E[0]], &x[3 * E[1]], &x[3 * F[0]], &x[3 * F[1]]));
+    }
+  EXPECT_NEAR(sc.min_distance(x, 10.0), brute, 1e-9);
+}
+
+TEST(SelfCollisionCheck, IndependentTriangleTestCountsAKnownCrossing) {
+  // Two separate triangles: one in z = 0, one vertical piercing it, then moved away.
+  Mesh m;
+  m.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0.2, 0.2, -0.5, 0.2, 0.2, 0.5, 0.2, 1.2, 0.0};
+  m.triangles = {0, 1, 2, 3, 4, 5};
+  EXPECT_EQ(tritest::count_intersecting_pairs(m, m.positions), 1);
+  std::vector<double> x = m.positions;
+  for (int v = 3; v < 6; ++v) x[3 * v] += 2.0;
+  EXPECT_EQ(tritest::count_intersecting_pairs(m, x), 0);
+}
+
+TEST(SelfCollisionCheck, IndependentTriangleTestIgnoresAFlatSheetAndFindsAFold) {
+  Mesh m = make_grid(8, 8, 1.0, 1.0, GridPlane::XZ);
+  std::vector<double> x = m.positions;
+  for (std::size_t v = 0; v < x.size() / 3; ++v) x[3 * v + 1] = -3.924e-05 * (1 + (v % 3) * 1e-16);  // last-bit noise
+  EXPECT_EQ(tritest::count_intersecting_pairs(m, x), 0);
+  // Push the middle row through the sheet's far half folded back over it: rows iz >= 4 are
+  // mirrored onto iz < 4 (z -> 0.8 - z) and tilted so that they cut through the near half.
+  for (Index iz = 4; iz < 8; ++iz)
+    for (Index ix = 0; ix < 8; ++ix) {
+      const Index v = m.grid->index(ix, iz);
+      const double z = -m.positions[3 * v + 2];  // grid XZ runs towards -z
+      x[3 * v + 2] = -(8.0 / 7.0 - z);
+      x[3 * v + 1] = 0.3 * (ix / 7.0 - 0.5);
+    }
+  EXPECT_GT(tritest::count_intersecting_pairs(m, x), 0);
+}
+
