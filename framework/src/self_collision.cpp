@@ -416,6 +416,7 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
   ref_x_.assign(n3, 0.0);
   moved_.assign(nv_, 0.0);
   step_len_.assign(nv_, 0.0);
+  len0_.assign(nv_, 0.0);
   frozen_.assign(nv_, 0);
   vt_.reserve(8 * static_cast<std::size_t>(nv_));
   ee_.reserve(16 * static_cast<std::size_t>(nv_));
@@ -423,20 +424,6 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
 }
 
 void SelfCollision::begin_step(const State& s) { std::memcpy(x0_.data(), s.x.data(), x0_.size() * sizeof(double)); }
-
-void SelfCollision::pair_vertices(bool vt, const Pair& p, Index idx[4]) const {
-  if (vt) {
-    idx[0] = p.a;
-    idx[1] = tris_[3 * p.b];
-    idx[2] = tris_[3 * p.b + 1];
-    idx[3] = tris_[3 * p.b + 2];
-  } else {
-    idx[0] = edges_[p.a][0];
-    idx[1] = edges_[p.a][1];
-    idx[2] = edges_[p.b][0];
-    idx[3] = edges_[p.b][1];
-  }
-}
 
 // Distance of a pair at positions x; w are the weights of the relative position
 // sum_i w_i x_i (vertex minus triangle point, or second edge point minus first), n its direction.
@@ -537,7 +524,9 @@ bool SelfCollision::respond(const Index idx[4], const double w[4], const double 
     for (int i = 0; i < 4; ++i) {
       const double* di = &d_[3 * idx[i]];
       step_len_[idx[i]] = std::sqrt(selfcol::dot(di, di));
+      max_growth_ = std::max(max_growth_, step_len_[idx[i]] - len0_[idx[i]]);
     }
+  responded_ |= changed;
   return changed;
 }
 
@@ -696,24 +685,28 @@ void SelfCollision::resolve(State& s, double h) {
   const Index n = nv_;
   const double th = opt_.thickness;
   double* x = s.x.data();
-#pragma omp parallel for schedule(static) if (n >= kParallelMinVertices)
+  // One pass over the vertices (light work: serial, no thread wake-up). The broad phase's
+  // candidate pairs are reused while every vertex's motion this step stays inside the box it
+  // had when they were found, grown by the margin; otherwise refit and traverse.
+  bool valid = have_candidates_;
   for (Index i = 0; i < n; ++i) {
     double l2 = 0, m2 = 0;
     for (int k = 0; k < 3; ++k) {
-      const double dk = x[3 * i + k] - x0_[3 * i + k];
-      const double mk = x0_[3 * i + k] - ref_x_[3 * i + k];
+      const double a = x0_[3 * i + k], b = x[3 * i + k];
+      const double dk = b - a;
+      const double mk = a - ref_x_[3 * i + k];
       d_[3 * i + k] = dk;
       l2 += dk * dk;
       m2 += mk * mk;
+      const double lo = vlo_[3 * i + k] - margin_, hi = vhi_[3 * i + k] + margin_;
+      valid &= a >= lo && a <= hi && b >= lo && b <= hi;
     }
-    step_len_[i] = std::sqrt(l2);
+    step_len_[i] = len0_[i] = std::sqrt(l2);
     moved_[i] = std::sqrt(m2);
     inv_mass_[i] = s.inv_mass[i];
     frozen_[i] = 0;
   }
-  // Broad phase: reuse the candidate pairs while every vertex's motion this step stays inside
-  // the box it had when they were found, grown by the margin; otherwise refit and traverse.
-  if (!candidates_valid(x0_.data(), d_.data())) broad_phase(x0_.data(), d_.data(), margin_, th);
+  if (!valid) broad_phase(x0_.data(), d_.data(), margin_, th);
   stats_.candidates_vt = static_cast<Index>(vt_.size());
   stats_.candidates_ee = static_cast<Index>(ee_.size());
   stats_.broad_seconds = seconds_since(t0);
@@ -729,23 +722,36 @@ void SelfCollision::resolve(State& s, double h) {
     return std::max(moved_[idx[0]], moved_[idx[1]]) + std::max(moved_[idx[2]], moved_[idx[3]]) +
            std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
   };
+  const Index nvt = static_cast<Index>(vt_.size()), npairs = nvt + static_cast<Index>(ee_.size());
+  near_flag_.resize(npairs);
+#pragma omp parallel for schedule(static) if (npairs >= 4 * kParallelMinVertices)
+  for (Index q = 0; q < npairs; ++q) {
+    const bool vt = q < nvt;
+    const Pair& p = vt ? vt_[q] : ee_[q - nvt];
+    Index idx[4];
+    pair_vertices(vt, p, idx);
+    near_flag_[q] = p.dist_ref - bound(vt, idx) < th;
+  }
+  near_.clear();
+  for (Index q = 0; q < npairs; ++q)
+    if (near_flag_[q]) near_.push_back(q);
+  max_growth_ = 0;
+  responded_ = false;
   Index proximity = 0;
-  for (int pass = 0; pass < 2; ++pass) {
-    const bool vt = pass == 0;
-    for (const Pair& p : vt ? vt_ : ee_) {
-      Index idx[4];
-      pair_vertices(vt, p, idx);
-      if (p.dist_ref - bound(vt, idx) >= th) continue;
-      double w[4], nrm[3];
-      const double dist = pair_distance(vt, idx, x0_.data(), w, nrm);
-      double dn = 0;
-      for (int i = 0; i < 4; ++i)
-        for (int k = 0; k < 3; ++k) dn += w[i] * d_[3 * idx[i] + k] * nrm[k];
-      const double gap = dist + dn;  // linearised distance at the end of the step
-      const double target = dist < th ? dist + kRepulsionFraction * (th - dist) : th;
-      if (dist >= th && gap >= target) continue;
-      if (respond(idx, w, nrm, std::max(0.0, target - gap), h, s)) ++proximity;
-    }
+  for (const Index q : near_) {
+    const bool vt = q < nvt;
+    const Pair& p = vt ? vt_[q] : ee_[q - nvt];
+    Index idx[4];
+    pair_vertices(vt, p, idx);
+    double w[4], nrm[3];
+    const double dist = pair_distance(vt, idx, x0_.data(), w, nrm);
+    double dn = 0;
+    for (int i = 0; i < 4; ++i)
+      for (int k = 0; k < 3; ++k) dn += w[i] * d_[3 * idx[i] + k] * nrm[k];
+    const double gap = dist + dn;  // linearised distance at the end of the step
+    const double target = dist < th ? dist + kRepulsionFraction * (th - dist) : th;
+    if (dist >= th && gap >= target) continue;
+    if (respond(idx, w, nrm, std::max(0.0, target - gap), h, s)) ++proximity;
   }
   stats_.proximity = proximity;
   stats_.narrow_seconds = seconds_since(t0);
@@ -754,16 +760,25 @@ void SelfCollision::resolve(State& s, double h) {
   // CCD impulse iterations (Gauss-Seidel over the pairs), then the fail-safe.
   const double tol = kCcdTolerance * th;
   bool clean = false;
+  // Pairs outside the near list were farther than the thickness plus their motion; responses
+  // lengthen displacements by at most max_growth_, so the list stays complete for CCD while
+  // 2 max_growth_ < thickness - tol (after a new traversal, all pairs are visited).
+  bool near_valid = true;
   for (int it = 0; it < kCcdIterations && !clean; ++it) {
-    if (!candidates_valid(x0_.data(), d_.data())) {
+    if (responded_ && !candidates_valid(x0_.data(), d_.data())) {
       broad_phase(x0_.data(), d_.data(), margin_, th);
-      for (Index i = 0; i < n; ++i) moved_[i] = 0;
+      near_valid = false;
     }
     ++stats_.ccd_iterations;
     Index hits = 0;
-    for (int pass = 0; pass < 2; ++pass) {
-      const bool vt = pass == 0;
-      for (const Pair& p : vt ? vt_ : ee_) {
+    const Index nvt_now = static_cast<Index>(vt_.size());
+    const bool use_near = near_valid && 2 * max_growth_ < th - tol;
+    const Index count = use_near ? static_cast<Index>(near_.size()) : nvt_now + static_cast<Index>(ee_.size());
+    for (Index r = 0; r < count; ++r) {
+      const Index q = use_near ? near_[r] : r;
+      const bool vt = q < nvt_now;
+      const Pair& p = vt ? vt_[q] : ee_[q - nvt_now];
+      {
         Index idx[4];
         pair_vertices(vt, p, idx);
         if (p.dist_ref - bound(vt, idx) > tol) continue;
@@ -822,10 +837,11 @@ void SelfCollision::resolve(State& s, double h) {
       for (Index i = 0; i < n; ++i) moved_[i] = 0;
     }
     stats_.frozen = freeze_pass(s);
+    responded_ = true;
   }
-#pragma omp parallel for schedule(static) if (n >= kParallelMinVertices)
-  for (Index i = 0; i < n; ++i)
-    for (int k = 0; k < 3; ++k) x[3 * i + k] = x0_[3 * i + k] + d_[3 * i + k];
+  if (responded_)
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) x[3 * i + k] = x0_[3 * i + k] + d_[3 * i + k];
   stats_.response_seconds = seconds_since(t0);
 }
 

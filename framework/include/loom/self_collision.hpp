@@ -173,11 +173,29 @@ class SelfCollision {
   std::vector<double> moved_;                    ///< per vertex |x0 - ref_x| this step
   std::vector<double> step_len_;                 ///< per vertex |d| this step
   std::vector<Pair> vt_, ee_;
-  std::vector<std::uint8_t> vt_near_, ee_near_;  ///< could be in proximity or collide this step
+  std::vector<std::uint8_t> near_flag_;          ///< per pair (VT then EE): could be within the thickness this step
+  std::vector<Index> near_;                      ///< those pairs (index into VT then EE)
+  std::vector<double> len0_;                     ///< per vertex |d| before any response this step
+  double max_growth_ = 0;                        ///< largest |d| - len0 after responses
+  bool responded_ = false;                       ///< d or v changed this step
   std::vector<std::array<Index, 2>> stack_;
   std::vector<std::uint8_t> frozen_;
   bool have_candidates_ = false;
   SelfCollisionStats stats_;
 };
+
+inline void SelfCollision::pair_vertices(bool vt, const Pair& p, Index idx[4]) const {
+  if (vt) {
+    idx[0] = p.a;
+    idx[1] = tris_[3 * p.b];
+    idx[2] = tris_[3 * p.b + 1];
+    idx[3] = tris_[3 * p.b + 2];
+  } else {
+    idx[0] = edges_[p.a][0];
+    idx[1] = edges_[p.a][1];
+    idx[2] = edges_[p.b][0];
+    idx[3] = edges_[p.b][1];
+  }
+}
 
 }  // namespace loom
