@@ -343,7 +343,6 @@ std::string fmt(double v) {
 constexpr double kRepulsionFraction = 0.25;  ///< of the missing thickness restored per step
 constexpr double kCcdTolerance = 1e-3;       ///< CCD contact distance, times the thickness
 constexpr double kCcdSeparation = 0.1;       ///< CCD impulses leave this gap, times the thickness
-constexpr int kCcdIterations = 16;           ///< CCD impulse passes before the fail-safe
 
 }  // namespace
 
@@ -739,6 +738,7 @@ void SelfCollision::resolve(State& s, double h) {
   responded_ = false;
   Index proximity = 0;
   for (const Index q : near_) {
+    if (!opt_.repulsion) break;
     const bool vt = q < nvt;
     const Pair& p = vt ? vt_[q] : ee_[q - nvt];
     Index idx[4];
@@ -764,7 +764,7 @@ void SelfCollision::resolve(State& s, double h) {
   // lengthen displacements by at most max_growth_, so the list stays complete for CCD while
   // 2 max_growth_ < thickness - tol (after a new traversal, all pairs are visited).
   bool near_valid = true;
-  for (int it = 0; it < kCcdIterations && !clean; ++it) {
+  for (int it = 0; it < opt_.ccd_iterations && !clean; ++it) {
     if (responded_ && !candidates_valid(x0_.data(), d_.data())) {
       broad_phase(x0_.data(), d_.data(), margin_, th);
       near_valid = false;

@@ -263,3 +263,82 @@ TEST(SelfCollisionCheck, IndependentTriangleTestIgnoresAFlatSheetAndFindsAFold) 
   EXPECT_GT(tritest::count_intersecting_pairs(m, x), 0);
 }
 
+namespace {
+
+// Three separate triangles: A in the plane y = 0, B a small one 5 cm above it, C far away.
+// In one step of h = 0.01 s, B moves 10 cm down (through A) and C moves sideways.
+struct ThroughStep {
+  Mesh mesh;
+  State s;
+  std::vector<double> x0, x1;
+  ThroughStep() {
+    mesh.positions = {0, 0, 0, 1, 0, 0, 0, 0, 1,                   // A
+                      0.2, 0.05, 0.2, 0.3, 0.05, 0.2, 0.2, 0.05, 0.3,  // B
+                      5, 0, 5, 6, 0, 5, 5, 0, 6};                  // C
+    mesh.triangles = {0, 1, 2, 3, 4, 5, 6, 7, 8};
+    s.resize(9);
+    for (Index i = 0; i < 9; ++i) s.mass[i] = 0.01;
+    s.update_inverse_masses();
+    x0 = mesh.positions;
+    x1 = x0;
+    for (Index i = 3; i < 6; ++i) x1[3 * i + 1] -= 0.1;
+    for (Index i = 6; i < 9; ++i) x1[3 * i] += 0.02;
+  }
+  void step(SelfCollision& sc, double h) {
+    s.x = x0;
+    sc.begin_step(s);
+    s.x = x1;
+    for (std::size_t k = 0; k < s.v.size(); ++k) s.v[k] = (x1[k] - x0[k]) / h;
+    sc.resolve(s, h);
+  }
+};
+
+}  // namespace
+
+TEST(SelfCollisionResponse, ATriangleDrivenThroughAnotherStopsAboveItWithoutApproachVelocity) {
+  ThroughStep t;
+  for (Index b = 3; b < 6; ++b) ASSERT_LT(t.x1[3 * b + 1], 0.0);  // the unprotected step tunnels through A
+  const double th = 0.01;
+  SelfCollision sc({th, 0.0}, t.mesh);
+  t.step(sc, 0.01);
+  EXPECT_EQ(tritest::count_intersecting_pairs(t.mesh, t.s.x), 0);
+  EXPECT_EQ(sc.last_stats().frozen, 0);
+  // Every vertex of B ends on the side of A's (tilted) plane it started on, and not closer than
+  // the CCD separation (0.1 thickness) to A.
+  const double* a0 = &t.s.x[0];
+  const double* a1 = &t.s.x[3];
+  const double* a2 = &t.s.x[6];
+  double e1[3], e2[3], nrm[3];
+  for (int k = 0; k < 3; ++k) e1[k] = a1[k] - a0[k], e2[k] = a2[k] - a0[k];
+  nrm[0] = e1[1] * e2[2] - e1[2] * e2[1], nrm[1] = e1[2] * e2[0] - e1[0] * e2[2], nrm[2] = e1[0] * e2[1] - e1[1] * e2[0];
+  if (nrm[1] < 0) for (double& c : nrm) c = -c;
+  for (Index b = 3; b < 6; ++b) {
+    const double* p = &t.s.x[3 * b];
+    EXPECT_GT((p[0] - a0[0]) * nrm[0] + (p[1] - a0[1]) * nrm[1] + (p[2] - a0[2]) * nrm[2], 0.0) << b;
+    double w[3];
+    EXPECT_GT(point_triangle_distance(p, a0, a1, a2, w), 0.1 * th - 1e-12) << b;
+  }
+  // Momentum along y is conserved by the impulses (equal masses, none pinned).
+  double p = 0;
+  for (Index i = 0; i < 6; ++i) p += t.s.v[3 * i + 1];
+  EXPECT_NEAR(p, 3 * (-0.1 / 0.01), 1e-9);
+  for (Index i = 6; i < 9; ++i) EXPECT_EQ(t.s.x[3 * i], t.x1[3 * i]);          // C untouched
+}
+
+TEST(SelfCollisionResponse, FailSafeAloneReturnsTheCollidingVerticesToTheirStart) {
+  ThroughStep t;
+  SelfCollision::Options o{0.01, 0.0};
+  o.ccd_iterations = 0;
+  o.repulsion = false;
+  SelfCollision sc(o, t.mesh);
+  t.step(sc, 0.01);
+  EXPECT_EQ(tritest::count_intersecting_pairs(t.mesh, t.s.x), 0);
+  EXPECT_EQ(sc.last_stats().frozen, 6);  // the vertices of the colliding pairs: B and A (A was at rest)
+  for (Index i = 3; i < 6; ++i)
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_EQ(t.s.x[3 * i + k], t.x0[3 * i + k]);
+      EXPECT_EQ(t.s.v[3 * i + k], 0.0);
+    }
+  for (Index i = 6; i < 9; ++i) EXPECT_EQ(t.s.x[3 * i], t.x1[3 * i]);  // C moved as integrated
+}
+

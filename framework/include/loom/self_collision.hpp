@@ -119,6 +119,9 @@ class SelfCollision {
   struct Options {
     double thickness = 0;   ///< m: pairs closer than this are pushed apart
     double friction = 0;    ///< Coulomb coefficient between cloth layers
+    // Not scene keys: the tests switch stages off to exercise the fail-safe alone.
+    int ccd_iterations = 16;  ///< CCD impulse passes before the fail-safe
+    bool repulsion = true;    ///< proximity repulsion and friction
   };
   /// Parse the scene's `self_collision` mapping (nullptr when absent). Checks the keys, and
   /// that the thickness is below the smallest distance between non-adjacent elements of the
