@@ -644,6 +644,7 @@ Index SelfCollision::freeze_pass(State& s) {
   Index frozen = 0;
   for (;;) {
     Index found = 0;
+    const Index before = frozen;
     for (int pass = 0; pass < 2; ++pass) {
       const bool vt = pass == 0;
       const std::vector<Pair>& list = vt ? vt_ : ee_;
@@ -674,6 +675,7 @@ Index SelfCollision::freeze_pass(State& s) {
       }
     }
     if (found == 0) break;
+    if (frozen == before) break;  // only pinned vertices still move: a prescribed pin motion drives it
   }
   return frozen;
 }

@@ -8,7 +8,7 @@
 
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
-#include "tri_tri.hpp"
+#include "loom/intersection_check.hpp"
 
 using namespace loom;
 using namespace loom::selfcol;
@@ -235,34 +235,6 @@ TEST(SelfCollisionBvh, MinDistanceMatchesBruteForce) {
   EXPECT_NEAR(sc.min_distance(x, 10.0), brute, 1e-9);
 }
 
-TEST(SelfCollisionCheck, IndependentTriangleTestCountsAKnownCrossing) {
-  // Two separate triangles: one in z = 0, one vertical piercing it, then moved away.
-  Mesh m;
-  m.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0, 0.2, 0.2, -0.5, 0.2, 0.2, 0.5, 0.2, 1.2, 0.0};
-  m.triangles = {0, 1, 2, 3, 4, 5};
-  EXPECT_EQ(tritest::count_intersecting_pairs(m, m.positions), 1);
-  std::vector<double> x = m.positions;
-  for (int v = 3; v < 6; ++v) x[3 * v] += 2.0;
-  EXPECT_EQ(tritest::count_intersecting_pairs(m, x), 0);
-}
-
-TEST(SelfCollisionCheck, IndependentTriangleTestIgnoresAFlatSheetAndFindsAFold) {
-  Mesh m = make_grid(8, 8, 1.0, 1.0, GridPlane::XZ);
-  std::vector<double> x = m.positions;
-  for (std::size_t v = 0; v < x.size() / 3; ++v) x[3 * v + 1] = -3.924e-05 * (1 + (v % 3) * 1e-16);  // last-bit noise
-  EXPECT_EQ(tritest::count_intersecting_pairs(m, x), 0);
-  // Push the middle row through the sheet's far half folded back over it: rows iz >= 4 are
-  // mirrored onto iz < 4 (z -> 0.8 - z) and tilted so that they cut through the near half.
-  for (Index iz = 4; iz < 8; ++iz)
-    for (Index ix = 0; ix < 8; ++ix) {
-      const Index v = m.grid->index(ix, iz);
-      const double z = -m.positions[3 * v + 2];  // grid XZ runs towards -z
-      x[3 * v + 2] = -(8.0 / 7.0 - z);
-      x[3 * v + 1] = 0.3 * (ix / 7.0 - 0.5);
-    }
-  EXPECT_GT(tritest::count_intersecting_pairs(m, x), 0);
-}
-
 namespace {
 
 // Three separate triangles: A in the plane y = 0, B a small one 5 cm above it, C far away.
@@ -301,7 +273,7 @@ TEST(SelfCollisionResponse, ATriangleDrivenThroughAnotherStopsAboveItWithoutAppr
   const double th = 0.01;
   SelfCollision sc({th, 0.0}, t.mesh);
   t.step(sc, 0.01);
-  EXPECT_EQ(tritest::count_intersecting_pairs(t.mesh, t.s.x), 0);
+  EXPECT_EQ(loom::count_intersecting_pairs(t.mesh, t.s.x), 0);
   EXPECT_EQ(sc.last_stats().frozen, 0);
   // Every vertex of B ends on the side of A's (tilted) plane it started on, and not closer than
   // the CCD separation (0.1 thickness) to A.
@@ -332,7 +304,7 @@ TEST(SelfCollisionResponse, FailSafeAloneReturnsTheCollidingVerticesToTheirStart
   o.repulsion = false;
   SelfCollision sc(o, t.mesh);
   t.step(sc, 0.01);
-  EXPECT_EQ(tritest::count_intersecting_pairs(t.mesh, t.s.x), 0);
+  EXPECT_EQ(loom::count_intersecting_pairs(t.mesh, t.s.x), 0);
   EXPECT_EQ(sc.last_stats().frozen, 6);  // the vertices of the colliding pairs: B and A (A was at rest)
   for (Index i = 3; i < 6; ++i)
     for (int k = 0; k < 3; ++k) {

@@ -1,5 +1,6 @@
 // Self-collision in whole scenes: no intersecting pair of non-adjacent triangles in any frame
-// (counted by the independent exact test of tri_tri.hpp), the thickness kept, bad input refused.
+// (counted by the exact test of loom/intersection_check.hpp, `loom check`, which shares no code
+// with the collision code), the thickness kept, bad input refused.
 #include <gtest/gtest.h>
 
 #include <array>
@@ -11,7 +12,7 @@
 #include <sys/wait.h>
 
 #include "loom/simulation.hpp"
-#include "tri_tri.hpp"
+#include "loom/intersection_check.hpp"
 
 namespace fs = std::filesystem;
 
@@ -90,7 +91,7 @@ RunResult run_and_check(loom::Simulation& sim, int frames, double thickness) {
       }
     }
     const auto& x = sim.scene().state.x;
-    const int c = tritest::count_intersecting_pairs(mesh, x);
+    const int c = static_cast<int>(loom::count_intersecting_pairs(mesh, x));
     if (c > r.max_intersections) r.max_intersections = c;
     if (c > 0 && r.first_bad_frame < 0) r.first_bad_frame = f;
     if (thickness > 0) r.min_distance = std::min(r.min_distance, min_vertex_triangle_distance(mesh, x, thickness));
