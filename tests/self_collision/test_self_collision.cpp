@@ -314,3 +314,25 @@ TEST(SelfCollisionResponse, FailSafeAloneReturnsTheCollidingVerticesToTheirStart
   for (Index i = 6; i < 9; ++i) EXPECT_EQ(t.s.x[3 * i], t.x1[3 * i]);  // C moved as integrated
 }
 
+
+TEST(SelfCollisionResponse, APinnedTriangleDrivenThroughFreeClothPushesItAndTheFailSafeEnds) {
+  // A is pinned and moves up 10 cm through B (free, at rest 5 cm above): B must give way.
+  ThroughStep t;
+  for (Index i = 0; i < 3; ++i) t.s.pin(i);
+  t.s.update_inverse_masses();
+  t.x1 = t.x0;
+  for (Index i = 0; i < 3; ++i) t.x1[3 * i + 1] += 0.1;
+  const double th = 0.01;
+  SelfCollision sc({th, 0.0}, t.mesh);
+  t.step(sc, 0.01);
+  EXPECT_EQ(loom::count_intersecting_pairs(t.mesh, t.s.x), 0u);
+  for (Index i = 0; i < 3; ++i) EXPECT_EQ(t.s.x[3 * i + 1], 0.1);        // the pin moved as prescribed
+  for (Index b = 3; b < 6; ++b) EXPECT_GT(t.s.x[3 * b + 1], 0.1);        // B pushed above A
+  // With only the fail-safe, freezing B cannot stop a prescribed motion: it must still end.
+  SelfCollision::Options o{th, 0.0};
+  o.ccd_iterations = 0;
+  o.repulsion = false;
+  SelfCollision bare(o, t.mesh);
+  t.step(bare, 0.01);
+  EXPECT_EQ(bare.last_stats().frozen, 3);
+}
