@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <ostream>
 #include <random>
 #include <string>
 #include <vector>
@@ -40,6 +41,8 @@ struct Config {
   std::string params;  // YAML map
   double tolerance;
 };
+
+void PrintTo(const Config& c, std::ostream* os) { *os << c.solver << "/" << c.label << " " << c.params; }
 
 // Configurations per solver name: each preconditioner / variant with its stated tolerance.
 std::vector<Config> configs_for(const std::string& name) {

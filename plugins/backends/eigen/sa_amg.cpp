@@ -1,6 +1,9 @@
 #include "sa_amg.hpp"
 
 #include <omp.h>
+#if defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -55,6 +58,46 @@ inline void gemm_add(const double* A, const double* B, double* Cm) {
       const double s = A[a * K + k];
       for (int c = 0; c < C; ++c) Cm[a * C + c] += s * B[k * C + c];
     }
+}
+
+// y = sum_k A_ik x_col(k) over block row i of a 3x3-block matrix. The AVX2 path keeps one
+// 4-lane accumulator per row of the block (lane 3 multiplies a zero), as eigen_pcg's SpMV.
+inline void row_multiply3(const Index* rp, const Index* col, const double* val, const double* x, Index i,
+                          double* yi) {
+#if defined(__AVX2__) && defined(__FMA__)
+  const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
+  __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd();
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+    const double* B = val + 9 * static_cast<std::size_t>(k);
+    const __m256d xv = _mm256_maskload_pd(x + 3 * static_cast<std::size_t>(col[k]), m3);
+    a0 = _mm256_fmadd_pd(_mm256_loadu_pd(B), xv, a0);
+    a1 = _mm256_fmadd_pd(_mm256_loadu_pd(B + 3), xv, a1);
+    a2 = _mm256_fmadd_pd(_mm256_maskload_pd(B + 6, m3), xv, a2);
+  }
+  const __m256d h01 = _mm256_hadd_pd(a0, a1);
+  const __m128d s01 = _mm_add_pd(_mm256_castpd256_pd128(h01), _mm256_extractf128_pd(h01, 1));
+  const __m128d l2 = _mm_add_pd(_mm256_castpd256_pd128(a2), _mm256_extractf128_pd(a2, 1));
+  yi[0] = _mm_cvtsd_f64(s01);
+  yi[1] = _mm_cvtsd_f64(_mm_unpackhi_pd(s01, s01));
+  yi[2] = _mm_cvtsd_f64(_mm_add_sd(l2, _mm_unpackhi_pd(l2, l2)));
+#else
+  yi[0] = yi[1] = yi[2] = 0;
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<3, 3>(val + 9 * static_cast<std::size_t>(k), x + 3 * static_cast<std::size_t>(col[k]), yi);
+#endif
+}
+
+// acc = b_i - (A x)_i for block row i.
+template <int B>
+inline void row_residual(const BlockMatrix& A, const double* b, const double* x, Index i, double* acc) {
+  if constexpr (B == 3) {
+    double ax[3];
+    row_multiply3(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
+    for (int a = 0; a < 3; ++a) acc[a] = b[3 * static_cast<std::size_t>(i) + a] - ax[a];
+  } else {
+    for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a];
+    for (Index k = A.rp[i]; k < A.rp[i + 1]; ++k)
+      gemv_sub<B, B>(A.block(k), x + static_cast<std::size_t>(B) * A.ci[k], acc);
+  }
 }
 
 // Inverse of a B x B SPD matrix by Cholesky; false when it is not (numerically) SPD.
@@ -718,9 +761,7 @@ void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::
     for (Index t = cp[c]; t < cp[c + 1]; ++t) {
       const Index i = cr[t];
       double acc[B];
-      for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a];
-      for (Index k = A.rp[i]; k < A.rp[i + 1]; ++k)
-        gemv_sub<B, B>(A.block(k), x + static_cast<std::size_t>(B) * A.ci[k], acc);
+      row_residual<B>(A, b, x, i, acc);
       gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
     }
   }
@@ -764,10 +805,7 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
     {
 #pragma omp for schedule(static)
       for (Index i = 0; i < n; ++i) {
-        double* ri = r + static_cast<std::size_t>(B) * i;
-        for (int a = 0; a < B; ++a) ri[a] = b[static_cast<std::size_t>(B) * i + a];
-        for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
-          gemv_sub<B, B>(L.A.block(k), x + static_cast<std::size_t>(B) * L.A.ci[k], ri);
+        row_residual<B>(L.A, b, x, i, r + static_cast<std::size_t>(B) * i);
       }
 #pragma omp for schedule(static)
       for (Index I = 0; I < nc; ++I) {
