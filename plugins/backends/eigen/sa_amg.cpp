@@ -241,12 +241,32 @@ void SaAmg::aggregate(std::size_t l) {
   L.agg = std::move(agg);
 }
 
+// Gauss-Seidel schedule: the rows are cut into `parts` contiguous ranges (8 when the level
+// is large enough to run threaded, else 1). A row whose neighbours all lie in its own range
+// is interior: the interior rows of different ranges are never coupled, so the ranges are
+// swept lexicographically in parallel (lexicographic Gauss-Seidel smooths better than a
+// multicolour one: 28 vs 35 iterations on the 128^2 wool hang). The remaining boundary rows
+// are greedily coloured and swept colour by colour afterwards.
 void SaAmg::colour(std::size_t l) {
   Level& L = L_[l];
   const Index n = L.A.rows;
+  const int parts = static_cast<Index>(n) * L.A.br >= o_.parallel_min_dofs ? 8 : 1;
+  auto part = [&](Index i) { return static_cast<int>(static_cast<long long>(i) * parts / n); };
+  std::vector<char> boundary(n, 0);
+  for (Index i = 0; i < n; ++i)
+    for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
+      if (part(L.A.ci[k]) != part(i)) boundary[i] = 1;
+  L.part_ptr.assign(static_cast<std::size_t>(parts) + 1, 0);
+  L.part_rows.clear();
+  for (int p = 0; p < parts; ++p) {
+    for (Index i = 0; i < n; ++i)
+      if (!boundary[i] && part(i) == p) L.part_rows.push_back(i);
+    L.part_ptr[p + 1] = static_cast<Index>(L.part_rows.size());
+  }
   std::vector<int> c(n, -1), seen;
   int nc = 0;
   for (Index i = 0; i < n; ++i) {
+    if (!boundary[i]) continue;
     seen.assign(static_cast<std::size_t>(nc) + 1, 0);
     for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k) {
       const int cj = c[L.A.ci[k]];
@@ -258,11 +278,13 @@ void SaAmg::colour(std::size_t l) {
     nc = std::max(nc, ci + 1);
   }
   L.colour_ptr.assign(static_cast<std::size_t>(nc) + 1, 0);
-  for (Index i = 0; i < n; ++i) ++L.colour_ptr[c[i] + 1];
+  for (Index i = 0; i < n; ++i)
+    if (c[i] >= 0) ++L.colour_ptr[c[i] + 1];
   for (int k = 0; k < nc; ++k) L.colour_ptr[k + 1] += L.colour_ptr[k];
-  L.colour_rows.resize(n);
+  L.colour_rows.resize(L.colour_ptr[nc]);
   std::vector<Index> fill(L.colour_ptr.begin(), L.colour_ptr.end() - 1);
-  for (Index i = 0; i < n; ++i) L.colour_rows[fill[c[i]]++] = i;
+  for (Index i = 0; i < n; ++i)
+    if (c[i] >= 0) L.colour_rows[fill[c[i]]++] = i;
 }
 
 // Patterns of P (row i: the aggregates of i's neighbours), R = P^T, A P and P^T A P; the
@@ -742,27 +764,45 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   info_.clear();
   for (const Level& L : L_)
     info_.push_back({L.A.rows, L.A.br, L.A.nnz(),
-                     L.colour_ptr.empty() ? 0 : static_cast<int>(L.colour_ptr.size()) - 1});
+                     L.colour_ptr.empty() ? 0 : static_cast<int>(L.colour_ptr.size()) - 1,
+                     L.part_ptr.empty() ? 0 : static_cast<int>(L.part_ptr.size()) - 1});
   return true;
 }
 
 namespace {
 
-// One Gauss-Seidel sweep over the colours in the given direction: within a colour no two
-// rows are coupled, so its rows update in parallel without races.
+// One Gauss-Seidel sweep. Forward: the interior rows of every part in increasing order (the
+// parts in parallel: they are not coupled), then the boundary rows colour by colour (rows of
+// one colour are not coupled). Backward: exactly the reverse order. Every update is a
+// sequential Gauss-Seidel step in one fixed row order, so the backward sweep is the adjoint
+// of the forward one, with no races and the same result on any number of threads.
 template <int B>
 void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::vector<Index>& cp,
-              const std::vector<Index>& cr, const double* b, double* x, bool forward, bool par) {
+              const std::vector<Index>& cr, const std::vector<Index>& pp, const std::vector<Index>& pr,
+              const double* b, double* x, bool forward, bool par) {
   const int nc = static_cast<int>(cp.size()) - 1;
+  const int np = static_cast<int>(pp.size()) - 1;
+  auto update = [&](Index i) {
+    double acc[B];
+    row_residual<B>(A, b, x, i, acc);
+    gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+  };
 #pragma omp parallel if (par)
-  for (int s = 0; s < nc; ++s) {
-    const int c = forward ? s : nc - 1 - s;
+  {
+    if (forward) {
+#pragma omp for schedule(static, 1)
+      for (int p = 0; p < np; ++p)
+        for (Index t = pp[p]; t < pp[p + 1]; ++t) update(pr[t]);
+    }
+    for (int s = 0; s < nc; ++s) {
+      const int c = forward ? s : nc - 1 - s;
 #pragma omp for schedule(static)
-    for (Index t = cp[c]; t < cp[c + 1]; ++t) {
-      const Index i = cr[t];
-      double acc[B];
-      row_residual<B>(A, b, x, i, acc);
-      gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+      for (Index t = cp[c]; t < cp[c + 1]; ++t) update(cr[t]);
+    }
+    if (!forward) {
+#pragma omp for schedule(static, 1)
+      for (int p = 0; p < np; ++p)
+        for (Index t = pp[p + 1]; t-- > pp[p];) update(pr[t]);
     }
   }
 }
@@ -786,8 +826,8 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       with_size(bs, [&](auto Bc) {
         constexpr int B = decltype(Bc)::value;
         for (int s = 0; s < 2; ++s) {
-          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, b, x, true, par);
-          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, b, x, false, par);
+          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
         }
       });
     }
@@ -798,7 +838,7 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
   with_sizes(bs, m_, [&](auto Bc, auto Mc) {
     constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
     constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
-    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, b, x, true, par);
+    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
     double* r = L.r.data();
     const Index nc = C.A.rows;
 #pragma omp parallel if (par)
@@ -821,7 +861,7 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k)
         gemv_add<B, M>(L.P.v.data() + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
                        x + static_cast<std::size_t>(B) * i);
-    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, b, x, false, par);
+    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
   });
 }
 
