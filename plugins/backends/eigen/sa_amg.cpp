@@ -86,10 +86,45 @@ inline void row_multiply3(const Index* rp, const Index* col, const double* val, 
 #endif
 }
 
+// y = sum_k A_ik x_col(k) over block row i of a 6x6-block matrix: per row of the block one
+// 4-lane and one 2-lane accumulator, reduced once per block row.
+inline void row_multiply6(const Index* rp, const Index* col, const double* val, const double* x, Index i,
+                          double* yi) {
+#if defined(__AVX2__) && defined(__FMA__)
+  __m256d a[6];
+  __m128d c[6];
+  for (int r = 0; r < 6; ++r) {
+    a[r] = _mm256_setzero_pd();
+    c[r] = _mm_setzero_pd();
+  }
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+    const double* B = val + 36 * static_cast<std::size_t>(k);
+    const double* xk = x + 6 * static_cast<std::size_t>(col[k]);
+    const __m256d x4 = _mm256_loadu_pd(xk);
+    const __m128d x2 = _mm_loadu_pd(xk + 4);
+    for (int r = 0; r < 6; ++r) {
+      a[r] = _mm256_fmadd_pd(_mm256_loadu_pd(B + 6 * r), x4, a[r]);
+      c[r] = _mm_fmadd_pd(_mm_loadu_pd(B + 6 * r + 4), x2, c[r]);
+    }
+  }
+  for (int r = 0; r < 6; ++r) {
+    const __m128d h = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a[r]), _mm256_extractf128_pd(a[r], 1)), c[r]);
+    yi[r] = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
+  }
+#else
+  for (int r = 0; r < 6; ++r) yi[r] = 0;
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<6, 6>(val + 36 * static_cast<std::size_t>(k), x + 6 * static_cast<std::size_t>(col[k]), yi);
+#endif
+}
+
 // acc = b_i - (A x)_i for block row i.
 template <int B>
 inline void row_residual(const BlockMatrix& A, const double* b, const double* x, Index i, double* acc) {
-  if constexpr (B == 3) {
+  if constexpr (B == 6) {
+    double ax[6];
+    row_multiply6(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
+    for (int a = 0; a < 6; ++a) acc[a] = b[6 * static_cast<std::size_t>(i) + a] - ax[a];
+  } else if constexpr (B == 3) {
     double ax[3];
     row_multiply3(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
     for (int a = 0; a < 3; ++a) acc[a] = b[3 * static_cast<std::size_t>(i) + a] - ax[a];
