@@ -165,6 +165,7 @@ std::vector<SolverVariant> variants() {
   v.push_back({"eigen_pcg_block_jacobi_extrapolated", false, bj, 1 << 30, true, true});
   loom::PcgOptions amg = bj;
   amg.preconditioner = loom::PcgPreconditioner::SaAmg;
+  amg.amg.prolongator_refresh_steps = 1;
   v.push_back({"eigen_pcg_sa_amg_rigid", false, amg});
   v.push_back({"eigen_pcg_sa_amg_rigid_cold", false, amg, 1 << 30, false});
   v.push_back({"eigen_pcg_sa_amg_rigid_extrapolated", false, amg, 1 << 30, true, true});

@@ -1,7 +1,9 @@
 // Linear-solver backends on the Baraff-Witkin matrix A = M - h^2 K of a hanging mass-spring
 // cloth (nx x nx vertices, structural + shear + bend springs, top corners pinned, h^2 k/m =
 // 1e3): analysis, factorisation / preconditioner set-up and one cold-start solve, for
-// cholmod, petsc (CG + jacobi / bjacobi / gamg), eigen_ldlt and eigen_pcg.
+// cholmod, petsc (CG + jacobi / bjacobi / gamg / boomeramg, the AMGs with the rigid-body
+// near-null space), eigen_ldlt and eigen_pcg (block_jacobi, sa_amg). Every solver gets the
+// vertex positions (set_coordinates) before factorize, as Baraff-Witkin gives them.
 //
 //   bench_solvers --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 //   mpirun -n 2 --oversubscribe bench_solvers --benchmark_filter=petsc ...   (PETSc on 2 ranks;
@@ -54,6 +56,7 @@ void run(benchmark::State& st, const Factory& make, Index nx, Phase phase) {
   auto solver = make();
   std::vector<double> dv(3 * s.n, 0.0);
   SolveReport rep;
+  solver->set_coordinates(s.x);
   if (phase != Phase::Analyze) solver->analyze_pattern(s.A, s.S);
   if (phase == Phase::Solve) {
     SolveReport f;
@@ -127,7 +130,7 @@ int main(int argc, char** argv) {
   solvers.emplace_back("cholmod", [] { return std::make_unique<CholmodSolver>(); });
 #endif
 #ifdef LOOM_BENCH_PETSC
-  for (const char* pc : {"jacobi", "bjacobi", "gamg"}) {
+  for (const char* pc : {"jacobi", "bjacobi", "gamg", "boomeramg"}) {
     solvers.emplace_back(std::string("petsc_") + pc, [pc] {
       PetscSolverOptions o;
       o.pc = pc;
@@ -142,6 +145,13 @@ int main(int argc, char** argv) {
     PcgOptions o;
     o.tolerance = kIterativeTolerance;
     o.max_iterations = 100000;
+    return std::make_unique<EigenPcg>(o);
+  });
+  solvers.emplace_back("eigen_pcg_sa_amg", [] {
+    PcgOptions o;
+    o.tolerance = kIterativeTolerance;
+    o.max_iterations = 100000;
+    o.preconditioner = PcgPreconditioner::SaAmg;
     return std::make_unique<EigenPcg>(o);
   });
 #endif

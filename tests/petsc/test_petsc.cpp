@@ -73,7 +73,8 @@ TEST(Petsc, HangingClothAgreesWithDenseLdlt) {
 
 // The AMG preconditioners selectable by name, with block size 3 and the rigid-body
 // near-null space built from the vertex positions: gamg and hypre BoomerAMG (nodal
-// coarsening + interpolation of the near-null vectors) solve the hanging cloth with pins and
+// coarsening; the rigid modes are attached but BoomerAMG uses them only with vector
+// interpolation, an `options` choice) solve the hanging cloth with pins and
 // contact constraints to the dense answer; the near-null space is attached exactly when
 // positions are given (auto), and near_null_space: rigid without positions is an error.
 TEST(Petsc, GamgAndBoomerAmgWithRigidBodyNearNullSpace) {

@@ -282,12 +282,12 @@ void PetscSolver::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   LOOM_PETSC(KSPGetPC(m.ksp, &pc));
   if (m.opt.pc == "boomeramg") {
     // hypre BoomerAMG for a block-3 system: nodal coarsening on the 3x3 blocks (Frobenius
-    // norms) and interpolation that also reproduces the near-null space vectors (the rigid
-    // modes attached in factorize). The scene's `options` can still override both.
+    // norms). Interpolation that also fits the rigid modes attached in factorize
+    // (-pc_hypre_boomeramg_vec_interp_variant 2) is available through `options`; it cost
+    // 9x more here (docs/plugins/solvers.md). The scene's `options` override these defaults.
     LOOM_PETSC(PCSetType(pc, PCHYPRE));
     LOOM_PETSC(PCHYPRESetType(pc, "boomeramg"));
-    for (auto [key, value] : {std::pair{"pc_hypre_boomeramg_nodal_coarsen", "6"},
-                              std::pair{"pc_hypre_boomeramg_vec_interp_variant", "2"}}) {
+    for (auto [key, value] : {std::pair{"pc_hypre_boomeramg_nodal_coarsen", "6"}}) {
       const std::string name = "-" + m.prefix + key;
       PetscBool set = PETSC_FALSE;
       LOOM_PETSC(PetscOptionsHasName(nullptr, nullptr, name.c_str(), &set));
