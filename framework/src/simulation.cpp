@@ -486,7 +486,14 @@ void Simulation::claim_output_dir(const std::string& scene_text) const {
                      std::to_string(files.size()) + " files, e.g. " + fs::path(files.front()).filename().string() +
                      (previous.empty() ? ", without its scene.yaml" : ", of a different scene or --set") +
                      "). Fix: loom run ... --overwrite replaces them, or choose another folder with --out DIR.");
-  for (const auto& f : files) {
+  // stats.csv first: a run killed while clearing never leaves more stats rows than frames.
+  auto rank = [](const std::string& f) {
+    const std::string name = fs::path(f).filename().string();
+    return name == "stats.csv" ? 0 : name == "run.pc2" ? 1 : name == "scene.yaml" ? 2 : 3;
+  };
+  std::vector<std::string> order = files;
+  std::stable_sort(order.begin(), order.end(), [&](const std::string& a, const std::string& b) { return rank(a) < rank(b); });
+  for (const auto& f : order) {
     std::error_code ec;
     fs::remove(f, ec);
     if (ec) throw InputError("cannot remove " + f + " from the earlier run: " + ec.message() + ".");
