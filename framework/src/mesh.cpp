@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <iostream>
+#include <array>
+#include <map>
 #include <iterator>
 #include <cstdlib>
 #include <filesystem>
@@ -163,6 +166,30 @@ Mesh read_obj(const std::string& path, double area_tolerance) {
       if (poly.size() < 3) obj_error(path, lineno, "a face needs at least 3 vertices.");
       for (std::size_t k = 0; k < poly.size(); ++k)
         if (polyvt[k] >= 0 && vt_of_vertex[poly[k]] < 0) vt_of_vertex[poly[k]] = static_cast<Index>(polyvt[k]);
+      if (poly.size() > 3) {
+        // Polygons are fanned from their first vertex. That is right only for convex
+        // polygons: a concave one gives a triangle that faces the other way. Compare each fan
+        // triangle with the polygon's (Newell) normal.
+        double nn[3] = {0, 0, 0};
+        for (std::size_t k = 0; k < poly.size(); ++k) {
+          const double* a = &m.positions[3 * static_cast<std::size_t>(poly[k])];
+          const double* b = &m.positions[3 * static_cast<std::size_t>(poly[(k + 1) % poly.size()])];
+          nn[0] += (a[1] - b[1]) * (a[2] + b[2]);
+          nn[1] += (a[2] - b[2]) * (a[0] + b[0]);
+          nn[2] += (a[0] - b[0]) * (a[1] + b[1]);
+        }
+        for (std::size_t k = 1; k + 1 < poly.size(); ++k) {
+          const double* a = &m.positions[3 * static_cast<std::size_t>(poly[0])];
+          const double* b = &m.positions[3 * static_cast<std::size_t>(poly[k])];
+          const double* c = &m.positions[3 * static_cast<std::size_t>(poly[k + 1])];
+          const double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+          const double cr[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]};
+          if (cr[0] * nn[0] + cr[1] * nn[1] + cr[2] * nn[2] < 0)
+            obj_error(path, lineno, "this " + std::to_string(poly.size()) + "-sided face is not convex: splitting it "
+                                    "into a fan from its first vertex gives a flipped triangle. Fix: triangulate the mesh "
+                                    "in your modelling tool (Blender: Triangulate modifier, 'Beauty') before loading it.");
+        }
+      }
       for (std::size_t k = 1; k + 1 < poly.size(); ++k) {
         m.triangles.insert(m.triangles.end(), {poly[0], poly[k], poly[k + 1]});
         tri_line.push_back(lineno);
@@ -198,6 +225,38 @@ Mesh read_obj(const std::string& path, double area_tolerance) {
     if (!(area > area_tolerance * mean_e2))
       obj_error(path, tri_line[t], "degenerate face (zero area: its vertices are collinear or coincide). "
                                    "Fix: remove it or clean the mesh (e.g. Blender's 'Merge by distance').");
+  }
+  // Duplicate faces (the same three vertices twice) are an error; edges shared by three or
+  // more triangles (non-manifold) are a warning: membranes simulate them, but hinge bending
+  // refuses them and contact normals are ambiguous there (docs/ARCHITECTURE.md, meshes).
+  {
+    std::map<std::array<Index, 3>, std::size_t> faces;
+    std::map<std::array<Index, 2>, int> edge_use;
+    for (std::size_t t = 0; t < nt; ++t) {
+      std::array<Index, 3> key{m.triangles[3 * t], m.triangles[3 * t + 1], m.triangles[3 * t + 2]};
+      std::sort(key.begin(), key.end());
+      const auto [it, fresh] = faces.emplace(key, t);
+      if (!fresh)
+        obj_error(path, tri_line[t], "duplicate face: vertices " + std::to_string(key[0] + 1) + ", " +
+                                         std::to_string(key[1] + 1) + ", " + std::to_string(key[2] + 1) +
+                                         " already form the face on line " + std::to_string(tri_line[it->second]) +
+                                         ". Fix: delete one of them (Blender: Mesh > Clean Up > Delete Loose / Merge by distance).");
+      for (int k = 0; k < 3; ++k) {
+        const Index a = m.triangles[3 * t + k], b = m.triangles[3 * t + (k + 1) % 3];
+        edge_use[{std::min(a, b), std::max(a, b)}] += 1;
+      }
+    }
+    int shown = 0, non_manifold = 0;
+    for (const auto& [e, uses] : edge_use)
+      if (uses > 2) {
+        ++non_manifold;
+        if (shown++ < 3)
+          std::cerr << "loom: warning: " << path << ": edge between vertices " << e[0] + 1 << " and " << e[1] + 1
+                    << " is shared by " << uses << " triangles (non-manifold). Membranes simulate it; bending refuses "
+                    << "it. Fix: split the edge in your modelling tool if the cloth should not branch there.\n";
+      }
+    if (non_manifold > 3)
+      std::cerr << "loom: warning: " << path << ": " << non_manifold << " non-manifold edges in all.\n";
   }
   // UVs: only when every vertex got one.
   if (!vt.empty() && std::all_of(vt_of_vertex.begin(), vt_of_vertex.end(), [](Index t) { return t >= 0; })) {

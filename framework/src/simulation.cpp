@@ -235,6 +235,24 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
 
   // ---- colliders (only when declared) ----
   sc.colliders = ColliderSet::parse(root.child("colliders"), base_dir);
+  {
+    // A contact offset larger than the whole cloth is a unit slip (it would throw the cloth
+    // that far on the first contact): refuse it, naming the collider.
+    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], st.x[3 * i + k]);
+        hi[k] = std::max(hi[k], st.x[3 * i + k]);
+      }
+    const double size = std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                                  (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    const Params list = root.child("colliders");
+    for (std::size_t c = 0; c < sc.colliders.size(); ++c)
+      if (sc.colliders.colliders()[c].thickness > size)
+        list.at(c).child("thickness").fail("the contact offset " + fmt(sc.colliders.colliders()[c].thickness) +
+                                           " m is larger than the whole cloth (" + fmt(size) +
+                                           " m across). Fix: give the thickness in metres (a few millimetres is usual).");
+  }
   sc.self_collision = SelfCollision::parse(root.child("self_collision"), sc.mesh, st.x);
 
   // ---- integrator ----
@@ -544,6 +562,14 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   auto emit = [&](int frame) {
     if (!write) return;
     const FrameStats f = measure(frame);
+    // No output ever carries a non-finite number: energies that overflow (positions near the
+    // double range, absurd masses) stop the run as diverged before this frame is written.
+    for (double q : {f.kinetic, f.gravitational, f.elastic, f.kinetic + f.gravitational + f.elastic, f.max_strain})
+      if (!std::isfinite(q))
+        throw DivergenceError("diverged at frame " + std::to_string(frame) + " (t = " + fmt(f.time) +
+                              " s): the energies are not finite (kinetic " + fmt(f.kinetic) + ", gravitational " +
+                              fmt(f.gravitational) + ", elastic " + fmt(f.elastic) + ", strain " + fmt(f.max_strain) +
+                              "). Fix: check masses, scales and collider offsets for values near the double range.");
     // Frame files first, then the stats row: a killed run never has a row for a frame it did
     // not write.
     if (frame % output_.every == 0) {

@@ -231,6 +231,11 @@ TEST(Cli, HardenedInputsAreBadInputWithAClearMessage) {
   EXPECT_NE(big.out.find("long.yaml:4"), std::string::npos) << big.out.substr(0, 400);
   EXPECT_NE(big.out.find("(200000 characters)"), std::string::npos) << big.out.substr(0, 400);
   EXPECT_LT(big.out.size(), 4000u);
+  // a collider offset larger than the cloth (issue 20: 1e308 threw the cloth to 1e308)
+  expect_bad("validate " + write_scene(dir, std::string(kScene) +
+                                              "colliders: [{type: plane, point: [0, -2, 0], normal: [0, 1, 0], thickness: 1.0e308}]\n",
+                                          "thick.yaml"),
+             "larger than the whole cloth");
   // an initial state beyond the guards: refused before anything is written
   const Result r = run("run " + write_scene(dir, std::string(kScene) + "initial_velocity: [1.0e200, 0, 0]\n", "v0.yaml") +
                        " --out " + (dir / "out_v0").string());

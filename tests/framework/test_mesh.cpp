@@ -52,12 +52,14 @@ TEST(Mesh, GridRejectsBadSizes) {
 
 TEST(Mesh, ObjReadsQuadsUvsAndNegativeIndices) {
   const std::string path = write_temp("quad.obj",
-                                      "# quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
-                                      "f 1/1 2/2 3/3 4/4\nf -4/1 -2/3 -1/4\n");
+                                      "# quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                                      "f 1/1 2/2 3/3 4/4\nf -4/2 -1/1 -3/3\n");
   const loom::Mesh m = loom::read_obj(path);
-  EXPECT_EQ(m.num_vertices(), 4);
+  EXPECT_EQ(m.num_vertices(), 5);
+  EXPECT_EQ(m.triangles[6], 1);  // -4 of 5 vertices is vertex 2 (index 1)
+  EXPECT_EQ(m.triangles[7], 4);  // -1 is the last vertex
   EXPECT_EQ(m.num_triangles(), 3);
-  ASSERT_EQ(m.uvs.size(), 8u);
+  ASSERT_EQ(m.uvs.size(), 10u);
   EXPECT_DOUBLE_EQ(m.uvs[2 * 2], 1.0);
 }
 
@@ -102,4 +104,27 @@ TEST(Mesh, ObjLineEndingsSubnormalsAndFolders) {
   } catch (const loom::InputError& e) {
     EXPECT_NE(std::string(e.what()).find("not a regular file"), std::string::npos) << e.what();
   }
+}
+
+// Issue 20: a concave n-gon that a fan would split into a flipped triangle, and duplicate
+// faces, are errors naming the line; a non-manifold edge is accepted (with a warning).
+TEST(Mesh, ObjTopologyProblemsAreReported) {
+  // an L-shaped hexagon, fanned from its reflex corner's neighbour: concave
+  const std::string concave = "v 0 0 0\nv 2 0 0\nv 2 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\nf 3 4 5 6 1 2\n";
+  std::string e = obj_error(concave);
+  EXPECT_NE(e.find(":7:"), std::string::npos) << e;
+  EXPECT_NE(e.find("not convex"), std::string::npos) << e;
+  // the same outline fanned from a vertex that sees every other one is fine
+  const loom::Mesh ok = loom::read_obj(write_temp("convexfan.obj", "v 0 0 0\nv 2 0 0\nv 2 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\nf 4 5 6 1 2 3\n"));
+  EXPECT_EQ(ok.num_triangles(), 4);
+  // a convex quad
+  EXPECT_EQ(loom::read_obj(write_temp("quad2.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")).num_triangles(), 2);
+  e = obj_error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 2 3 1\n");
+  EXPECT_NE(e.find(":5:"), std::string::npos) << e;
+  EXPECT_NE(e.find("duplicate face"), std::string::npos) << e;
+  EXPECT_NE(e.find("line 4"), std::string::npos) << e;
+  // three triangles on one edge: read (a warning goes to stderr)
+  const loom::Mesh nm = loom::read_obj(
+      write_temp("nonmanifold.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n"));
+  EXPECT_EQ(nm.num_triangles(), 3);
 }

@@ -390,8 +390,23 @@ TEST(GnatvMaterial, BadMaterialFilesNameTheFileAndLine) {
        "percent"},
       {"percent_step.yaml", good_file("{start: 0.0, step: 0.5, stress: [0, 5, 12, 30]}"), "divide the strains by 100"},
       {"dip.yaml", good_file("{start: 0.0, step: 0.02, stress: [0, 5, 4.5, 30]}"), "sample 2"},
+      // issue 20: samples near the double range and infinite end slopes pass the sample
+      // checks but give Inf energies or forces: refused at load
+      {"huge.yaml", good_file("{start: 0.0, step: 0.02, stress: [0, 5, 12, 1.0e308]}"), "is not finite at strain"},
   };
   const loom::Mesh mesh = loom::make_grid(3, 3, 1.0, 1.0);
+  {
+    // an infinite B-spline end slope (used only with interpolation: bspline)
+    const std::string f =
+        td.write("infslope.yaml", good_file("{start: 0.0, step: 0.02, stress: [0, 5, 12, 30], bspline_right_slope: .inf}"));
+    try {
+      auto p = loom::Params::from_string("material_file: " + f + "\ninterpolation: bspline\n", "<test>");
+      GnatvMaterial m(p, mesh);
+      ADD_FAILURE() << "infinite end slope: no error";
+    } catch (const loom::InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("is not finite at strain"), std::string::npos) << e.what();
+    }
+  }
   for (const Bad& b : bad) {
     const std::string f = td.write(b.name, b.text);
     try {

@@ -135,6 +135,23 @@ Curve read_curve(const Params& curves, const std::string& key, CurveInterpolatio
       throw;
     }
     c.check_unused();
+    // Every derived quantity must be finite where the model can evaluate it: samples near the
+    // double range (1e308) or an infinite end slope would pass the sample checks and then give
+    // Inf or NaN forces at the first step. Checked at the data's ends, at the samples, and a
+    // data range beyond each end (the linear extension).
+    {
+      const double lo = strain.front(), hi = strain.back(), span = hi - lo;
+      std::vector<double> probes = {lo - span, lo, 0.0, hi, hi + span};
+      probes.insert(probes.end(), strain.begin(), strain.end());
+      for (double e : probes) {
+        const double W = out.energy(e), S = out.stress(e), D = out.stiffness(e);
+        if (!std::isfinite(W) || !std::isfinite(S) || !std::isfinite(D))
+          c.fail("curve '" + key + "' is not finite at strain " + std::to_string(e) + " (energy " + std::to_string(W) +
+                 ", stress " + std::to_string(S) + ", stiffness " + std::to_string(D) +
+                 "): a sample or an end slope is too large for the model to evaluate. Fix: check the units "
+                 "(stress in N/m) and the bspline end slopes.");
+      }
+    }
     // The rest state (zero strain) must be stress free.
     double smax = 0;
     for (double s : stress) smax = std::max(smax, std::fabs(s));
