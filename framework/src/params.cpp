@@ -165,10 +165,12 @@ Params Params::from_file(const std::string& path) {
     throw InputError(path + ": is a folder, not a file. Fix: give the YAML file inside it (e.g. scenes/hanging_cloth.yaml).");
   if (!std::filesystem::is_regular_file(st))
     throw InputError(path + ": is not a regular file (a device or a pipe). Fix: give the path of a YAML file.");
-  constexpr std::uintmax_t kMaxBytes = 64u << 20;
+  // 16 MiB: far above any scene or material file (the largest shipped one is 100 KB), and low
+  // enough that a runaway list cannot exhaust memory in the YAML parser (about 150 bytes a node).
+  constexpr std::uintmax_t kMaxBytes = 16u << 20;
   const auto bytes = std::filesystem::file_size(path, ec);
   if (!ec && bytes > kMaxBytes)
-    throw InputError(path + ": is " + std::to_string(bytes >> 20) + " MiB; YAML inputs are limited to 64 MiB. "
+    throw InputError(path + ": is " + std::to_string(bytes >> 20) + " MiB; YAML inputs are limited to 16 MiB. "
                      "Fix: give large data (meshes) as OBJ files the scene names.");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path + ": cannot open file (does it exist, and is it readable?)");

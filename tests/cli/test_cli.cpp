@@ -231,6 +231,19 @@ TEST(Cli, HardenedInputsAreBadInputWithAClearMessage) {
   EXPECT_NE(big.out.find("long.yaml:4"), std::string::npos) << big.out.substr(0, 400);
   EXPECT_NE(big.out.find("(200000 characters)"), std::string::npos) << big.out.substr(0, 400);
   EXPECT_LT(big.out.size(), 4000u);
+  // a missing material file names the scene's line (issue 20: it named only the path)
+  expect_bad("validate " + write_scene(dir, "mesh: {grid: {nx: 4, ny: 4}}\nmaterial: {type: gnatv, material_file: nowhere.yaml}\n"
+                                            "integrator: {type: symplectic_euler, dt: 0.001}\n", "nomat.yaml"),
+             "nomat.yaml:2");
+  // an input file over the size limit
+  {
+    std::ofstream big(dir / "big.yaml");
+    big << kScene << "description: \"";
+    const std::string chunk(1 << 20, 'x');
+    for (int k = 0; k < 17; ++k) big << chunk;
+    big << "\"\n";
+  }
+  expect_bad("validate " + (dir / "big.yaml").string(), "limited to 16 MiB");
   // a collider offset larger than the cloth (issue 20: 1e308 threw the cloth to 1e308)
   expect_bad("validate " + write_scene(dir, std::string(kScene) +
                                               "colliders: [{type: plane, point: [0, -2, 0], normal: [0, 1, 0], thickness: 1.0e308}]\n",

@@ -32,6 +32,15 @@ GnatvOptions read_options(const Params& p) {
   GnatvOptions o;
   const std::string file = p.require_string("material_file");
   o.material_file = resolve_against(p.source(), file);
+  {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(o.material_file, ec))
+      p.child("material_file").fail("material file '" + o.material_file + "' " +
+                                    (std::filesystem::exists(o.material_file, ec) ? "is not a regular file"
+                                                                                  : "does not exist") +
+                                    ". Fix: paths are relative to the scene file's folder; measured fabrics are also "
+                                    "available by name (fabric: 11oz-black-denim, see materials/wang2011).");
+  }
   o.interpolation = p.get_choice("interpolation", "monotone_cubic", {"monotone_cubic", "bspline"}) == "bspline"
                         ? CurveInterpolation::BSpline
                         : CurveInterpolation::MonotoneCubic;
