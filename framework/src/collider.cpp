@@ -223,18 +223,6 @@ int ColliderSet::resolve_with_frames(State& s, const Collider::Frame* frames, do
 
 namespace {
 
-Vec3 read_vec3(const Params& p, const std::string& key, const Vec3& def, bool required = false) {
-  Params c = p.child(key);
-  if (!c.valid()) {
-    if (required) p.fail("missing '" + key + "' (a list of 3 numbers).");
-    return def;
-  }
-  const auto v = c.as_doubles();
-  if (v.size() != 3) c.fail("needs 3 numbers, e.g. [0, 1, 0].");
-  for (double x : v)
-    if (!std::isfinite(x)) c.fail("components must be finite numbers (got NaN or Inf).");
-  return {v[0], v[1], v[2]};
-}
 
 Vec3 unit(const Params& p, const std::string& key, Vec3 v) {
   const double len = norm(v);

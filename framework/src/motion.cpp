@@ -6,9 +6,7 @@
 
 namespace loom {
 
-namespace {
-
-Vec3 motion_vec3(const Params& p, const std::string& key, const Vec3& def, bool required) {
+Vec3 read_vec3(const Params& p, const std::string& key, const Vec3& def, bool required) {
   Params c = p.child(key);
   if (!c.valid()) {
     if (required) p.fail("missing '" + key + "' (a list of 3 numbers).");
@@ -21,8 +19,10 @@ Vec3 motion_vec3(const Params& p, const std::string& key, const Vec3& def, bool 
   return {v[0], v[1], v[2]};
 }
 
+namespace {
+
 Vec3 motion_axis(const Params& m) {
-  const Vec3 a = motion_vec3(m, "axis", {0, 1, 0}, false);
+  const Vec3 a = read_vec3(m, "axis", {0, 1, 0}, false);
   const double len = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
   if (!(len > 1e-12)) m.child("axis").fail("must be a non-zero vector.");
   return {a[0] / len, a[1] / len, a[2] / len};
@@ -36,7 +36,7 @@ RigidMotion parse_rigid_motion(const Params& m, const std::vector<std::string>& 
   const std::string mt = m.get_choice("type", "fixed", {"fixed", "translate", "rotate", "keyframes"});
   if (mt == "translate") {
     mo.type = RigidMotion::Type::Translate;
-    mo.velocity = motion_vec3(m, "velocity", {0, 0, 0}, true);
+    mo.velocity = read_vec3(m, "velocity", {0, 0, 0}, true);
   } else if (mt == "rotate") {
     mo.type = RigidMotion::Type::Rotate;
     mo.axis = motion_axis(m);
@@ -54,7 +54,7 @@ RigidMotion parse_rigid_motion(const Params& m, const std::vector<std::string>& 
     for (std::size_t q = 0; q < keys.size(); ++q) {
       Params kp = keys.at(q);
       if (!kp.is_map()) kp.fail("a key is a mapping {t: seconds, translate: [x, y, z], angle: radians}.");
-      RigidMotion::Key key{kp.require_double("t"), motion_vec3(kp, "translate", {0, 0, 0}, false), kp.get("angle", 0.0)};
+      RigidMotion::Key key{kp.require_double("t"), read_vec3(kp, "translate", {0, 0, 0}, false), kp.get("angle", 0.0)};
       if (!std::isfinite(key.t) || !std::isfinite(key.angle)) kp.fail("t and angle must be finite numbers.");
       if (!mo.keys.empty() && !(key.t > mo.keys.back().t))
         kp.child("t").fail("keyframe times must increase (t = " + std::to_string(key.t) + " after t = " +

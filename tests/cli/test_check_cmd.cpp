@@ -1,6 +1,8 @@
 // `loom check RUN_DIR`: per-frame intersection counts, exit codes, bad input.
 #include <gtest/gtest.h>
 
+#include "cli_run.hpp"
+
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -12,28 +14,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-  int code = -1;
-  std::string out;
-};
-
-Result loom(const std::string& args) {
-  const std::string cmd = "LOOM_PLUGIN_PATH=" LOOM_TEST_PLUGIN_DIR " " + std::string(LOOM_EXE) + " " + args + " 2>&1";
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf{};
-  while (fgets(buf.data(), buf.size(), p)) r.out += buf.data();
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
-
-fs::path scratch(const std::string& name) {
-  const fs::path d = fs::temp_directory_path() / ("loom_check_" + name);
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+using loom_cli_test::Result;
+Result loom(const std::string& args) { return loom_cli_test::run_loom(args); }
+fs::path scratch(const std::string& name) { return loom_cli_test::scratch_dir("loom_check_", name); }
 
 // Two triangles: A in z = 0 around the origin; B vertical, at x = bx. B pierces A when
 // bx is inside A (|bx| < 0.5 at y = 0), and is beside it otherwise.

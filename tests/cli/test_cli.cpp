@@ -1,6 +1,8 @@
 // End-to-end tests of the `loom` executable: exit codes, files, messages.
 #include <gtest/gtest.h>
 
+#include "cli_run.hpp"
+
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -11,30 +13,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-  int code = -1;
-  std::string out;  // stdout and stderr together
-};
-
-Result run(const std::string& args, bool test_plugins = true) {
-  std::string cmd;
-  if (test_plugins) cmd += "LOOM_PLUGIN_PATH=" LOOM_TEST_PLUGIN_DIR " ";
-  cmd += std::string(LOOM_EXE) + " " + args + " 2>&1";
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf{};
-  while (fgets(buf.data(), buf.size(), p)) r.out += buf.data();
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
-
-fs::path scratch(const std::string& name) {
-  const fs::path d = fs::temp_directory_path() / ("loom_cli_" + name);
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+using loom_cli_test::Result;
+Result run(const std::string& args, bool test_plugins = true) { return loom_cli_test::run_loom(args, test_plugins); }
+fs::path scratch(const std::string& name) { return loom_cli_test::scratch_dir("loom_cli_", name); }
 
 std::string write_scene(const fs::path& dir, const std::string& text, const std::string& name = "scene.yaml") {
   std::ofstream(dir / name) << text;

@@ -1,6 +1,8 @@
 // Output files a DCC reads (PC2, OBJ with UVs and normals), output-folder rules, and what a
 // killed or interrupted run leaves behind.
 #include <gtest/gtest.h>
+
+#include "cli_run.hpp"
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -25,28 +27,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Result {
-  int code = -1;
-  std::string out;
-};
-
-Result run(const std::string& args) {
-  const std::string cmd = "LOOM_PLUGIN_PATH=" LOOM_TEST_PLUGIN_DIR " " + std::string(LOOM_EXE) + " " + args + " 2>&1";
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf{};
-  while (fgets(buf.data(), buf.size(), p)) r.out += buf.data();
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
-
-fs::path scratch(const std::string& name) {
-  const fs::path d = fs::temp_directory_path() / ("loom_output_" + name);
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+using loom_cli_test::Result;
+Result run(const std::string& args) { return loom_cli_test::run_loom(args); }
+fs::path scratch(const std::string& name) { return loom_cli_test::scratch_dir("loom_output_", name); }
 
 std::string scene(const fs::path& dir, int frames, const std::string& extra = "") {
   const std::string text = "mesh:\n  grid: {nx: 6, ny: 5, width: 1.0, height: 0.8}\nmaterial:\n  type: test_gravity_only\n"

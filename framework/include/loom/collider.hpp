@@ -52,6 +52,9 @@ struct RigidMotion {
 /// Parse a `motion:` mapping {type: fixed | translate | rotate | keyframes, ...} shared by
 /// colliders and pins (InputError with file:line on bad input). Keys listed in `also_known`
 /// are left for the caller (e.g. a pin group's rotation `center`).
+/// A 3-vector scene key (finite numbers), or def when absent (an error when required).
+Vec3 read_vec3(const Params& p, const std::string& key, const Vec3& def, bool required = false);
+
 RigidMotion parse_rigid_motion(const Params& m, const std::vector<std::string>& also_known = {});
 
 struct Collider {
