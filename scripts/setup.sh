@@ -7,7 +7,7 @@ root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 
 packages=(build-essential cmake ninja-build pkg-config
           libeigen3-dev libyaml-cpp-dev libgtest-dev libgmock-dev libbenchmark-dev
-          libsuitesparse-dev libopenblas-dev petsc-dev openmpi-bin python3-matplotlib
+          libsuitesparse-dev libopenblas-dev petsc-dev openmpi-bin python3-matplotlib python3-yaml
           libglm-dev libstb-dev libegl-dev libgles-dev libegl-mesa0 libgl1-mesa-dri libglfw3-dev)
 missing=()
 for p in "${packages[@]}"; do
