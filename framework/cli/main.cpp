@@ -65,8 +65,6 @@ environment:
   LOOM_PLUGIN_PATH  colon-separated folders searched first for plugin modules
   OMP_NUM_THREADS   threads for 'threads: auto' (capped at the usable cores; a count in
                     the scene takes precedence)
-  OMP_WAIT_POLICY, GOMP_SPINCOUNT   when neither is set, loom sets GOMP_SPINCOUNT=20000
-                    (idle threads spin briefly, then sleep: see docs/ARCHITECTURE.md)
 
 exit codes: 0 ok, 1 internal error, 2 bad input (scene, mesh, flags), 3 diverged,
             4 linear solver failed, 5 loom check found intersecting triangles,
@@ -207,7 +205,6 @@ int finish(int code) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  loom::set_wait_policy_and_reexec(argc, argv);
   const Args args = parse_args(argc, argv);
   try {
     if (args.command == "plugins") return cmd_plugins();

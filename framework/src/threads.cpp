@@ -8,6 +8,8 @@
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <thread>
+#include <chrono>
 
 namespace loom {
 
@@ -39,6 +41,19 @@ int cgroup_quota_cores() {
   return 0;
 }
 
+// Runnable tasks other than this process, from /proc/loadavg's "running/total" field (the
+// count includes the reader itself). 0 when it cannot be read.
+int other_runnable_tasks() {
+  std::ifstream in("/proc/loadavg");
+  double l1, l5, l15;
+  std::string rt;
+  if (!(in >> l1 >> l5 >> l15 >> rt)) return 0;
+  const auto slash = rt.find('/');
+  if (slash == std::string::npos) return 0;
+  const int running = std::atoi(rt.substr(0, slash).c_str());
+  return std::max(0, running - 1);
+}
+
 }  // namespace
 
 int usable_cores() {
@@ -55,19 +70,21 @@ int resolve_thread_count(int requested, bool* capped) {
     // auto: OMP_NUM_THREADS, when set, still chooses (capped at the usable cores).
     const char* env = std::getenv("OMP_NUM_THREADS");
     const int from_env = env ? std::atoi(env) : 0;
-    return from_env > 0 ? std::min(from_env, cores) : cores;
+    if (from_env > 0) return std::min(from_env, cores);
+    // Otherwise leave the cores other runnable processes occupy right now: on a busy machine
+    // every barrier of a parallel step waits for a descheduled thread (measured: 2 threads
+    // next to one CPU-bound process ran 2x slower than 1 thread; docs/BENCHMARKS.md).
+    // The minimum over a few samples 2 ms apart: a process that is only starting or
+    // finishing (the shell that launched us, a pipe) is not a competitor.
+    int others = other_runnable_tasks();
+    for (int k = 0; k < 4 && others > 0; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      others = std::min(others, other_runnable_tasks());
+    }
+    return std::max(1, cores - others);
   }
   return std::min(requested, cores);
 }
 
-void set_wait_policy_and_reexec(int argc, char** argv) {
-  (void)argc;
-  if (std::getenv("OMP_WAIT_POLICY") || std::getenv("GOMP_SPINCOUNT") || std::getenv("LOOM_REEXECED")) return;
-  const std::string spin = std::to_string(kSpinCount);
-  ::setenv("GOMP_SPINCOUNT", spin.c_str(), 1);
-  ::setenv("LOOM_REEXECED", "1", 1);  // never loop, even if the runtime ignores the variable
-  ::execv("/proc/self/exe", argv);
-  // execv returned: keep running with the default policy (the variables stay set for children).
-}
 
 }  // namespace loom
