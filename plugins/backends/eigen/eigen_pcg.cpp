@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <utility>
 
+#include "block_row.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/solver_common.hpp"
 
@@ -34,31 +35,6 @@ const char* precond_name(PcgPreconditioner p) {
     case PcgPreconditioner::SaAmg: return "sa_amg";
     default: return "block_jacobi";
   }
-}
-// y_i = sum_k A_ik x_col(k) over block row i. The AVX2 path keeps one 4-lane accumulator
-// per block row (lane 3 multiplies a zero) and reduces once per vertex instead of once per
-// block; the scalar path is the shared kernel.
-inline void row_multiply(const Index* rp, const Index* col, const double* val, const double* x, Index i,
-                         double* yi) {
-#if defined(__AVX2__) && defined(__FMA__)
-  const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
-  __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd();
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
-    const double* B = val + 9 * static_cast<std::size_t>(k);
-    const __m256d xv = _mm256_maskload_pd(x + 3 * static_cast<std::size_t>(col[k]), m3);
-    a0 = _mm256_fmadd_pd(_mm256_loadu_pd(B), xv, a0);
-    a1 = _mm256_fmadd_pd(_mm256_loadu_pd(B + 3), xv, a1);
-    a2 = _mm256_fmadd_pd(_mm256_maskload_pd(B + 6, m3), xv, a2);
-  }
-  const __m256d h01 = _mm256_hadd_pd(a0, a1);  // [a0_0+a0_1, a1_0+a1_1, a0_2+a0_3, a1_2+a1_3]
-  const __m128d s01 = _mm_add_pd(_mm256_castpd256_pd128(h01), _mm256_extractf128_pd(h01, 1));
-  const __m128d l2 = _mm_add_pd(_mm256_castpd256_pd128(a2), _mm256_extractf128_pd(a2, 1));
-  yi[0] = _mm_cvtsd_f64(s01);
-  yi[1] = _mm_cvtsd_f64(_mm_unpackhi_pd(s01, s01));
-  yi[2] = _mm_cvtsd_f64(_mm_add_sd(l2, _mm_unpackhi_pd(l2, l2)));
-#else
-  kernels::bsr_row_multiply(rp, col, val, x, i, yi);
-#endif
 }
 
 }  // namespace
@@ -247,7 +223,7 @@ int EigenPcg::iterate(const BsrMatrix& A, const Filter& S, std::span<double> dv,
 #pragma omp for schedule(static) nowait
       for (Index i = 0; i < n; ++i) {
         const std::size_t o = 3 * static_cast<std::size_t>(i);
-        row_multiply(rp, col, val, c, i, q + o);
+        block_row_multiply3(rp, col, val, c, i, q + o);
         const int f = S.free_dofs(i);
         if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), q + o);
         loc += kernels::dot3(c + o, q + o);
@@ -340,7 +316,7 @@ int EigenPcg::iterate_amg(const BsrMatrix& A, const Filter& S, std::span<double>
 #pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
     for (Index i = 0; i < n; ++i) {
       const std::size_t o = 3 * static_cast<std::size_t>(i);
-      row_multiply(rp, col, val, c, i, q + o);
+      block_row_multiply3(rp, col, val, c, i, q + o);
       const int f = S.free_dofs(i);
       if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), q + o);
       cq += kernels::dot3(c + o, q + o);

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <type_traits>
 
+#include "block_row.hpp"
 #include "loom/solver_common.hpp"
 
 namespace loom::amg {
@@ -60,31 +61,6 @@ inline void gemm_add(const double* A, const double* B, double* Cm) {
     }
 }
 
-// y = sum_k A_ik x_col(k) over block row i of a 3x3-block matrix. The AVX2 path keeps one
-// 4-lane accumulator per row of the block (lane 3 multiplies a zero), as eigen_pcg's SpMV.
-inline void row_multiply3(const Index* rp, const Index* col, const double* val, const double* x, Index i,
-                          double* yi) {
-#if defined(__AVX2__) && defined(__FMA__)
-  const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
-  __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd();
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
-    const double* B = val + 9 * static_cast<std::size_t>(k);
-    const __m256d xv = _mm256_maskload_pd(x + 3 * static_cast<std::size_t>(col[k]), m3);
-    a0 = _mm256_fmadd_pd(_mm256_loadu_pd(B), xv, a0);
-    a1 = _mm256_fmadd_pd(_mm256_loadu_pd(B + 3), xv, a1);
-    a2 = _mm256_fmadd_pd(_mm256_maskload_pd(B + 6, m3), xv, a2);
-  }
-  const __m256d h01 = _mm256_hadd_pd(a0, a1);
-  const __m128d s01 = _mm_add_pd(_mm256_castpd256_pd128(h01), _mm256_extractf128_pd(h01, 1));
-  const __m128d l2 = _mm_add_pd(_mm256_castpd256_pd128(a2), _mm256_extractf128_pd(a2, 1));
-  yi[0] = _mm_cvtsd_f64(s01);
-  yi[1] = _mm_cvtsd_f64(_mm_unpackhi_pd(s01, s01));
-  yi[2] = _mm_cvtsd_f64(_mm_add_sd(l2, _mm_unpackhi_pd(l2, l2)));
-#else
-  yi[0] = yi[1] = yi[2] = 0;
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<3, 3>(val + 9 * static_cast<std::size_t>(k), x + 3 * static_cast<std::size_t>(col[k]), yi);
-#endif
-}
 
 // y = sum_k A_ik x_col(k) over block row i of a 6x6-block matrix: per row of the block one
 // 4-lane and one 2-lane accumulator, reduced once per block row.
@@ -126,7 +102,7 @@ inline void row_residual(const BlockMatrix& A, const double* b, const double* x,
     for (int a = 0; a < 6; ++a) acc[a] = b[6 * static_cast<std::size_t>(i) + a] - ax[a];
   } else if constexpr (B == 3) {
     double ax[3];
-    row_multiply3(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
+    block_row_multiply3(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
     for (int a = 0; a < 3; ++a) acc[a] = b[3 * static_cast<std::size_t>(i) + a] - ax[a];
   } else {
     for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a];
