@@ -10,7 +10,6 @@
 #include <thrust/fill.h>
 #include <thrust/for_each.h>
 #include <thrust/functional.h>
-#include <thrust/inner_product.h>
 #include <thrust/iterator/counting_iterator.h>
 #include <thrust/transform_reduce.h>
 
@@ -104,27 +103,48 @@ template <class T, class F>
 T reduce_sum(Index n, const F& f) {
   if (n <= 0) return T(0);
 #ifdef LOOM_CUDA_OMP_STANDIN
-  if (n < omp_serial_below())
-    return thrust::transform_reduce(thrust::seq, thrust::counting_iterator<Index>(0),
-                                    thrust::counting_iterator<Index>(n), f, T(0), thrust::plus<T>());
-#endif
+  // An OpenMP reduction of our own: Thrust's OpenMP reduce assigns its partial sums through a
+  // thrust::reference built on a null system pointer (UBSan: reference bound to null).
+  T sum = T(0);
+  if (n < omp_serial_below()) {
+    for (Index i = 0; i < n; ++i) sum += f(i);
+    return sum;
+  }
+#pragma omp parallel for reduction(+ : sum) schedule(static)
+  for (Index i = 0; i < n; ++i) sum += f(i);
+  return sum;
+#else
   return thrust::transform_reduce(LOOM_CUDA_REDUCE_POLICY, thrust::counting_iterator<Index>(0),
                                   thrust::counting_iterator<Index>(n), f, T(0), thrust::plus<T>());
+#endif
 }
 
-/// a . b over the whole vectors.
+/// One term a[i] * b[i] of a dot product, over raw pointers.
+template <class T>
+struct DotTerm {
+  const T* a;
+  const T* b;
+  LOOM_HD T operator()(Index i) const { return a[i] * b[i]; }
+};
+
+/// a . b over the whole vectors (0 for empty vectors). It reduces over raw pointers: Thrust's
+/// inner_product on device iterators converts device references through a null system pointer
+/// on the OpenMP system, and an empty vector's begin() is null (UBSan reports both as a
+/// reference bound to null).
 template <class T>
 T dot(const DVec<T>& a, const DVec<T>& b) {
-#ifdef LOOM_CUDA_OMP_STANDIN
-  if (static_cast<Index>(a.size()) < omp_serial_below())
-    return thrust::inner_product(thrust::seq, a.begin(), a.end(), b.begin(), T(0));
-#endif
-  return thrust::inner_product(LOOM_CUDA_REDUCE_POLICY, a.begin(), a.end(), b.begin(), T(0));
+  const Index n = static_cast<Index>(a.size() < b.size() ? a.size() : b.size());
+  if (n == 0) return T(0);
+  return reduce_sum<T>(n, DotTerm<T>{raw(a), raw(b)});
 }
 
 /// Upload host data (any arithmetic type) into a device vector of T, resizing it.
 template <class T, class S>
 void upload(const std::vector<S>& host, DVec<T>& dev) {
+  if (host.empty()) {  // assign() from an empty host range binds a reference to null
+    dev.clear();
+    return;
+  }
   if constexpr (std::is_same_v<T, S>) {
     dev.assign(host.begin(), host.end());
   } else {
@@ -137,6 +157,7 @@ void upload(const std::vector<S>& host, DVec<T>& dev) {
 template <class T>
 void download(const DVec<T>& dev, std::vector<double>& host, std::vector<T>& stage) {
   host.resize(dev.size());
+  if (dev.empty()) return;  // copy() from an empty device range binds a reference to null
   if constexpr (std::is_same_v<T, double>) {
     thrust::copy(dev.begin(), dev.end(), host.begin());
   } else {
@@ -148,6 +169,7 @@ void download(const DVec<T>& dev, std::vector<double>& host, std::vector<T>& sta
 
 template <class T>
 void fill(DVec<T>& v, T value) {
+  if (v.empty()) return;
   thrust::fill(thrust::device, v.begin(), v.end(), value);
 }
 
