@@ -1,4 +1,5 @@
 #include "loom/simulation.hpp"
+#include "loom/memory_estimate.hpp"
 #include "loom/bending.hpp"
 #include "loom/fabric_library.hpp"
 
@@ -103,6 +104,36 @@ std::unique_ptr<Simulation> Simulation::from_string(const std::string& yaml, con
   return sim;
 }
 
+// The estimate of the run's peak memory against the machine's (loom/memory_estimate.hpp),
+// from the vertex count and the combo the scene names; the sections themselves are parsed later.
+void Simulation::check_memory(const Params& root, long long vertices) {
+  MemoryCombo combo;
+  combo.vertices = vertices;
+  auto scalar = [](const Params& p) { return p.valid() && p.is_scalar() ? p.as_string() : std::string(); };
+  const Params integ = root.child("integrator");
+  if (integ.is_map()) combo.integrator = scalar(integ.child("type"));
+  const Params solver = root.child("solver");
+  if (solver.valid()) {
+    Params type = solver.is_map() ? solver.child("type") : solver;
+    combo.solver = type.is_sequence() && type.size() > 0 ? scalar(type.at(0)) : scalar(type);
+    if (solver.is_map() && solver.child("eigen_pcg").is_map())
+      combo.sa_amg = scalar(solver.child("eigen_pcg").child("preconditioner")) == "sa_amg";
+  }
+  const Params mat = root.child("material");
+  combo.bending = mat.is_map() && (mat.has("bending") || mat.has("fabric"));
+  combo.self_collision = root.has("self_collision");
+  const MemoryEstimate est = estimate_run_memory(combo);
+  const auto machine = machine_memory_bytes();
+  memory_line_ = "memory:     about " + format_bytes(est.bytes) + " at the peak (" + est.basis + ", " +
+                 std::to_string(vertices) + " vertices)" +
+                 (machine ? "; this machine has " + format_bytes(*machine) : std::string("; machine memory unknown"));
+  if (machine && est.bytes > *machine)
+    root.child("mesh").fail("this run needs about " + format_bytes(est.bytes) + " of memory (" + est.basis + ", " +
+                            std::to_string(vertices) + " vertices), more than this machine's " +
+                            format_bytes(*machine) + ". Fix: use a coarser mesh (fewer vertices), an iterative "
+                            "solver instead of a direct one, or a machine with more memory.");
+}
+
 void Simulation::build(const Params& root, const std::string& base_dir, PluginLoader& loader) {
   if (!root.is_map()) root.fail("a scene file must be a YAML mapping with mesh, material, integrator, ... sections.");
   scene_ = std::make_unique<Scene>();
@@ -133,6 +164,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     const std::string plane = g.get_choice("plane", "xy", {"xy", "xz"});
     const std::string diag = g.get_choice("diagonals", "alternate", {"alternate", "uniform"});
     g.check_unused();
+    check_memory(root, static_cast<long long>(nx) * ny);  // before the grid allocates anything
     sc.mesh = make_grid(static_cast<Index>(nx), static_cast<Index>(ny), w, h,
                         plane == "xy" ? GridPlane::XY : GridPlane::XZ, diag == "alternate");
   } else {
@@ -140,6 +172,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     const std::string file = resolve_path(base_dir, o.as_string());
     if (!fs::exists(file)) o.fail("OBJ file '" + file + "' not found. Fix: paths are relative to the scene file's folder.");
     sc.mesh = read_obj(file);
+    check_memory(root, static_cast<long long>(sc.mesh.num_vertices()));
     const double scale = mesh.get_positive("scale", 1.0);
     for (double& c : sc.mesh.positions) c *= scale;
   }
@@ -404,6 +437,7 @@ std::vector<std::string> Simulation::describe() const {
                     fmt(sc.self_collision->options().friction));
   lines.push_back("gravity:    [" + fmt(sc.gravity[0]) + ", " + fmt(sc.gravity[1]) + ", " + fmt(sc.gravity[2]) + "]");
   lines.push_back("frames:     " + std::to_string(frames_) + " (" + fmt(static_cast<double>(frames_) * substeps_ * dt_) + " s simulated)");
+  if (!memory_line_.empty()) lines.push_back(memory_line_);
   lines.push_back("output:     " + (output_.dir.empty() ? std::string("none") : output_.dir));
   return lines;
 }

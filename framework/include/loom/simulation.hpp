@@ -116,6 +116,8 @@ class Simulation {
   std::unique_ptr<Scene> scene_;
   std::unique_ptr<Integrator> integrator_;
   std::string integrator_name_, material_name_, solver_name_;
+  std::string memory_line_;  ///< the memory estimate against the machine's, for describe()
+  void check_memory(const Params& root, long long vertices);
   std::string resolved_yaml_, base_dir_;
   double dt_ = 1e-3;
   int substeps_ = 1;
