@@ -66,7 +66,7 @@ environment:
   OMP_NUM_THREADS   threads for 'threads: auto' (capped at the usable cores; a count in
                     the scene takes precedence)
 
-exit codes: 0 ok, 1 internal error, 2 bad input (scene, mesh, flags), 3 diverged,
+exit codes: 0 ok, 1 internal or output error (disk full), 2 bad input (scene, mesh, flags), 3 diverged,
             4 linear solver failed, 5 loom check found intersecting triangles,
             130 interrupted (Ctrl-C; frames written so far kept)
 )";
@@ -357,6 +357,9 @@ int main(int argc, char** argv) {
   } catch (const loom::SolverError& e) {
     std::cerr << "loom: linear solver failed: " << e.what() << "\n";
     return finish(loom::kExitSolverFailed);
+  } catch (const loom::OutputError& e) {
+    std::cerr << "loom: output error: " << e.what() << "\n";
+    return finish(loom::kExitInternal);
   } catch (const std::exception& e) {
     std::cerr << "loom: internal error: " << e.what() << "\n";
     return finish(loom::kExitInternal);

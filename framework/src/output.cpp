@@ -24,18 +24,19 @@ namespace loom {
 void write_file_atomic(const std::string& path, const std::string& text) {
   const std::string tmp = path + ".tmp." + std::to_string(::getpid());
   FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw std::runtime_error("cannot create " + tmp + ": " + std::strerror(errno));
+  if (!f) throw OutputError("cannot create " + tmp + ": " + std::strerror(errno));
   const std::size_t n = std::fwrite(text.data(), 1, text.size(), f);
-  const bool ok = n == text.size() && std::fflush(f) == 0;
-  std::fclose(f);
+  bool ok = n == text.size() && std::fflush(f) == 0;
+  const int write_errno = errno;
+  ok = std::fclose(f) == 0 && ok;
   if (!ok) {
     std::remove(tmp.c_str());
-    throw std::runtime_error("cannot write " + tmp + " (disk full?)");
+    throw OutputError("cannot write " + tmp + " (" + std::strerror(write_errno ? write_errno : ENOSPC) + "; disk full?)");
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
     const std::string err = std::strerror(errno);
     std::remove(tmp.c_str());
-    throw std::runtime_error("cannot rename " + tmp + " to " + path + ": " + err);
+    throw OutputError("cannot rename " + tmp + " to " + path + ": " + err);
   }
 }
 
@@ -144,7 +145,7 @@ PointCacheWriter::PointCacheWriter(const std::string& path, int num_points, floa
   std::memcpy(header + 24, &sample_rate, 4);
   std::memcpy(header + 28, &samples, 4);
   if (std::fwrite(header, 1, 32, f_) != 32 || std::fflush(f_) != 0)
-    throw std::runtime_error("cannot write " + path + " (disk full?)");
+    throw OutputError("cannot write " + path + " (" + std::strerror(errno) + "; disk full?)");
 }
 
 PointCacheWriter::~PointCacheWriter() {
@@ -162,7 +163,7 @@ void PointCacheWriter::append(std::span<const double> x) {
             std::fflush(f_) == 0;
   // Only now that the sample is on disk does the header count it.
   ok = ok && std::fseek(f_, 28, SEEK_SET) == 0 && std::fwrite(&next, 4, 1, f_) == 1 && std::fflush(f_) == 0;
-  if (!ok) throw std::runtime_error("cannot write " + path_ + " (disk full?)");
+  if (!ok) throw OutputError("cannot write " + path_ + " (" + std::strerror(errno) + "; disk full?)");
   samples_ = next;
 }
 

@@ -8,7 +8,9 @@
 #include <algorithm>
 #include <chrono>
 #include <csignal>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -561,6 +563,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   }
   const bool write = !output_.dir.empty() && is_output_rank();
   std::ofstream stats;
+  std::streamoff stats_complete = 0;  // bytes of stats.csv that hold complete rows
   std::unique_ptr<OutputLock> lock;
   std::error_code ec;
   const std::string abs_base = fs::absolute(base_dir_, ec).lexically_normal().string();
@@ -581,6 +584,9 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
                "wall_ms_per_step,force_evaluations,linear_iterations"
             << scene_->pins.csv_header() << '\n';
       stats.precision(10);
+      stats.flush();
+      if (!stats) throw OutputError("cannot write " + output_.dir + "/stats.csv (" + std::strerror(errno) + "; disk full?)");
+      stats_complete = stats.tellp();
     }
   }
   const ObjOptions obj_options{output_.uvs, output_.normals, output_.lossless};
@@ -625,9 +631,18 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       }
       stats << '\n';
       stats.flush();
-      if (!stats)
-        throw std::runtime_error("cannot write " + (fs::path(output_.dir) / "stats.csv").string() +
-                                 " (disk full?); the frames written so far are kept.");
+      if (!stats) {
+        // Cut the partial row off (truncation frees space, so it works on a full disk too):
+        // stats.csv keeps only complete rows, one per frame written.
+        const std::string path = (fs::path(output_.dir) / "stats.csv").string();
+        const std::string why = std::strerror(errno);
+        stats.close();
+        std::error_code trunc_ec;
+        if (stats_complete > 0) fs::resize_file(path, static_cast<std::uintmax_t>(stats_complete), trunc_ec);
+        throw OutputError("cannot write " + path + " (" + why + "; disk full?); the frames written so far are kept" +
+                                 (trunc_ec ? std::string(", but the last row may be incomplete") : std::string()) + ".");
+      }
+      stats_complete = stats.tellp();
     }
   };
   if (write) write_file_atomic((fs::path(output_.dir) / "scene.yaml").string(), scene_text);

@@ -16,10 +16,9 @@ struct Result {
   std::string out;  // stdout and stderr together
 };
 
-inline Result run_loom(const std::string& args, bool test_plugins = true) {
-  std::string cmd;
-  if (test_plugins) cmd += "LOOM_PLUGIN_PATH=" LOOM_TEST_PLUGIN_DIR " ";
-  cmd += std::string(LOOM_EXE) + " " + args + " 2>&1";
+/// Any shell command line (tests only: fixed strings), stdout and stderr together.
+inline Result run_loom_shell(const std::string& command_line) {
+  const std::string cmd = "(" + command_line + ") 2>&1";
   Result r;
   FILE* p = popen(cmd.c_str(), "r");
   std::array<char, 4096> buf{};
@@ -27,6 +26,12 @@ inline Result run_loom(const std::string& args, bool test_plugins = true) {
   const int status = pclose(p);
   r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
+}
+
+inline Result run_loom(const std::string& args, bool test_plugins = true) {
+  std::string cmd;
+  if (test_plugins) cmd += "LOOM_PLUGIN_PATH=" LOOM_TEST_PLUGIN_DIR " ";
+  return run_loom_shell(cmd + std::string(LOOM_EXE) + " " + args);
 }
 
 /// An empty folder <tmp>/<prefix><name>, removed first if it exists.

@@ -43,6 +43,13 @@ class DivergenceError : public std::runtime_error {
   explicit DivergenceError(const std::string& what) : std::runtime_error(what) {}
 };
 
+/// Writing the run's output failed (disk full, quota, file size limit, I/O error). Exit 1; the
+/// frames written before it are complete and kept.
+class OutputError : public std::runtime_error {
+ public:
+  explicit OutputError(const std::string& what) : std::runtime_error(what) {}
+};
+
 /// A linear solve failed (not converged, indefinite system) and the policy says stop.
 class SolverError : public std::runtime_error {
  public:
