@@ -15,10 +15,18 @@ namespace loom {
 
 using Index = std::int32_t;
 
-/// Loops over fewer vertices than this run on one thread: below it, the cost of waking and
-/// joining threads exceeds the work (measured: a 576-vertex cloth ran 30x slower on 2 threads
-/// of a loaded machine with every loop parallel).
+/// The one rule for when a loop runs on one thread (docs/ARCHITECTURE.md "Threads"): a loop
+/// whose work is less than kParallelMinVertices vertex updates runs on the calling thread,
+/// because below it waking and joining threads costs more than the work (measured: a 576-vertex
+/// cloth ran 30x slower on 2 threads of a loaded machine with every loop parallel). Loops over
+/// other items use the same rule in their units, defined here and nowhere else:
 constexpr Index kParallelMinVertices = 4096;
+/// Springs and hinges: about half a vertex update's work each (a mesh has about 3 springs
+/// per vertex, 6 with shear and bend springs).
+constexpr Index kParallelMinSprings = 2 * kParallelMinVertices;
+/// Rows of a 3x3-block sparse matrix (one per vertex) in the linear solvers: a row product
+/// touches about 7 blocks, twice a vertex update's work.
+constexpr Index kParallelMinRows = kParallelMinVertices / 2;
 
 /// Process exit codes of the `loom` CLI (documented in README.md).
 enum ExitCode : int {

@@ -23,8 +23,8 @@ namespace loom::solver {
 /// Number of scalar unknowns (3 per vertex).
 inline std::size_t dofs(const BsrMatrix& A) { return 3 * static_cast<std::size_t>(A.rows()); }
 
-/// Below this many block rows the helpers run serially (OpenMP start-up costs more).
-constexpr Index kParallelMinRows = 2048;
+/// Below this many block rows the helpers run serially: the rule in common.hpp.
+using loom::kParallelMinRows;
 
 /// y <- S_i y for vertex i (exact zeros for a fully constrained vertex).
 inline void filter_vertex(const Filter& S, Index i, double* y) {

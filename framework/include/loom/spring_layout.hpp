@@ -72,7 +72,7 @@ class SpringLayout {
   /// Cross springs up to this count run on one thread (cheaper than a barrier per colour).
   static constexpr Index kSerialCross = 16384;
   /// Layouts with fewer springs run on the calling thread (a parallel region costs more).
-  static constexpr Index kParallelMin = 4096;
+  static constexpr Index kParallelMin = kParallelMinSprings;  // the rule in common.hpp
 
   SpringLayout() = default;
 

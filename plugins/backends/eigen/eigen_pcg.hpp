@@ -22,7 +22,7 @@ struct PcgOptions {
   /// The iteration runs on all OpenMP threads only from this many vertices on (below it
   /// the per-iteration barriers cost more than they save, and far more when the machine is
   /// oversubscribed). 0 = always parallel.
-  Index parallel_min_rows = 2048;
+  Index parallel_min_rows = kParallelMinRows;  // the rule in common.hpp (a scene may override it)
   amg::SaAmgOptions amg;       ///< preconditioner: sa_amg (the `sa_amg:` map)
 };
 

@@ -100,7 +100,7 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
 }
 
 /// Below this many springs a step runs on the calling thread.
-constexpr Index kHoSerialSprings = 8192;
+constexpr Index kHoSerialSprings = kParallelMinSprings;  // the rule in common.hpp
 
 /// Largest number of distinct spring parameter sets stored as a table (16-bit ids).
 constexpr std::size_t kHoMaxTable = 65536;

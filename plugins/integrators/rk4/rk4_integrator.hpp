@@ -13,7 +13,7 @@
 namespace loom {
 
 /// Below this many vertices the vertex loops run on the calling thread.
-constexpr Index kRk4SerialVertices = 4096;
+constexpr Index kRk4SerialVertices = kParallelMinVertices;  // the rule in common.hpp
 
 /// One RK4 step on raw arrays (3n each; w has n entries). force(xs, vs, f) overwrites f with
 /// the internal forces at (xs, vs). Work arrays xs, vs, f, ax, av (3n each) are the caller's.

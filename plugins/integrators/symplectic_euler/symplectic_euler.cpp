@@ -34,7 +34,7 @@ void SymplecticEuler::step(Scene& scene, double h) {
   const double* f = f_.data();
   const double* w = s.inv_mass.data();
   const double g0 = scene.gravity[0], g1 = scene.gravity[1], g2 = scene.gravity[2];
-#pragma omp parallel for schedule(static) if (n >= 2048)
+#pragma omp parallel for schedule(static) if (n >= kParallelMinVertices)
   for (Index i = 0; i < n; ++i) {
     const double wi = w[i];
     double* xi = x + 3 * i;
