@@ -12,10 +12,18 @@
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <fstream>
+#include <algorithm>
 #include <map>
 #include <memory>
 #include <string>
 
+#include "loom/mesh.hpp"
+#include "loom/self_collision.hpp"
 #include "loom/simulation.hpp"
 
 namespace {
@@ -45,12 +53,40 @@ loom::PluginLoader& loader() {
   return l;
 }
 
+// The draping takes minutes at 256^2; LOOM_BENCH_DRAPE_CACHE=DIR keeps the draped positions
+// and velocities there (draped_N.bin) for later runs of this benchmark.
+bool read_cache(const std::string& path, loom::State& s) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  std::vector<double> x(s.x.size()), v(s.v.size());
+  double t = 0;
+  in.read(reinterpret_cast<char*>(x.data()), static_cast<std::streamsize>(x.size() * sizeof(double)));
+  in.read(reinterpret_cast<char*>(v.data()), static_cast<std::streamsize>(v.size() * sizeof(double)));
+  in.read(reinterpret_cast<char*>(&t), sizeof t);
+  if (!in) return false;
+  s.x = x;
+  s.v = v;
+  s.time = t;
+  return true;
+}
+
 const loom::State& draped(int n) {
   static std::map<int, std::unique_ptr<loom::Simulation>> sims;
   auto& sim = sims[n];
   if (!sim) {
     sim = loom::Simulation::from_string(scene(n, "baraff_witkin", true), "bench.yaml", ".", {}, loader());
-    for (int k = 0; k < 175; ++k) sim->step();
+    const char* dir = std::getenv("LOOM_BENCH_DRAPE_CACHE");
+    const std::string path = dir ? std::string(dir) + "/draped_" + std::to_string(n) + ".bin" : "";
+    auto& s = sim->scene().state;
+    if (path.empty() || !read_cache(path, s)) {
+      for (int k = 0; k < 175; ++k) sim->step();
+      if (!path.empty()) {
+        std::ofstream out(path, std::ios::binary);
+        out.write(reinterpret_cast<const char*>(s.x.data()), static_cast<std::streamsize>(s.x.size() * sizeof(double)));
+        out.write(reinterpret_cast<const char*>(s.v.data()), static_cast<std::streamsize>(s.v.size() * sizeof(double)));
+        out.write(reinterpret_cast<const char*>(&s.time), sizeof s.time);
+      }
+    }
   }
   return sim->scene().state;
 }
@@ -87,8 +123,149 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// Broad phase alone, BVH against a uniform-grid spatial hash, on the draped cloth: find every
+// pair of triangles whose boxes overlap, the boxes grown by the thickness on each side (what a
+// full rebuild of the candidate lists starts from: each vertex's reach is at least half the
+// thickness, plus half the thickness as gap). Both count the same pairs (counter `pairs`;
+// `agree` = 1 when the counts match).
+// - bvh: the refit of SelfCollision's hierarchy (built once on the flat cloth), then its self
+//   traversal (TriangleBvh::self_pairs), one thread.
+// - hash: cells of 1 or 2 (second argument) times the mean box size, each box entered in the cells it overlaps (counting sort
+//   into a table of 2^k buckets, k fixed by the box count), pairs tested within a cell and
+//   reported by the cell holding the lower corner of their overlap (so once), one thread.
+
+struct Boxes {
+  std::vector<double> lo, hi;
+  std::vector<double> centroid_rest;
+};
+
+Boxes draped_boxes(int n) {
+  const loom::State& s = draped(n);
+  const loom::Mesh mesh = loom::make_grid(n, n, 1.0, 1.0, loom::GridPlane::XZ);
+  const loom::Index nt = mesh.num_triangles();
+  const double pad = 0.25 / (n - 1);
+  Boxes b;
+  b.lo.resize(3 * nt);
+  b.hi.resize(3 * nt);
+  b.centroid_rest.assign(3 * nt, 0.0);
+  for (loom::Index t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) {
+      double lo = 1e300, hi = -1e300;
+      for (int j = 0; j < 3; ++j) {
+        const loom::Index v = mesh.triangles[3 * t + j];
+        lo = std::min(lo, s.x[3 * v + k]);
+        hi = std::max(hi, s.x[3 * v + k]);
+        b.centroid_rest[3 * t + k] += mesh.positions[3 * v + k] / 3.0;
+      }
+      b.lo[3 * t + k] = lo - pad;
+      b.hi[3 * t + k] = hi + pad;
+    }
+  return b;
+}
+
+std::map<int, long> bvh_pairs_found;
+
+void BM_BroadPhaseBvh(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const Boxes b = draped_boxes(n);
+  loom::selfcol::TriangleBvh bvh;
+  bvh.build(b.centroid_rest);
+  std::vector<std::array<loom::Index, 2>> stack;
+  stack.reserve(256);
+  long pairs = 0;
+  for (auto _ : st) {
+    bvh.refit(b.lo.data(), b.hi.data(), 0.0);
+    pairs = 0;
+    bvh.self_pairs([&](loom::Index, loom::Index) { ++pairs; }, stack);
+    benchmark::DoNotOptimize(pairs);
+  }
+  bvh_pairs_found[n] = pairs;
+  st.counters["pairs"] = static_cast<double>(pairs);
+  st.counters["triangles"] = static_cast<double>(b.lo.size() / 3);
+}
+
+void BM_BroadPhaseHash(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const Boxes b = draped_boxes(n);
+  const std::size_t nt = b.lo.size() / 3;
+  double mean = 0;
+  for (std::size_t t = 0; t < nt; ++t)
+    for (int k = 0; k < 3; ++k) mean += (b.hi[3 * t + k] - b.lo[3 * t + k]) / (3.0 * nt);
+  const double inv = 1.0 / (mean * static_cast<double>(st.range(1)));
+  std::size_t buckets = 1;
+  while (buckets < 4 * nt) buckets *= 2;
+  struct Entry {
+    std::int64_t cell;
+    std::uint32_t tri;
+  };
+  auto key = [](std::int64_t i, std::int64_t j, std::int64_t k) {
+    return ((i & 0x1FFFFF) << 42) | ((j & 0x1FFFFF) << 21) | (k & 0x1FFFFF);
+  };
+  auto bucket_of = [&](std::int64_t c) {
+    return static_cast<std::size_t>((static_cast<std::uint64_t>(c) * 0x9E3779B97F4A7C15ull) >> 20) & (buckets - 1);
+  };
+  std::vector<Entry> entries, sorted;
+  std::vector<std::uint32_t> start(buckets + 1);
+  entries.reserve(16 * nt);
+  sorted.reserve(16 * nt);
+  long pairs = 0;
+  for (auto _ : st) {
+    entries.clear();
+    for (std::size_t t = 0; t < nt; ++t) {
+      std::int64_t lo[3], hi[3];
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = static_cast<std::int64_t>(std::floor(b.lo[3 * t + k] * inv));
+        hi[k] = static_cast<std::int64_t>(std::floor(b.hi[3 * t + k] * inv));
+      }
+      for (std::int64_t i = lo[0]; i <= hi[0]; ++i)
+        for (std::int64_t j = lo[1]; j <= hi[1]; ++j)
+          for (std::int64_t k = lo[2]; k <= hi[2]; ++k) entries.push_back({key(i, j, k), static_cast<std::uint32_t>(t)});
+    }
+    std::fill(start.begin(), start.end(), 0u);
+    for (const Entry& e : entries) ++start[bucket_of(e.cell) + 1];
+    for (std::size_t q = 0; q < buckets; ++q) start[q + 1] += start[q];
+    sorted.resize(entries.size());
+    for (const Entry& e : entries) sorted[start[bucket_of(e.cell)]++] = e;  // start[q] now = end of bucket q
+    pairs = 0;
+    std::uint32_t first = 0;
+    for (std::size_t q = 0; q < buckets; ++q) {
+      const std::uint32_t last = start[q];
+      for (std::uint32_t x = first; x < last; ++x)
+        for (std::uint32_t y = x + 1; y < last; ++y) {
+          const Entry &A = sorted[x], &B = sorted[y];
+          if (A.cell != B.cell || A.tri == B.tri) continue;
+          const double* alo = &b.lo[3 * A.tri];
+          const double* ahi = &b.hi[3 * A.tri];
+          const double* blo = &b.lo[3 * B.tri];
+          const double* bhi = &b.hi[3 * B.tri];
+          bool ov = true;
+          std::int64_t c[3];
+          for (int k = 0; k < 3; ++k) {
+            ov &= alo[k] <= bhi[k] && blo[k] <= ahi[k];
+            c[k] = static_cast<std::int64_t>(std::floor(std::max(alo[k], blo[k]) * inv));
+          }
+          if (ov && key(c[0], c[1], c[2]) == A.cell) ++pairs;
+        }
+      first = last;
+    }
+    benchmark::DoNotOptimize(pairs);
+  }
+  st.counters["pairs"] = static_cast<double>(pairs);
+  st.counters["triangles"] = static_cast<double>(nt);
+  st.counters["entries_per_triangle"] = static_cast<double>(entries.size()) / static_cast<double>(nt);
+  const auto it = bvh_pairs_found.find(n);
+  if (it != bvh_pairs_found.end()) st.counters["agree"] = it->second == pairs ? 1 : 0;
+}
+
+BENCHMARK(BM_BroadPhaseBvh)->Arg(64)->Arg(128)->Arg(256)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_BroadPhaseHash)->ArgsProduct({{64, 128, 256}, {1, 2}})->Unit(benchmark::kMillisecond);
+
 void args(benchmark::internal::Benchmark* b) {
-  for (int n : {64, 128, 256}) b->Args({n, 2});
+  // Two threads (the machine the figures were taken on has two cores); LOOM_BENCH_THREADS=k overrides.
+  const char* env = std::getenv("LOOM_BENCH_THREADS");
+  const int threads = env ? std::max(1, std::atoi(env)) : 2;
+  for (int n : {64, 128, 256}) b->Args({n, threads});
   b->Unit(benchmark::kMillisecond);
 }
 

@@ -60,22 +60,61 @@ class TriangleBvh {
   /// All pairs of distinct leaves whose boxes overlap, each once (a < b not implied).
   template <class F>
   void self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack) const;
+  /// The part of self_pairs below one task: {a, a} the pairs inside node a, {a, b} the pairs
+  /// between a and b.
+  template <class F>
+  void pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack) const;
+  /// Independent tasks for a parallel traversal (at least `target` where the tree has them):
+  /// self_pairs emits exactly the union of pairs_from over the tasks, each pair once.
+  /// `tasks` is overwritten; it allocates only when it must grow.
+  void split(std::size_t target, std::vector<std::array<Index, 2>>& tasks) const;
+  /// Set one leaf's box (triangle tri, no padding) and refit its ancestors.
+  void update_leaf(Index tri, const double* lo, const double* hi);
+  /// Every leaf (triangle) whose box overlaps [lo, hi].
+  template <class F>
+  void query(const double* lo, const double* hi, F&& emit, std::vector<Index>& stack) const;
   const std::vector<Node>& nodes() const { return nodes_; }
 
  private:
   std::vector<Node> nodes_;
+  std::vector<Index> parent_;  ///< per node (-1 for the root)
+  std::vector<Index> leaf_;    ///< per triangle: its leaf node
 };
+
+template <class F>
+void TriangleBvh::query(const double* lo, const double* hi, F&& emit, std::vector<Index>& stack) const {
+  if (nodes_.empty()) return;
+  stack.clear();
+  stack.push_back(0);
+  while (!stack.empty()) {
+    const Node& n = nodes_[stack.back()];
+    stack.pop_back();
+    if (n.lo[0] > hi[0] || lo[0] > n.hi[0] || n.lo[1] > hi[1] || lo[1] > n.hi[1] || n.lo[2] > hi[2] || lo[2] > n.hi[2])
+      continue;
+    if (n.tri >= 0) {
+      emit(n.tri);
+    } else {
+      stack.push_back(n.left);
+      stack.push_back(n.right);
+    }
+  }
+}
 
 template <class F>
 void TriangleBvh::self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack) const {
   if (nodes_.empty()) return;
+  pairs_from({0, 0}, emit, stack);
+}
+
+template <class F>
+void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack) const {
   auto overlap = [](const Node& a, const Node& b) {
     return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
            a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
   };
   auto extent = [](const Node& a) { return (a.hi[0] - a.lo[0]) + (a.hi[1] - a.lo[1]) + (a.hi[2] - a.lo[2]); };
   stack.clear();
-  stack.push_back({0, 0});  // {a, a}: the pairs inside node a; {a, b}: pairs between a and b
+  stack.push_back(task);  // {a, a}: the pairs inside node a; {a, b}: pairs between a and b
   while (!stack.empty()) {
     const auto [a, b] = stack.back();
     stack.pop_back();
@@ -105,7 +144,9 @@ void TriangleBvh::self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack)
 
 /// Counters of the last resolve() call (and the seconds it spent in each phase).
 struct SelfCollisionStats {
-  bool rebuilt = false;          ///< the broad phase ran (refit + traversal) this step
+  bool rebuilt = false;          ///< the candidate lists were rebuilt or refreshed this step
+  int rebuilds = 0;              ///< full rebuilds (refit + traversal of the whole cloth)
+  Index refreshed = 0;           ///< vertices whose pairs alone were re-examined (incremental refresh)
   Index candidates_vt = 0, candidates_ee = 0;
   Index proximity = 0;           ///< repulsion / friction impulses
   Index ccd_collisions = 0;      ///< CCD impulses, all iterations
@@ -122,6 +163,9 @@ class SelfCollision {
     // Not scene keys: the tests switch stages off to exercise the fail-safe alone.
     int ccd_iterations = 16;  ///< CCD impulse passes before the fail-safe
     bool repulsion = true;    ///< proximity repulsion and friction
+    /// When at most this fraction of the vertices has left its reach, only their pairs are
+    /// re-examined (refresh); beyond it the lists are rebuilt (tests set 1 or 0 to force either).
+    double refresh_fraction = 1.0 / 256;
   };
   /// Parse the scene's `self_collision` mapping (nullptr when absent). Checks the keys, and
   /// that the thickness is below the smallest distance between non-adjacent elements of the
@@ -144,13 +188,45 @@ class SelfCollision {
   void candidate_pairs(const std::vector<double>& x, double inflate, std::vector<std::array<Index, 2>>& vt,
                        std::vector<std::array<Index, 2>>& ee);
 
+  /// The candidate lists of the last resolve() (sorted), for tests: they hold every pair that
+  /// could come within the thickness during that step.
+  void candidate_lists(std::vector<std::array<Index, 2>>& vt, std::vector<std::array<Index, 2>>& ee) const;
+
+  /// A pair of non-adjacent elements and its distance: vertex-triangle (a = vertex, b =
+  /// triangle) or edge-edge (a < b, indices into Mesh::edges()).
+  struct Proximity {
+    Index a, b;
+    double distance;
+  };
+  /// Every non-adjacent vertex-triangle and edge-edge pair closer than `within` at positions x
+  /// (3 per vertex), sorted by (a, b), through the same broad phase. The step's candidate lists
+  /// are reused as work space: the next resolve() rebuilds them.
+  void proximity_pairs(const double* x, double within, std::vector<Proximity>& vt, std::vector<Proximity>& ee);
+
  private:
   struct Pair {
     Index a, b;         ///< vertex, triangle  or  edge, edge
     double dist_ref;    ///< distance at the broad phase's start positions
   };
-  void broad_phase(const double* x0, const double* d, double margin, double reach);
-  bool candidates_valid(const double* x0, const double* d) const;
+  // The candidate lists at positions x0: every pair whose boxes (vertex i: x0_i +- (reach_i +
+  // gap / 2); triangles, edges: their vertices' box grown by the largest reach_ among them +
+  // gap / 2) overlap; with `exact`, only those closer than gap + the two elements' reaches.
+  void broad_phase(const double* x0, double gap, bool exact);
+  // The step's lists: reach_ from this step's displacements (step_len_), then broad_phase.
+  void rebuild(const double* x0);
+  // Keep the lists complete for this step: nothing when every vertex is within its reach;
+  // when a few are not, refresh() only their pairs; when many are not, rebuild().
+  void update_candidates(const double* x0);
+  // Give the vertices in refresh_v_ new reference positions (x0) and reaches, and re-examine
+  // every pair that involves one of them.
+  void refresh(const double* x0);
+  double reach_for(Index i) const;
+  void vertex_box(Index i, double gap);
+  void triangle_box(Index t, double gap);
+  void edge_box(Index e, double gap);
+  // Whether every vertex stays within its reach of the positions of the last rebuild
+  // (moved_ + step_len_ <= reach_): then no pair outside the lists comes within the thickness.
+  bool candidates_valid() const;
   // The 4 vertex indices of a pair (vertex, triangle's 3) or (edge's 2, edge's 2).
   void pair_vertices(bool vt, const Pair& p, Index idx[4]) const;
   double pair_distance(bool vt, const Index idx[4], const double* x, double w[4], double n[3]) const;
@@ -167,6 +243,7 @@ class SelfCollision {
   std::vector<std::array<Index, 2>> edges_;
   std::vector<std::array<Index, 3>> own_verts_;  ///< vertices owned by each triangle (-1 = none)
   std::vector<std::array<Index, 3>> own_edges_;  ///< edges owned by each triangle (-1 = none)
+  std::vector<Index> tri_edges_;                 ///< the 3 edges of each triangle (k: vertices k, k+1)
   selfcol::TriangleBvh bvh_;
 
   // Work arrays, sized in the constructor.
@@ -182,6 +259,16 @@ class SelfCollision {
   double max_growth_ = 0;                        ///< largest |d| - len0 after responses
   bool responded_ = false;                       ///< d or v changed this step
   std::vector<std::array<Index, 2>> stack_;
+  std::vector<double> reach_;                    ///< per vertex: motion allowed before the lists are rebuilt
+  std::vector<double> treach_, ereach_;          ///< per triangle / edge: the largest reach_ of its vertices
+  std::vector<double> elo_, ehi_;                ///< edge boxes
+  std::vector<std::array<Index, 2>> tasks_;      ///< parallel traversal tasks (TriangleBvh::split)
+  std::vector<std::vector<Pair>> tvt_, tee_;     ///< per-thread pairs found by the traversal
+  std::vector<std::vector<std::array<Index, 2>>> tstack_;  ///< per-thread traversal stacks
+  std::vector<Index> vt_off_, vt_adj_, ve_off_, ve_adj_;   ///< vertex -> incident triangles / edges (CSR)
+  std::vector<Index> refresh_v_, refresh_t_, refresh_e_;   ///< refresh(): the vertices and their elements
+  std::vector<std::uint8_t> vflag_, tflag_, eflag_;        ///< refresh(): membership of those lists
+  std::vector<Index> qstack_;                              ///< TriangleBvh::query stack
   std::vector<std::uint8_t> frozen_;
   bool have_candidates_ = false;
   SelfCollisionStats stats_;
