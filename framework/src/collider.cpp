@@ -136,6 +136,10 @@ Collider::Frame Collider::frame_at(double t) const {
 }
 
 Collider::Contact Collider::query(const Frame& f, const double xp[3]) const {
+  return query(f, xp, INFINITY);
+}
+
+Collider::Contact Collider::query(const Frame& f, const double xp[3], double cutoff) const {
   const Vec3 x{xp[0], xp[1], xp[2]};
   Contact ct{};
   if (shape == Shape::Sphere) {
@@ -152,7 +156,8 @@ Collider::Contact Collider::query(const Frame& f, const double xp[3]) const {
                          R[1] * r[0] + R[4] * r[1] + R[7] * r[2] + point[1],
                          R[2] * r[0] + R[5] * r[1] + R[8] * r[2] + point[2]};
     double nb[3], qb[3];
-    const double sd = body->signed_distance(y, nb, qb);
+    const double sd = std::isinf(cutoff) ? body->signed_distance(y, nb, qb)
+                                         : body->signed_distance(y, nb, qb, cutoff + thickness);
     const Vec3 q{qb[0] - point[0], qb[1] - point[1], qb[2] - point[2]};
     ct.normal = {R[0] * nb[0] + R[1] * nb[1] + R[2] * nb[2], R[3] * nb[0] + R[4] * nb[1] + R[5] * nb[2],
                  R[6] * nb[0] + R[7] * nb[1] + R[8] * nb[2]};
@@ -196,7 +201,7 @@ int ColliderSet::resolve_with_frames(State& s, const Collider::Frame* frames, do
     double* v = &s.v[3 * i];
     for (std::size_t c = 0; c < nc; ++c) {
       const Collider& col = colliders_[c];
-      const Collider::Contact ct = col.query(frames[c], x);
+      const Collider::Contact ct = col.query(frames[c], x, 0.0);  // exact where < 0: all this pass needs
       if (ct.distance >= 0) continue;
       ++contacts;
       for (int k = 0; k < 3; ++k) x[k] -= ct.distance * ct.normal[k];   // onto the offset surface

@@ -271,8 +271,13 @@ Index MeshBody::build_node(Index begin, Index end, std::vector<double>& centroid
 
 MeshBody::Nearest MeshBody::nearest(const double p[3]) const {
   Nearest best{};
-  double best_d2 = INFINITY;
-  int best_feature = 6;
+  nearest_within(p, INFINITY, best);
+  return best;
+}
+
+bool MeshBody::nearest_within(const double p[3], double limit2, Nearest& best) const {
+  double best_d2 = limit2;
+  int best_feature = -1;
   Index stack[128];
   int top = 0;
   stack[top++] = 0;
@@ -309,16 +314,16 @@ MeshBody::Nearest MeshBody::nearest(const double p[3]) const {
       stack[top++] = nd.right;
     }
   }
+  if (best_feature < 0) return false;
   best.distance = std::sqrt(best_d2);
   const double* n = best_feature < 3   ? &vert_n_[3 * tri_[3 * best.face + best_feature]]
                     : best_feature < 6 ? &edge_n_[9 * best.face + 3 * (best_feature - 3)]
                                        : &face_n_[3 * best.face];
   std::copy(n, n + 3, best.normal);
-  return best;
+  return true;
 }
 
-double MeshBody::signed_distance(const double p[3], double normal[3], double point[3]) const {
-  const Nearest nr = nearest(p);
+double MeshBody::signed_from(const double p[3], const Nearest& nr, double normal[3], double point[3]) const {
   double d[3];
   sub3(p, nr.point, d);
   const double s = dot3(d, nr.normal) < 0 ? -1.0 : 1.0;
@@ -331,6 +336,30 @@ double MeshBody::signed_distance(const double p[3], double normal[3], double poi
     std::copy(nr.normal, nr.normal + 3, normal);
   }
   return s * nr.distance;
+}
+
+double MeshBody::signed_distance(const double p[3], double normal[3], double point[3]) const {
+  return signed_from(p, nearest(p), normal, point);
+}
+
+double MeshBody::signed_distance(const double p[3], double normal[3], double point[3], double cutoff) const {
+  const Node& root = nodes_[0];
+  const double box2 = box_distance2(root.lo, root.hi, p);
+  Nearest nr{};
+  if (closed_ && box2 > 0) {
+    // Outside the box of a closed mesh is outside the body: farther than the box distance.
+    auto far = [&](double bound) {
+      for (int k = 0; k < 3; ++k) normal[k] = 0, point[k] = p[k];
+      return bound;
+    };
+    if (box2 >= cutoff * cutoff) return far(std::sqrt(box2));
+    if (!nearest_within(p, cutoff * cutoff, nr)) return far(cutoff);
+    return signed_from(p, nr, normal, point);
+  }
+  // Inside the box (or an open mesh, whose back side counts as inside): the sign needs the
+  // nearest face wherever it is.
+  if (!nearest_within(p, cutoff * cutoff, nr)) nearest_within(p, INFINITY, nr);
+  return signed_from(p, nr, normal, point);
 }
 
 }  // namespace loom

@@ -145,6 +145,39 @@ TEST(MeshCollider, OpenMeshFrontIsOutside) {
   EXPECT_NEAR(b->signed_distance(beside, n, q), std::hypot(0.5, 0.1), 1e-15);
 }
 
+TEST(MeshCollider, CutoffQueryIsExactBelowTheCutoffAndALowerBoundAbove) {
+  // The cutoff query against the full one, on closed meshes wound both ways, the icosphere and
+  // an open table top, with points inside, near and far outside the bounding boxes.
+  const auto ico = loom::MeshBody::load(LOOM_SOURCE_DIR "/scenes/meshes/icosphere3.obj", 0.3, {0, 0, 0});
+  const auto top = loom::MeshBody::build({-1, 0.7, -1, 1, 0.7, -1, 1, 0.7, 1, -1, 0.7, 1}, {0, 2, 1, 0, 3, 2}, "top");
+  const std::shared_ptr<loom::MeshBody> bodies[] = {cube(0.5), cube(0.5, true), ico, top};
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> U(-2.5, 2.5);
+  int below = 0, above = 0;
+  for (const auto& b : bodies)
+    for (const double cutoff : {0.0, 0.004, 0.05, 0.4})
+      for (int i = 0; i < 2000; ++i) {
+        const double p[3] = {U(rng), U(rng), U(rng)};
+        double n[3], q[3], nc[3], qc[3];
+        const double d = b->signed_distance(p, n, q);
+        const double dc = b->signed_distance(p, nc, qc, cutoff);
+        if (d < cutoff) {
+          ++below;
+          ASSERT_EQ(dc, d) << b->source() << " cutoff " << cutoff;
+          for (int k = 0; k < 3; ++k) {
+            ASSERT_EQ(nc[k], n[k]);
+            ASSERT_EQ(qc[k], q[k]);
+          }
+        } else {
+          ++above;
+          ASSERT_GE(dc, cutoff) << b->source();
+          ASSERT_LE(dc, d + 1e-12) << b->source();  // the box distance of a cube is its distance, up to rounding
+        }
+      }
+  EXPECT_GT(below, 1000);  // both branches are exercised
+  EXPECT_GT(above, 1000);
+}
+
 TEST(MeshCollider, RigidMotionMovesTheBodyAndGivesTheSurfaceVelocity) {
   // A cube of half-size 0.5 about (1, 0, 0), rotating about +y at 2 rad/s and translating.
   std::ofstream(fs::temp_directory_path() / "loom_cube.obj") << [] {

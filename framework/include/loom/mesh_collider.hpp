@@ -40,6 +40,12 @@ class MeshBody {
   Nearest nearest(const double p[3]) const;
   /// Signed distance (< 0 inside / behind) and the outward unit normal at p.
   double signed_distance(const double p[3], double normal[3], double point[3]) const;
+  /// The same for callers that need the answer only below `cutoff` (> 0): a result below
+  /// cutoff is exact (normal and point too); a result >= cutoff is a lower bound of a positive
+  /// distance (normal and point then unspecified). Far points are cheap: the search skips every
+  /// part of the hierarchy farther than cutoff, and on a closed mesh a point outside the
+  /// bounding box by cutoff or more is answered from the box alone.
+  double signed_distance(const double p[3], double normal[3], double point[3], double cutoff) const;
 
   bool closed() const { return closed_; }
   Index num_vertices() const { return static_cast<Index>(x_.size() / 3); }
@@ -57,6 +63,9 @@ class MeshBody {
     Index right;  ///< inner: right child
   };
   Index build_node(Index begin, Index end, std::vector<double>& centroid);
+  // Nearest point among the faces closer than sqrt(limit2) (all faces for INFINITY); false if none.
+  bool nearest_within(const double p[3], double limit2, Nearest& out) const;
+  double signed_from(const double p[3], const Nearest& nr, double normal[3], double point[3]) const;
 
   std::vector<double> x_;
   std::vector<Index> tri_;
