@@ -1,10 +1,12 @@
 // What self-collision costs: one step of the draped cloth (N x N mass-spring cloth, 1 m, on the
 // spinning ball of scenes/draped_ball_*.yaml) with and without self_collision, for
 // symplectic_euler and baraff_witkin at N = 64, 128, 256. The counters split the self-collision
-// time per step into broad phase (refit + traversal, only on steps whose motion leaves the
-// boxes of the last traversal; `rebuilds` is that fraction), narrow phase (proximity distances)
-// and response (repulsion, CCD passes, fail-safe).
-//   build/bin/bench_self_collision --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
+// time per step into broad phase (the per-vertex reach check every step; refreshes of the pairs
+// of the few vertices that left their reach, or full rebuilds: refit + parallel traversal;
+// `rebuilds` is the fraction of steps whose lists changed either way, `full_rebuilds` per step,
+// `refreshed` vertices per step), narrow phase (proximity distances) and response (repulsion,
+// CCD passes, fail-safe; it includes refreshes that responses cause).
+//   LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 // Thickness: a quarter of the edge length, 0.25 / (N - 1) m. The cloth is first draped with
 // baraff_witkin and self-collision (0.35 s: it has landed and folds start; at 0.2 s a smoke run
 // at 64^2 saw no contact yet); every run starts from that state. `impulses` counts the contact
@@ -98,7 +100,7 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
   auto sim = loom::Simulation::from_string(scene(n, integrator, self), "bench.yaml", ".", {}, loader());
   sim->scene().state = draped(n);
   for (int k = 0; k < 3; ++k) sim->step();  // warm-up: work arrays and candidate lists sized
-  double broad = 0, narrow = 0, response = 0, rebuilds = 0, candidates = 0, impulses = 0;
+  double broad = 0, narrow = 0, response = 0, rebuilds = 0, full = 0, refreshed = 0, candidates = 0, impulses = 0;
   for (auto _ : st) {
     sim->step();
     if (const auto* sc = sim->scene().self_collision.get()) {
@@ -107,6 +109,8 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
       narrow += s.narrow_seconds;
       response += s.response_seconds;
       rebuilds += s.rebuilt ? 1 : 0;
+      full += s.rebuilds;
+      refreshed += static_cast<double>(s.refreshed);
       candidates += s.candidates_vt + s.candidates_ee;
       impulses += s.proximity + s.ccd_collisions;
     }
@@ -118,6 +122,8 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
     st.counters["narrow_ms"] = C(1e3 * narrow, C::kAvgIterations);
     st.counters["response_ms"] = C(1e3 * response, C::kAvgIterations);
     st.counters["rebuilds"] = C(rebuilds, C::kAvgIterations);
+    st.counters["full_rebuilds"] = C(full, C::kAvgIterations);
+    st.counters["refreshed"] = C(refreshed, C::kAvgIterations);
     st.counters["candidates"] = C(candidates, C::kAvgIterations);
     st.counters["impulses"] = C(impulses, C::kAvgIterations);
   }
