@@ -68,7 +68,7 @@ bool ImplicitSelfContact::find(SelfCollision& sc, const State& s, const std::vec
     c.W = W;
     c.lambda = 0;
     c.c1 = 0;
-    c.touching = p.distance < th;
+    c.touching = p.distance < th * (1 + kTouchingTolerance);
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b) {
         const Index q = P.find(c.v[a], c.v[b]);

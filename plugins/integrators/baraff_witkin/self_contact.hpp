@@ -41,6 +41,11 @@ class ImplicitSelfContact {
   /// kappa: the spring stiffness relative to the pair's effective mass over h^2. The gap error
   /// a step leaves is 1/(1 + kappa) of the one it would have without the spring.
   static constexpr double kStiffness = 100.0;
+  /// A pair is in contact (friction acts) when its gap at the step start is below the thickness
+  /// times (1 + this): layers resting on each other hold pairs at and just above the thickness
+  /// (the after-step response restores gaps towards it, and neighbouring elements of the one
+  /// under a vertex are a little farther), and those carry weight too.
+  static constexpr double kTouchingTolerance = 0.05;
 
   struct Contact {
     bool vt;           ///< vertex-triangle (else edge-edge)
@@ -53,7 +58,7 @@ class ImplicitSelfContact {
     double c1;         ///< C(x1) after the solve (m)
     double W;          ///< sum_a w_a^2 / m_a
     double lambda;     ///< accumulated impulse of stop_approach (N s)
-    bool touching;     ///< within the thickness at the step start: friction acts
+    bool touching;     ///< within (1 + kTouchingTolerance) thickness at the step start: friction acts
     Index blk[16];     ///< positions of blocks (v[a], v[b]) in the pattern, a-major
   };
   struct Stats {
