@@ -1142,3 +1142,51 @@ void SelfCollision::resolve(State& s, double h) {
 }
 
 }  // namespace loom
+
+namespace loom {
+
+void SelfCollision::proximity_pairs(const double* x, const double* d, std::vector<ProximityPair>& out) {
+  out.clear();
+  const double th = opt_.thickness;
+  // As in resolve(): reuse the candidates while x and x + d stay inside each vertex's box
+  // grown by the margin; moved_ is the motion since the candidates' reference positions.
+  bool valid = have_candidates_;
+  for (Index i = 0; i < nv_; ++i) {
+    double l2 = 0, m2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double a = x[3 * i + k], dk = d[3 * i + k], b = a + dk;
+      const double mk = a - ref_x_[3 * i + k];
+      l2 += dk * dk;
+      m2 += mk * mk;
+      const double lo = vlo_[3 * i + k] - margin_, hi = vhi_[3 * i + k] + margin_;
+      valid &= a >= lo && a <= hi && b >= lo && b <= hi;
+    }
+    step_len_[i] = std::sqrt(l2);
+    moved_[i] = std::sqrt(m2);
+  }
+  if (!valid) broad_phase(x, d, margin_, th);  // resets moved_
+  const Index nvt = static_cast<Index>(vt_.size()), npairs = nvt + static_cast<Index>(ee_.size());
+  for (Index q = 0; q < npairs; ++q) {
+    const bool vt = q < nvt;
+    const Pair& p = vt ? vt_[q] : ee_[q - nvt];
+    Index idx[4];
+    pair_vertices(vt, p, idx);
+    double step, since;
+    if (vt) {
+      step = step_len_[idx[0]] + std::max({step_len_[idx[1]], step_len_[idx[2]], step_len_[idx[3]]});
+      since = moved_[idx[0]] + std::max({moved_[idx[1]], moved_[idx[2]], moved_[idx[3]]});
+    } else {
+      step = std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
+      since = std::max(moved_[idx[0]], moved_[idx[1]]) + std::max(moved_[idx[2]], moved_[idx[3]]);
+    }
+    if (p.dist_ref - since - step >= th) continue;  // distance is 1-Lipschitz in each vertex
+    ProximityPair r;
+    r.vt = vt;
+    r.distance = pair_distance(vt, idx, x, r.w, r.normal);
+    if (r.distance - step >= th) continue;
+    for (int i = 0; i < 4; ++i) r.v[i] = idx[i];
+    out.push_back(r);
+  }
+}
+
+}  // namespace loom

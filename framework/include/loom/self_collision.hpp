@@ -155,6 +155,18 @@ struct SelfCollisionStats {
   double broad_seconds = 0, narrow_seconds = 0, response_seconds = 0;
 };
 
+/// A vertex-triangle or edge-edge pair of non-adjacent elements near each other (see
+/// SelfCollision::proximity_pairs). sum_i w[i] x[v[i]] is the vector from the closest point of
+/// the triangle to the vertex (from the first edge's closest point to the second's); normal
+/// is its direction and distance its length, at the positions of the query.
+struct ProximityPair {
+  bool vt = true;       ///< vertex-triangle (v = vertex, triangle's 3) or edge-edge (v = edge's 2, edge's 2)
+  Index v[4] = {0, 0, 0, 0};
+  double w[4] = {0, 0, 0, 0};
+  double normal[3] = {0, 0, 0};
+  double distance = 0;
+};
+
 class SelfCollision {
  public:
   struct Options {
@@ -179,6 +191,14 @@ class SelfCollision {
   /// After a step of size h: s.x and s.v are the integrator's end of step; modify them.
   void resolve(State& s, double h);
   const SelfCollisionStats& last_stats() const { return stats_; }
+
+  /// The pairs that can come within the thickness during a step: every non-adjacent
+  /// vertex-triangle and edge-edge pair whose distance at positions x (3 per vertex), less the
+  /// largest displacement of its vertices in d (a predicted step x -> x + d), is below the
+  /// thickness. Reuses the broad phase's candidates when they still cover x and x + d (else
+  /// refits and traverses, leaving candidates that resolve() reuses). out is cleared first.
+  /// For integrators that enter self-contacts into their step (baraff_witkin).
+  void proximity_pairs(const double* x, const double* d, std::vector<ProximityPair>& out);
 
   /// Smallest distance between non-adjacent vertex-triangle and edge-edge pairs at positions
   /// x, among pairs closer than `within` (returns `within` if none): for tests and the check above.

@@ -37,6 +37,7 @@ BaraffWitkinOptions parse_baraff_witkin_options(const Params& p) {
   if (mh < 1 || mh > 20) p.child("max_halvings").fail("max_halvings must be between 1 and 20");
   o.max_halvings = static_cast<int>(mh);
   o.warm_start = p.get("warm_start", o.warm_start);
+  o.implicit_self_contact = p.get("implicit_self_contact", o.implicit_self_contact);
   return o;
 }
 
@@ -69,6 +70,16 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
   // A fresh pattern object: matrices of a previous prepare() keep pointing at the old one
   // until they are replaced below.
   pattern_ = std::make_unique<BsrPattern>(BsrPattern::from_pairs(n, pairs));
+  material_pairs_ = pairs;
+  material_pattern_ = *pattern_;
+  pattern_rebuilds_ = 0;
+  self_contact_.reset();
+  if (scene.self_collision && options_.implicit_self_contact) {
+    self_contact_ = std::make_unique<ImplicitSelfContact>();
+    self_contact_->prepare(scene.mesh, scene.self_collision->options().thickness,
+                           scene.self_collision->options().friction);
+    self_contact_->bind(*pattern_, material_pattern_);
+  }
   scene.material->bind_pattern(*pattern_);
   dfdx_ = BsrMatrix(pattern_.get());
   dfdv_ = BsrMatrix(pattern_.get());
@@ -269,6 +280,24 @@ void BaraffWitkin::project_positions(Scene& scene, double t) {
   }
 }
 
+// The pattern: the material's pairs plus the self-contacts' (ImplicitSelfContact::reserve_pairs,
+// at most as many as the material's). The material binds to it again and the solver analyses
+// it again; this happens only when a contact needs a block the pattern lacks.
+void BaraffWitkin::rebuild_pattern(Scene& scene) {
+  const auto& extra = self_contact_->reserve_pairs(material_pairs_.size());
+  pattern_pairs_.assign(material_pairs_.begin(), material_pairs_.end());
+  pattern_pairs_.insert(pattern_pairs_.end(), extra.begin(), extra.end());
+  pattern_ = std::make_unique<BsrPattern>(BsrPattern::from_pairs(n_, pattern_pairs_));
+  scene.material->bind_pattern(*pattern_);
+  dfdx_ = BsrMatrix(pattern_.get());
+  dfdv_ = BsrMatrix(pattern_.get());
+  A_ = BsrMatrix(pattern_.get());
+  if (!self_contact_->bind(*pattern_, material_pattern_))
+    throw std::logic_error("baraff_witkin: the rebuilt pattern lacks a self-contact block");
+  scene.solver->analyze_pattern(A_, S_);
+  ++pattern_rebuilds_;
+}
+
 void BaraffWitkin::assemble(const Scene& scene, double h) {
   const State& s = scene.state;
   const BsrPattern& P = *pattern_;
@@ -287,8 +316,16 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
   const auto t0 = Clock::now();
   scene.material->compute_forces(s.x, s.v, f_);
   st.force_evaluations += 1;
-  scene.material->compute_jacobians(s.x, s.v, dfdx_, &dfdv_);
-  assemble(scene, h);
+  auto assemble_system = [&] {
+    scene.material->compute_jacobians(s.x, s.v, dfdx_, &dfdv_);
+    if (self_contact_) {  // blocks the pattern holds for self-contacts only
+      self_contact_->zero_extra_blocks(dfdx_);
+      self_contact_->zero_extra_blocks(dfdv_);
+    }
+    assemble(scene, h);
+    if (self_contact_) self_contact_->undo_laplacian(A_, b_, s.v, h * options_.kang_cho_damping);
+  };
+  assemble_system();
   set_constraints(scene, h);
   const auto t1 = Clock::now();
   st.assemble_seconds += seconds_between(t0, t1);
@@ -310,12 +347,26 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
   bool ok = solve_once();
   // Contacts whose constraint would pull are released, and the step is solved once more.
   if (ok && !contacts_.empty() && release_pulling_contacts(scene, h)) ok = solve_once();
+  // Self-contacts (self_contact.hpp): the pairs this step brings within the thickness become
+  // springs (a contact whose blocks the pattern lacks extends it first) and the step is solved
+  // again with them; springs that would pull are released and the step solved again.
+  if (ok && self_contact_ && self_contact_->find(*scene.self_collision, s, dv_, h, *pattern_)) {
+    if (!self_contact_->blocks_complete()) {
+      rebuild_pattern(scene);
+      assemble_system();
+    }
+    self_contact_->add_terms(A_, b_, s.v, h);
+    ok = solve_once();
+    for (int r = 0; ok && r < ImplicitSelfContact::kMaxReleaseSolves && self_contact_->release(A_, b_, s.v, dv_, h); ++r)
+      ok = solve_once();
+  }
   st.solve_seconds += seconds_between(t1, Clock::now());
   if (!ok) {
     std::fill(dv_.begin(), dv_.end(), 0.0);  // no warm start from a failed solve
     return false;
   }
   if (!contacts_.empty()) apply_friction(scene);
+  if (self_contact_) self_contact_->apply_friction(s, dv_, h);
   record_pin_forces(scene, h);
 
   const Index n = n_;
@@ -333,6 +384,7 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
   // Moving pins: x0 + h v1 equals p(t + h) up to rounding; store it exactly.
   scene.pins.apply_positions(s, t0_ + h);
   if (!contacts_.empty()) stop_landed(scene);
+  if (self_contact_) self_contact_->stop_approach(s);
   if (!in_contact_.empty()) {
     std::fill(in_contact_.begin(), in_contact_.end(), 0);
     for (const Contact& ct : contacts_) in_contact_[ct.vertex] = 1;

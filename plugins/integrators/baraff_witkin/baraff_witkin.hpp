@@ -8,6 +8,7 @@
 //   v1 = v0 + dv,   x1 = x0 + h v1
 #pragma once
 
+#include <array>
 #include <functional>
 #include <memory>
 #include <span>
@@ -17,6 +18,7 @@
 #include "loom/bsr.hpp"
 #include "loom/integrator.hpp"
 #include "loom/params.hpp"
+#include "self_contact.hpp"
 
 namespace loom {
 
@@ -27,10 +29,11 @@ struct BaraffWitkinOptions {
   enum class OnFailure { Stop, HalveStep } on_failure = OnFailure::Stop;
   int max_halvings = 3;          ///< nesting depth of halve_step retries
   bool warm_start = true;        ///< start each solve from the previous step's dv
+  bool implicit_self_contact = true;  ///< self-contacts as springs in the solve (self_contact.hpp)
 };
 
 /// Reads kang_cho_damping, rayleigh {alpha, beta}, on_solver_failure (stop | halve_step),
-/// max_halvings and warm_start.
+/// max_halvings, warm_start and implicit_self_contact.
 BaraffWitkinOptions parse_baraff_witkin_options(const Params& p);
 
 class BaraffWitkin final : public Integrator {
@@ -58,6 +61,10 @@ class BaraffWitkin final : public Integrator {
   const BsrMatrix& system_matrix() const { return A_; }
   std::span<const double> rhs() const { return b_; }
   const Filter& filter() const { return S_; }
+  /// Self-contact springs of the last solve (null unless the scene has self_collision and
+  /// implicit_self_contact is on), and how often the pattern was extended for them.
+  const ImplicitSelfContact* self_contact() const { return self_contact_.get(); }
+  int pattern_rebuilds() const { return pattern_rebuilds_; }
 
  private:
   bool attempt(Scene& scene, double h, StepStats& st, SolveReport& rep);
@@ -69,6 +76,7 @@ class BaraffWitkin final : public Integrator {
   void project_positions(Scene& scene, double t);
   void record_pin_forces(Scene& scene, double h);
   void stop_landed(Scene& scene);
+  void rebuild_pattern(Scene& scene);
 
   /// A vertex constrained by a collider at the end of the previous step, or within this
   /// distance (m) of a collider's offset surface (or inside) at the start of a step, is in
@@ -93,6 +101,10 @@ class BaraffWitkin final : public Integrator {
   BaraffWitkinOptions options_;
   ConstraintHook hook_;
   std::unique_ptr<BsrPattern> pattern_;
+  std::unique_ptr<ImplicitSelfContact> self_contact_;
+  BsrPattern material_pattern_;                      // the material's blocks (pattern_ may hold more)
+  std::vector<std::array<Index, 2>> material_pairs_, pattern_pairs_;
+  int pattern_rebuilds_ = 0;
   BsrMatrix dfdx_, dfdv_, A_;
   Filter S_;
   std::vector<double> degree_;           // graph-Laplacian diagonal n_i

@@ -1,0 +1,274 @@
+#include "self_contact.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace loom {
+
+namespace {
+inline double dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+// Sides of a pair: the vertex against the triangle's three, or edge against edge.
+inline bool same_side(bool vt, int a, int b) { return vt ? (a == 0) == (b == 0) : (a < 2) == (b < 2); }
+}  // namespace
+
+void ImplicitSelfContact::prepare(const Mesh& mesh, double thickness, double friction) {
+  thickness_ = thickness;
+  friction_ = friction;
+  const Index n = mesh.num_vertices();
+  const auto edges = mesh.edges();
+  ring_ptr_.assign(n + 1, 0);
+  for (const auto& e : edges) {
+    ++ring_ptr_[e[0] + 1];
+    ++ring_ptr_[e[1] + 1];
+  }
+  for (Index i = 0; i < n; ++i) ring_ptr_[i + 1] += ring_ptr_[i] + 1;  // + the vertex itself
+  ring_.assign(ring_ptr_[n], 0);
+  std::vector<Index> fill(ring_ptr_.begin(), ring_ptr_.end() - 1);
+  for (Index i = 0; i < n; ++i) ring_[fill[i]++] = i;
+  for (const auto& e : edges) {
+    ring_[fill[e[0]]++] = e[1];
+    ring_[fill[e[1]]++] = e[0];
+  }
+  d_.assign(3 * static_cast<std::size_t>(n), 0.0);
+  pairs_.reserve(4 * static_cast<std::size_t>(n));
+  contacts_.reserve(4 * static_cast<std::size_t>(n));
+  reserve_.clear();
+  extra_.clear();
+  stats_ = {};
+}
+
+bool ImplicitSelfContact::find(SelfCollision& sc, const State& s, const std::vector<double>& dv, double h,
+                               const BsrPattern& P) {
+  const std::size_t N = 3 * static_cast<std::size_t>(s.size());
+  for (std::size_t k = 0; k < N; ++k) d_[k] = h * (s.v[k] + dv[k]);
+  sc.proximity_pairs(s.x.data(), d_.data(), pairs_);
+  contacts_.clear();
+  stats_ = {};
+  bool complete = true;
+  const double th = thickness_;
+  for (const ProximityPair& p : pairs_) {
+    double W = 0, dn = 0;
+    for (int a = 0; a < 4; ++a) {
+      W += p.w[a] * p.w[a] * s.inv_mass[p.v[a]];
+      dn += p.w[a] * dot3(&d_[3 * static_cast<std::size_t>(p.v[a])], p.normal);
+    }
+    if (!(W > 0)) continue;  // all four pinned
+    // Within the thickness now, or predicted (linearised along n) to come within it.
+    if (p.distance >= th && p.distance + dn >= th) continue;
+    Contact c;
+    c.vt = p.vt;
+    for (int a = 0; a < 4; ++a) {
+      c.v[a] = p.v[a];
+      c.w[a] = p.w[a];
+    }
+    for (int k = 0; k < 3; ++k) c.n[k] = p.normal[k];
+    c.gap0 = p.distance;
+    c.rest = std::min(th, p.distance);
+    c.k = kStiffness / (W * h * h);
+    c.W = W;
+    c.lambda = 0;
+    c.c1 = 0;
+    c.touching = p.distance < th * (1 + kTouchingTolerance);
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) {
+        const Index q = P.find(c.v[a], c.v[b]);
+        c.blk[4 * a + b] = q;
+        complete &= q >= 0;
+      }
+    contacts_.push_back(c);
+  }
+  stats_.contacts = static_cast<Index>(contacts_.size());
+  complete_ = complete;
+  return !contacts_.empty();
+}
+
+const std::vector<std::array<Index, 2>>& ImplicitSelfContact::reserve_pairs(std::size_t limit) {
+  fresh_.clear();
+  for (const Contact& c : contacts_) {
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) {
+        if (a == b) continue;
+        if (same_side(c.vt, a, b)) {  // an element's own edge: in the material's pattern, normally
+          fresh_.push_back({std::min(c.v[a], c.v[b]), std::max(c.v[a], c.v[b])});
+          continue;
+        }
+        // The vertex against the other side's one-rings: the blocks a contact sliding to a
+        // neighbouring element needs.
+        for (Index r = ring_ptr_[c.v[b]]; r < ring_ptr_[c.v[b] + 1]; ++r) {
+          const Index u = ring_[r];
+          if (u == c.v[a]) continue;
+          fresh_.push_back({std::min(c.v[a], u), std::max(c.v[a], u)});
+        }
+      }
+  }
+  std::sort(fresh_.begin(), fresh_.end());
+  fresh_.erase(std::unique(fresh_.begin(), fresh_.end()), fresh_.end());
+  if (reserve_.size() + fresh_.size() > limit) reserve_.clear();  // keep the pattern from growing without bound
+  const std::size_t old = reserve_.size();
+  reserve_.insert(reserve_.end(), fresh_.begin(), fresh_.end());
+  std::inplace_merge(reserve_.begin(), reserve_.begin() + static_cast<std::ptrdiff_t>(old), reserve_.end());
+  reserve_.erase(std::unique(reserve_.begin(), reserve_.end()), reserve_.end());
+  return reserve_;
+}
+
+bool ImplicitSelfContact::bind(const BsrPattern& P, const BsrPattern& material) {
+  extra_.clear();
+  for (Index i = 0; i < P.n; ++i)
+    for (Index q = P.row_ptr[i]; q < P.row_ptr[i + 1]; ++q)
+      if (material.find(i, P.col[q]) < 0) extra_.push_back({q, i, P.col[q]});
+  bool complete = true;
+  for (Contact& c : contacts_)
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) {
+        c.blk[4 * a + b] = P.find(c.v[a], c.v[b]);
+        complete &= c.blk[4 * a + b] >= 0;
+      }
+  complete_ = complete;
+  return complete;
+}
+
+void ImplicitSelfContact::zero_extra_blocks(BsrMatrix& J) const {
+  for (const auto& e : extra_) std::fill(J.block(e[0]), J.block(e[0]) + 9, 0.0);
+}
+
+void ImplicitSelfContact::undo_laplacian(BsrMatrix& A, std::vector<double>& b, const std::vector<double>& v,
+                                         double hcd) const {
+  if (hcd == 0) return;
+  // The kernel added -h c_d I to A_ij and h c_d v_j to b_i (b_i = h (... - c_d (n_i v_i - sum_j v_j))).
+  for (const auto& e : extra_) {
+    double* a = A.block(e[0]);
+    a[0] += hcd;
+    a[4] += hcd;
+    a[8] += hcd;
+    for (int k = 0; k < 3; ++k) b[3 * static_cast<std::size_t>(e[1]) + k] -= hcd * v[3 * static_cast<std::size_t>(e[2]) + k];
+  }
+}
+
+void ImplicitSelfContact::add_term(const Contact& c, BsrMatrix& A, std::vector<double>& b,
+                                   const std::vector<double>& v, double h, double sign) const {
+  double un = 0;
+  for (int a = 0; a < 4; ++a) un += c.w[a] * dot3(&v[3 * static_cast<std::size_t>(c.v[a])], c.n);
+  const double C0 = c.gap0 - c.rest;
+  const double hk = sign * h * c.k;
+  double nn[9];
+  for (int r = 0; r < 3; ++r)
+    for (int q = 0; q < 3; ++q) nn[3 * r + q] = c.n[r] * c.n[q];
+  for (int a = 0; a < 4; ++a) {
+    double* ba = &b[3 * static_cast<std::size_t>(c.v[a])];
+    const double fa = -hk * c.w[a] * (C0 + h * un);
+    for (int k = 0; k < 3; ++k) ba[k] += fa * c.n[k];
+    for (int bb = 0; bb < 4; ++bb) {
+      double* blk = A.block(c.blk[4 * a + bb]);
+      const double s = h * hk * c.w[a] * c.w[bb];
+      for (int e = 0; e < 9; ++e) blk[e] += s * nn[e];
+    }
+  }
+}
+
+void ImplicitSelfContact::add_terms(BsrMatrix& A, std::vector<double>& b, const std::vector<double>& v,
+                                    double h) const {
+  for (const Contact& c : contacts_) add_term(c, A, b, v, h, 1.0);
+}
+
+bool ImplicitSelfContact::release(BsrMatrix& A, std::vector<double>& b, const std::vector<double>& v,
+                                  const std::vector<double>& dv, double h) {
+  std::size_t keep = 0;
+  Index released = 0;
+  for (std::size_t i = 0; i < contacts_.size(); ++i) {
+    Contact& c = contacts_[i];
+    double u1 = 0;
+    for (int a = 0; a < 4; ++a) {
+      const std::size_t o = 3 * static_cast<std::size_t>(c.v[a]);
+      for (int k = 0; k < 3; ++k) u1 += c.w[a] * (v[o + k] + dv[o + k]) * c.n[k];
+    }
+    c.c1 = c.gap0 - c.rest + h * u1;
+    if (c.c1 > 0) {
+      add_term(c, A, b, v, h, -1.0);
+      ++released;
+      continue;
+    }
+    contacts_[keep++] = c;
+  }
+  contacts_.resize(keep);
+  stats_.contacts = static_cast<Index>(keep);
+  stats_.released += released;
+  return released > 0;
+}
+
+void ImplicitSelfContact::apply_friction(const State& s, std::vector<double>& dv, double h) {
+  for (Contact& c : contacts_) {
+    double vrel[3] = {0, 0, 0}, W = 0;
+    for (int a = 0; a < 4; ++a) {
+      const std::size_t o = 3 * static_cast<std::size_t>(c.v[a]);
+      for (int k = 0; k < 3; ++k) vrel[k] += c.w[a] * (s.v[o + k] + dv[o + k]);
+      W += c.w[a] * c.w[a] * s.inv_mass[c.v[a]];
+    }
+    c.c1 = c.gap0 - c.rest + h * dot3(vrel, c.n);
+    if (!c.touching || friction_ <= 0 || c.c1 >= 0) continue;
+    const double J = h * c.k * -c.c1;  // normal impulse of the spring over the step (N s)
+    const double vn = dot3(vrel, c.n);
+    double vt[3];
+    for (int k = 0; k < 3; ++k) vt[k] = vrel[k] - vn * c.n[k];
+    const double len = std::sqrt(dot3(vt, vt));
+    if (!(len > 0)) continue;
+    // Relative tangential velocity change: up to mu J W, never reversing it.
+    const double change = std::min(len, friction_ * J * W);
+    const double Jt = change / (W * len);
+    for (int a = 0; a < 4; ++a) {
+      const double q = -c.w[a] * s.inv_mass[c.v[a]] * Jt;
+      for (int k = 0; k < 3; ++k) dv[3 * static_cast<std::size_t>(c.v[a]) + k] += q * vt[k];
+    }
+    ++stats_.friction;
+  }
+}
+
+int ImplicitSelfContact::stop_approach(State& s) {
+  if (contacts_.empty()) return 0;
+  double umax = 0;
+  auto rel = [&](const Contact& c) {
+    double u = 0;
+    for (int a = 0; a < 4; ++a) u += c.w[a] * dot3(&s.v[3 * static_cast<std::size_t>(c.v[a])], c.n);
+    return u;
+  };
+  for (Contact& c : contacts_) {
+    c.lambda = 0;
+    umax = std::max(umax, -rel(c));
+  }
+  if (!(umax > 0)) return 0;
+  constexpr int kMaxPasses = 100;
+  const double tol = 1e-6 * umax;  // relative normal velocity left (m/s)
+  int pass = 0;
+  while (pass < kMaxPasses) {
+    ++pass;
+    double change = 0;
+    for (Contact& c : contacts_) {
+      const double u = rel(c);
+      const double next = std::max(0.0, c.lambda - u / c.W);
+      const double d = next - c.lambda;
+      if (d == 0) continue;
+      c.lambda = next;
+      change = std::max(change, std::abs(d) * c.W);
+      for (int a = 0; a < 4; ++a) {
+        const double q = c.w[a] * s.inv_mass[c.v[a]] * d;
+        double* va = &s.v[3 * static_cast<std::size_t>(c.v[a])];
+        for (int k = 0; k < 3; ++k) va[k] += q * c.n[k];
+      }
+    }
+    if (change <= tol) break;
+  }
+  stats_.stop_passes = pass;
+  return pass;
+}
+
+void ImplicitSelfContact::forces(const std::vector<double>& x, std::vector<double>& f) const {
+  std::fill(f.begin(), f.end(), 0.0);
+  for (const Contact& c : contacts_) {
+    double gap = 0;
+    for (int a = 0; a < 4; ++a) gap += c.w[a] * dot3(&x[3 * static_cast<std::size_t>(c.v[a])], c.n);
+    const double C = gap - c.rest;
+    for (int a = 0; a < 4; ++a)
+      for (int k = 0; k < 3; ++k) f[3 * static_cast<std::size_t>(c.v[a]) + k] += -c.k * C * c.w[a] * c.n[k];
+  }
+}
+
+}  // namespace loom

@@ -1,0 +1,132 @@
+// Self-contacts of the cloth inside the Baraff-Witkin step (docs/CONTACT.md, "Self-contact in
+// the implicit step"; NUMERICS.md 3.1 for the step itself).
+//
+// The step is first solved without self-contacts. Every vertex-triangle or edge-edge pair that
+// is within the thickness at the step start, or that this solve brings within it (its gap
+// linearised along the normal), becomes a stiff one-sided spring on its gap along the contact
+// normal, and the step is solved again with the springs. The normal n and the weights w
+// (barycentric) are frozen at the step start:
+//   C(x) = n . sum_a w_a x_a - r,   E = k/2 C^2,   f_a = -k C w_a n,
+//   df_a/dx_b = -k w_a w_b n n^T   (exact for this force; rank one, negative semidefinite),
+// with k = kappa m_eff / h^2 (m_eff = 1 / sum_a w_a^2 / m_a, kappa = kStiffness) and the rest gap
+// r = min(thickness, gap at the step start): a pair already closer than the thickness is
+// kept from approaching but not pushed out (a push out within one step would leave its velocity,
+// (thickness - gap)/h, in the cloth); the after-step response restores its gap gradually and
+// without velocity (SelfCollision::resolve). Backward Euler
+// then ends the step with C(x1) = C_pred / (1 + kappa) (C_pred: the gap error the step would
+// have without the spring): a pair approaching the thickness closes the gap within the step and
+// stops there. A = ... - h^2 df/dx stays symmetric positive definite: each contact adds
+// h^2 k (w w^T) (x) (n n^T), positive semidefinite. The blocks (a, b) of a contact couple
+// vertices the material does not, so the integrator extends its BSR pattern with them (and a
+// one-ring around, so that a sliding contact keeps finding its blocks) when a contact needs one
+// it lacks. A spring that would pull at the end of the step (C(x1) > 0) is released and the
+// step solved again, as Baraff & Witkin release collider constraints. Coulomb friction
+// (self_collision.friction) acts after the solve on pairs already within the thickness at
+// the step start, bounded by the spring's normal impulse h k max(0, -C(x1)).
+#pragma once
+
+#include <array>
+#include <vector>
+
+#include "loom/bsr.hpp"
+#include "loom/common.hpp"
+#include "loom/mesh.hpp"
+#include "loom/self_collision.hpp"
+#include "loom/state.hpp"
+
+namespace loom {
+
+class ImplicitSelfContact {
+ public:
+  /// kappa: the spring stiffness relative to the pair's effective mass over h^2. The gap error
+  /// a step leaves is 1/(1 + kappa) of the one it would have without the spring.
+  static constexpr double kStiffness = 100.0;
+  /// A pair is in contact (friction acts) when its gap at the step start is below the thickness
+  /// times (1 + this): layers resting on each other hold pairs at and just above the thickness
+  /// (the after-step response restores gaps towards it, and neighbouring elements of the one
+  /// under a vertex are a little farther), and those carry weight too.
+  static constexpr double kTouchingTolerance = 0.05;
+
+  struct Contact {
+    bool vt;           ///< vertex-triangle (else edge-edge)
+    Index v[4];
+    double w[4];
+    double n[3];
+    double gap0;       ///< n . sum w x0: the distance at the step start
+    double rest;       ///< the spring's rest gap: the thickness, or gap0 when already closer
+    double k;          ///< spring stiffness (N/m)
+    double c1;         ///< C(x1) after the solve (m)
+    double W;          ///< sum_a w_a^2 / m_a
+    double lambda;     ///< accumulated impulse of stop_approach (N s)
+    bool touching;     ///< within (1 + kTouchingTolerance) thickness at the step start: friction acts
+    Index blk[16];     ///< positions of blocks (v[a], v[b]) in the pattern, a-major
+  };
+  struct Stats {
+    Index contacts = 0;   ///< springs in the last solve
+    Index released = 0;   ///< springs released after the first solve (pulling)
+    Index friction = 0;   ///< pairs that received a friction impulse
+    int stop_passes = 0;  ///< projected Gauss-Seidel passes of stop_approach
+  };
+
+  /// Vertex one-rings from the mesh, the thickness and friction; work arrays sized.
+  void prepare(const Mesh& mesh, double thickness, double friction);
+
+  /// Re-solves after releasing pulling springs, at most.
+  static constexpr int kMaxReleaseSolves = 3;
+
+  /// Contacts for a step of size h from s, given the step's velocity change dv solved without
+  /// them: pairs within the thickness at s.x, or whose gap (linearised along their normal)
+  /// falls below it at s.x + h (v + dv). Returns whether there is any. When blocks_complete()
+  /// is false the pattern P lacks a block they need: rebuild it with reserve_pairs() and bind().
+  bool find(SelfCollision& sc, const State& s, const std::vector<double>& dv, double h, const BsrPattern& P);
+  bool blocks_complete() const { return complete_; }
+  /// The contact blocks the pattern should hold (beyond the material's): the current contacts'
+  /// pairs and their one-ring, added to the pairs kept from earlier rebuilds (dropped once they
+  /// outnumber `limit`).
+  const std::vector<std::array<Index, 2>>& reserve_pairs(std::size_t limit);
+  /// Block positions of the contacts and the blocks of P the material does not have.
+  /// Returns whether P holds every block the contacts need.
+  bool bind(const BsrPattern& P, const BsrPattern& material);
+  /// Zero the non-material blocks of a Jacobian (the material writes only its own).
+  void zero_extra_blocks(BsrMatrix& J) const;
+  /// The Kang-Cho Laplacian damper of the assembly kernel couples every off-diagonal block of
+  /// the pattern; remove it from the non-material blocks (hcd = h c_d).
+  void undo_laplacian(BsrMatrix& A, std::vector<double>& b, const std::vector<double>& v, double hcd) const;
+  /// A += sign h^2 k (w w^T) (x) n n^T,  b += sign (-h k w_a (C0 + h n . sum w v0) n) for contact c.
+  void add_term(const Contact& c, BsrMatrix& A, std::vector<double>& b, const std::vector<double>& v, double h,
+                double sign) const;
+  void add_terms(BsrMatrix& A, std::vector<double>& b, const std::vector<double>& v, double h) const;
+  /// After a solve: C(x1) of each contact; springs that pull (C(x1) > 0) are removed from A, b
+  /// and the list. Returns whether any was.
+  bool release(BsrMatrix& A, std::vector<double>& b, const std::vector<double>& v, const std::vector<double>& dv,
+               double h);
+  /// Coulomb friction on touching pairs: changes dv.
+  void apply_friction(const State& s, std::vector<double>& dv, double h);
+  /// After the step (x1 = x0 + h v1 has landed the approaching pairs at the thickness, with
+  /// v1 still their approach velocity): make every contact inelastic, relative normal velocity
+  /// >= 0, by the smallest mass-weighted velocity change (projected Gauss-Seidel on the
+  /// contacts' accumulated impulses, which stay >= 0; positions untouched). As the landing
+  /// fix for colliders (BaraffWitkin::stop_landed). Returns the passes it took.
+  int stop_approach(State& s);
+
+  const std::vector<Contact>& contacts() const { return contacts_; }
+  const Stats& stats() const { return stats_; }
+  double thickness() const { return thickness_; }
+  /// The contact force on every vertex at positions x (3n, zero first), for the spring model
+  /// of the current contacts: f_a = -k C(x) w_a n (tests compare its finite differences with
+  /// the Jacobian blocks).
+  void forces(const std::vector<double>& x, std::vector<double>& f) const;
+
+ private:
+  double thickness_ = 0, friction_ = 0;
+  std::vector<Index> ring_ptr_, ring_;        ///< vertex one-rings (CSR, the vertex included)
+  std::vector<ProximityPair> pairs_;
+  std::vector<double> d_;                     ///< predicted displacement
+  std::vector<Contact> contacts_;
+  std::vector<std::array<Index, 2>> reserve_, fresh_;
+  std::vector<std::array<Index, 3>> extra_;   ///< (block position, row, column) of non-material blocks
+  Stats stats_;
+  bool complete_ = true;
+};
+
+}  // namespace loom
