@@ -1148,23 +1148,22 @@ namespace loom {
 void SelfCollision::proximity_pairs(const double* x, const double* d, std::vector<ProximityPair>& out) {
   out.clear();
   const double th = opt_.thickness;
-  // As in resolve(): reuse the candidates while x and x + d stay inside each vertex's box
-  // grown by the margin; moved_ is the motion since the candidates' reference positions.
-  bool valid = have_candidates_;
+  // The same lists as resolve(): kept while every vertex stays within its reach over the
+  // motion since the lists' reference positions plus the predicted step d; otherwise refreshed
+  // or rebuilt at x (update_candidates), and resolve() after the step reuses them.
+  int invalid = have_candidates_ ? 0 : 1;
   for (Index i = 0; i < nv_; ++i) {
     double l2 = 0, m2 = 0;
     for (int k = 0; k < 3; ++k) {
-      const double a = x[3 * i + k], dk = d[3 * i + k], b = a + dk;
-      const double mk = a - ref_x_[3 * i + k];
+      const double dk = d[3 * i + k], mk = x[3 * i + k] - ref_x_[3 * i + k];
       l2 += dk * dk;
       m2 += mk * mk;
-      const double lo = vlo_[3 * i + k] - margin_, hi = vhi_[3 * i + k] + margin_;
-      valid &= a >= lo && a <= hi && b >= lo && b <= hi;
     }
     step_len_[i] = std::sqrt(l2);
     moved_[i] = std::sqrt(m2);
+    invalid += moved_[i] + step_len_[i] > reach_[i] ? 1 : 0;
   }
-  if (!valid) broad_phase(x, d, margin_, th);  // resets moved_
+  if (invalid > 0) update_candidates(x);
   const Index nvt = static_cast<Index>(vt_.size()), npairs = nvt + static_cast<Index>(ee_.size());
   for (Index q = 0; q < npairs; ++q) {
     const bool vt = q < nvt;
