@@ -421,3 +421,29 @@ TEST(Plot, DrawsStatsCsvOrSaysWhatIsMissing) {
   ASSERT_GT(bytes.size(), 10000u);
   EXPECT_EQ(bytes.substr(1, 3), "PNG");
 }
+
+// The other CPU integrators carry nothing between steps besides x and v; with the direct
+// solvers Baraff-Witkin has no solver state either. Each continuation equals the whole run.
+TEST(Resume, EveryCpuIntegratorIsExact) {
+  const std::vector<std::pair<std::string, std::string>> combos = {
+      {"symplectic_euler", "integrator: {type: symplectic_euler, dt: 2.0e-4, substeps: 20}\n"},
+      {"rk4", "integrator: {type: rk4, dt: 4.0e-4, substeps: 10}\n"},
+      {"harmonic_oscillation", "integrator: {type: harmonic_oscillation, dt: 4.0e-4, substeps: 10}\n"},
+      {"bw_ldlt", "integrator: {type: baraff_witkin, dt: 0.004}\nsolver: {type: eigen_ldlt}\n"},
+      {"bw_cholmod", "integrator: {type: baraff_witkin, dt: 0.004}\nsolver: {type: [cholmod, eigen_ldlt]}\n"},
+  };
+  for (const auto& [name, integrator] : combos) {
+    const auto dir = scratch("resume_" + name);
+    std::ofstream(dir / "s.yaml") << "mesh:\n  grid: {nx: 7, ny: 7, width: 0.4, height: 0.4}\n"
+                                     "material: {type: mass_spring, stiffness: {structural: 300, shear: 300, bend: 10},"
+                                     " density: 0.1}\n"
+                                  << integrator << "pins: [top_corners]\nthreads: 1\nframes: 10\noutput: {lossless: true}\n";
+    const std::string sc = (dir / "s.yaml").string();
+    ASSERT_EQ(run_real("run " + sc + " --quiet --out " + (dir / "whole").string()).code, 0) << name;
+    ASSERT_EQ(run_real("run " + sc + " --quiet --frames 4 --out " + (dir / "parts").string()).code, 0) << name;
+    const Result r = run_real("run --resume " + (dir / "parts").string() + " --quiet --frames 10");
+    ASSERT_EQ(r.code, 0) << name << ": " << r.out;
+    SCOPED_TRACE(name);
+    expect_same_run(dir / "whole", dir / "parts");
+  }
+}
