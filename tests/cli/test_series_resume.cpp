@@ -447,3 +447,40 @@ TEST(Resume, EveryCpuIntegratorIsExact) {
     expect_same_run(dir / "whole", dir / "parts");
   }
 }
+
+// `loom study` prints its table; `--stability` plots the atlas (or says what is missing).
+TEST(Study, PrintsItsTableAndPlotsTheStabilityAtlas) {
+  const auto dir = scratch("study");
+  std::ofstream(dir / "s.yaml") << "mesh:\n  grid: {nx: 5, ny: 5, width: 0.5, height: 0.5}\n"
+                                   "material: {type: mass_spring, stiffness: {structural: 200, shear: 200, bend: 10},"
+                                   " density: 0.1}\n"
+                                   "integrator: {type: symplectic_euler, dt: 1.0e-3, substeps: 1}\n"
+                                   "pins: [top_corners]\nthreads: 1\nframes: 1\n";
+  std::ofstream(dir / "study.yaml")
+      << "times: [0.02]\nsteps: {h0: 1.0e-3, levels: 2}\nreference: {integrator: rk4, dt: 1.0e-4}\n"
+         "max_seconds_per_run: 20\ncombos:\n  - {name: SE, set: {integrator.type: symplectic_euler}}\n"
+         "  - {name: RK4, set: {integrator.type: rk4}}\n"
+         "stability:\n  horizon: 0.05\n  h_min: 1.0e-5\n  h_max: 0.05\n  bisections: 3\n  max_strain: 1.0\n"
+         "  sweep: {key: material.stiffness.structural, values: [200, 2000]}\n"
+         "  combos:\n    - {name: SE, set: {integrator.type: symplectic_euler}}\n";
+  const std::string args = (dir / "s.yaml").string() + " " + (dir / "study.yaml").string() + " --out " + (dir / "o").string();
+  Result r = run_real("study " + args);
+  ASSERT_EQ(r.code, 0) << r.out;
+  // The table: a header and one row per combo, step and time (2 combos x 2 steps).
+  EXPECT_NE(r.out.find("COMBO"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("RMS_ERROR"), std::string::npos) << r.out;
+  int rows = 0;
+  std::istringstream lines(r.out);
+  for (std::string line; std::getline(lines, line);) rows += line.rfind("SE ", 0) == 0 || line.rfind("RK4 ", 0) == 0;
+  EXPECT_EQ(rows, 4) << r.out;
+  r = run_real("study " + args + " --stability");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(fs::exists(dir / "o" / "stability.csv"));
+  if (std::system("/usr/bin/python3 -c 'import matplotlib' >/dev/null 2>&1") != 0) {
+    EXPECT_NE(r.out.find("no stability plot"), std::string::npos) << r.out;
+    GTEST_SKIP() << "python3-matplotlib is not installed here";
+  }
+  const std::string png = slurp(dir / "o" / "stability.png");
+  ASSERT_GT(png.size(), 5000u) << r.out;
+  EXPECT_EQ(png.substr(1, 3), "PNG");
+}
