@@ -172,7 +172,7 @@ PointCacheWriter::PointCacheWriter(const std::string& path, int num_points, int 
   const long end = 32L + static_cast<long>(samples_) * static_cast<long>(buf_.size()) * 4L;
   if (std::fseek(f_, 28, SEEK_SET) != 0 || std::fwrite(&count, 4, 1, f_) != 1 || std::fflush(f_) != 0 ||
       ::ftruncate(::fileno(f_), end) != 0)
-    throw std::runtime_error("cannot write " + path + " (disk full?)");
+    throw OutputError("cannot write " + path + " (" + std::strerror(errno) + "; disk full?)");
 }
 
 PointCacheWriter::~PointCacheWriter() {

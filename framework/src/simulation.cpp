@@ -596,8 +596,10 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     }
     // Record exactly what ran (with --set overrides applied).
     if (output_.stats && resuming) {
-      stats.open((fs::path(output_.dir) / "stats.csv").string(), std::ios::app);
-      if (!stats) throw InputError("cannot write " + output_.dir + "/stats.csv. Fix: check the folder's permissions.");
+      const std::string path = (fs::path(output_.dir) / "stats.csv").string();
+      stats_complete = static_cast<std::streamoff>(fs::file_size(path));  // trimmed to complete rows
+      stats.open(path, std::ios::app);
+      if (!stats) throw InputError("cannot write " + path + ". Fix: check the folder's permissions.");
       stats.precision(10);
     } else if (output_.stats) {
       stats.open((fs::path(output_.dir) / "stats.csv").string(), std::ios::trunc);
