@@ -33,7 +33,7 @@ void put(std::string& s, T v) {
 }
 
 void put_doubles(std::string& s, const std::vector<double>& a) {
-  s.append(reinterpret_cast<const char*>(a.data()), a.size() * sizeof(double));
+  if (!a.empty()) s.append(reinterpret_cast<const char*>(a.data()), a.size() * sizeof(double));
 }
 
 }  // namespace
@@ -80,7 +80,7 @@ RestartData read_restart(const std::string& dir) {
     if (count < 0 || static_cast<std::uint64_t>(count) > (s.size() - pos) / sizeof(double))
       throw damaged("truncated at byte " + std::to_string(pos));
     a.resize(static_cast<std::size_t>(count));
-    std::memcpy(a.data(), s.data() + pos, a.size() * sizeof(double));
+    if (!a.empty()) std::memcpy(a.data(), s.data() + pos, a.size() * sizeof(double));
     pos += a.size() * sizeof(double);
   };
   if (s.size() < 8 + 8 || std::memcmp(s.data(), kMagic, 8) != 0) throw damaged("not a Loom restart file");

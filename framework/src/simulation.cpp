@@ -580,7 +580,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   const std::string abs_base = fs::absolute(base_dir_, ec).lexically_normal().string();
   const std::string scene_text = "# The scene as it ran (overrides applied), written by loom run.\n"
                                  "# Relative paths resolve against the original scene's folder:\n"
-                                 "# loom-scene-dir: " + abs_base + "\n" + resolved_yaml_ + "\n";
+                                 "# loom-scene-dir: " + abs_base + "\n" + scene_file_line() + resolved_yaml_ + "\n";
   std::vector<double> reaction_work, reactions;
   if (write) {
     prepare_output_dir(output_.dir);
@@ -708,6 +708,16 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     emit(f);
     if (progress) progress(f, frames_);
   }
+}
+
+// "# loom-scene-file: PATH\n" (the scene file a run was made from, absolute) for scene.yaml:
+// loom run --resume builds from the copy with that name, so that plugins resolving paths
+// against their scene file (gnatv's material_file) find the same files.
+std::string Simulation::scene_file_line() const {
+  const std::string& src = scene_->source;
+  if (src.empty() || src.front() == '<') return {};
+  std::error_code ec;
+  return "# loom-scene-file: " + fs::absolute(src, ec).lexically_normal().string() + "\n";
 }
 
 int Simulation::resume(int frames) {

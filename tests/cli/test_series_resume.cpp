@@ -484,3 +484,17 @@ TEST(Study, PrintsItsTableAndPlotsTheStabilityAtlas) {
   ASSERT_GT(png.size(), 5000u) << r.out;
   EXPECT_EQ(png.substr(1, 3), "PNG");
 }
+
+// A shipped scene whose material plugin reads a file relative to the scene (gnatv's
+// material_file: ../materials/wool.yaml), resumed from a run folder elsewhere: the
+// continuation finds the file (scene.yaml records the original scene file) and is exact.
+TEST(Resume, ShippedGnatvSceneFromAnotherFolder) {
+  const auto dir = scratch("resume_wool");
+  const std::string sc = std::string(LOOM_SOURCE_DIR) + "/scenes/wool_hanging_32.yaml";
+  const std::string common = " --quiet --set output.lossless=true --set integrator.substeps=2";
+  ASSERT_EQ(run_real("run " + sc + common + " --frames 4 --out " + (dir / "whole").string()).code, 0);
+  ASSERT_EQ(run_real("run " + sc + common + " --frames 2 --out " + (dir / "parts").string()).code, 0);
+  const Result r = run_real("run --resume " + (dir / "parts").string() + " --quiet --frames 4");
+  ASSERT_EQ(r.code, 0) << r.out;
+  expect_same_run(dir / "whole", dir / "parts");
+}

@@ -124,6 +124,7 @@ class Simulation {
   void build(const Params& root, const std::string& base_dir, PluginLoader& loader);
   void check_state(bool check_strain);
   void claim_output_dir(const std::string& scene_text) const;
+  std::string scene_file_line() const;
 
   std::unique_ptr<Scene> scene_;
   std::unique_ptr<Integrator> integrator_;
