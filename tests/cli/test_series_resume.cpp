@@ -32,6 +32,14 @@ Result run(const std::string& args) { return loom_cli_test::run_loom(args); }
 Result run_real(const std::string& args) { return loom_cli_test::run_loom(args, /*test_plugins=*/false); }
 fs::path scratch(const std::string& name) { return loom_cli_test::scratch_dir("loom_series_", name); }
 
+// Whether this build has the plugin module (the sanitizer build has only a few).
+bool have(const std::string& module) {
+  return fs::exists(fs::path(LOOM_BINARY_DIR) / "lib/loom/plugins" / ("loom_" + module + ".so"));
+}
+#define NEED_PLUGINS(...)                                                   \
+  for (const char* m : {__VA_ARGS__})                                      \
+    if (!have(m)) GTEST_SKIP() << "plugin " << m << " is not built here";
+
 std::string slurp(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
   return std::string((std::istreambuf_iterator<char>(in)), {});
@@ -337,6 +345,7 @@ TEST(Resume, AfterCtrlCOrKillNineMatchesAnUninterruptedRun) {
 // Baraff-Witkin carries a warm start and the contact flags from step to step: restored from
 // restart.bin, the continuation is exact (with the PCG's warm start on, its default).
 TEST(Resume, BaraffWitkinWithContactsIsExact) {
+  NEED_PLUGINS("material_mass_spring", "integrator_baraff_witkin", "solver_eigen_pcg");
   const auto dir = scratch("resume_bw");
   const std::string text =
       "mesh:\n  grid: {nx: 8, ny: 8, width: 0.5, height: 0.5, plane: xz}\n"
@@ -425,6 +434,8 @@ TEST(Plot, DrawsStatsCsvOrSaysWhatIsMissing) {
 // The other CPU integrators carry nothing between steps besides x and v; with the direct
 // solvers Baraff-Witkin has no solver state either. Each continuation equals the whole run.
 TEST(Resume, EveryCpuIntegratorIsExact) {
+  NEED_PLUGINS("material_mass_spring", "integrator_symplectic_euler", "integrator_rk4", "integrator_harmonic_oscillation",
+               "integrator_baraff_witkin", "solver_eigen_ldlt");
   const std::vector<std::pair<std::string, std::string>> combos = {
       {"symplectic_euler", "integrator: {type: symplectic_euler, dt: 2.0e-4, substeps: 20}\n"},
       {"rk4", "integrator: {type: rk4, dt: 4.0e-4, substeps: 10}\n"},
@@ -450,6 +461,7 @@ TEST(Resume, EveryCpuIntegratorIsExact) {
 
 // `loom study` prints its table; `--stability` plots the atlas (or says what is missing).
 TEST(Study, PrintsItsTableAndPlotsTheStabilityAtlas) {
+  NEED_PLUGINS("material_mass_spring", "integrator_symplectic_euler", "integrator_rk4");
   const auto dir = scratch("study");
   std::ofstream(dir / "s.yaml") << "mesh:\n  grid: {nx: 5, ny: 5, width: 0.5, height: 0.5}\n"
                                    "material: {type: mass_spring, stiffness: {structural: 200, shear: 200, bend: 10},"
@@ -489,6 +501,7 @@ TEST(Study, PrintsItsTableAndPlotsTheStabilityAtlas) {
 // material_file: ../materials/wool.yaml), resumed from a run folder elsewhere: the
 // continuation finds the file (scene.yaml records the original scene file) and is exact.
 TEST(Resume, ShippedGnatvSceneFromAnotherFolder) {
+  NEED_PLUGINS("material_gnatv", "integrator_baraff_witkin", "solver_eigen_pcg");
   const auto dir = scratch("resume_wool");
   const std::string sc = std::string(LOOM_SOURCE_DIR) + "/scenes/wool_hanging_32.yaml";
   const std::string common = " --quiet --set output.lossless=true --set integrator.substeps=2";
