@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <iostream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -19,7 +20,9 @@
 #include "loom/study.hpp"
 #include "loom/threads.hpp"
 #include "check_cmd.hpp"
+#include "plot_cmd.hpp"
 #include "render_cmd.hpp"
+#include "resume_cmd.hpp"
 
 namespace {
 
@@ -32,6 +35,9 @@ usage:
       frames as `loom render DIR` does. A folder holding another scene's run is refused
       unless --overwrite (a rerun of the same scene replaces its files). Ctrl-C stops at
       the next step; the frames written so far are kept.
+  loom run --resume RUN_DIR [--frames N] [--quiet]
+      Continue a stopped run (Ctrl-C, kill, a crash) from its last complete frame
+      (RUN_DIR/restart.bin) as if it had never stopped; --frames N extends it to N frames.
   loom validate SCENE.yaml [--set key=value]...
       Check the scene and its combo without running; print what would be built.
   loom render RUN_DIR [--scene SCENE.yaml] [--out DIR] [--set render.key=value]...
@@ -46,6 +52,9 @@ usage:
       time), DIR/reference.txt and DIR/study.png (default DIR: out/study_<study name>).
       --stability: instead, the study's stability atlas: the largest stable step of each
       combo by bisection, over a swept key (stiffness, mass, ...): DIR/stability.csv.
+  loom plot RUN_DIR [--out FILE.png]
+      Plot RUN_DIR/stats.csv (energies, largest strain, solver iterations, time per step
+      against simulated time) to FILE (default RUN_DIR/stats.png); needs python3-matplotlib.
   loom check RUN_DIR [--allow] [--list] [--quiet]
       Count the intersecting non-adjacent triangle pairs of every frame of a run (exact
       test; touching counts). Exit 5 when any frame has some, unless --allow; --list
@@ -72,7 +81,7 @@ exit codes: 0 ok, 1 internal or output error (disk full), 2 bad input (scene, me
 )";
 
 struct Args {
-  std::string command, scene, out, render_scene, study;
+  std::string command, scene, out, render_scene, study, resume;
   int frames = -1;
   bool quiet = false;
   bool stability = false;
@@ -89,7 +98,7 @@ struct Args {
 
 Args parse_args(int argc, char** argv) {
   Args a;
-  if (argc < 2) usage_error("missing command: one of run, validate, study, render, view, plugins");
+  if (argc < 2) usage_error("missing command: one of run, validate, study, render, view, check, plot, plugins");
   a.command = argv[1];
   if (a.command == "--help" || a.command == "-h" || a.command == "help") {
     std::cout << kUsage;
@@ -99,11 +108,11 @@ Args parse_args(int argc, char** argv) {
     std::cout << "loom " << LOOM_VERSION_STRING << " (plugin ABI " << loom::kPluginAbiVersion << ")\n";
     std::exit(0);
   }
-  const std::vector<std::string> commands = {"run", "validate", "plugins", "render", "view", "study", "check"};
+  const std::vector<std::string> commands = {"run", "validate", "plugins", "render", "view", "study", "check", "plot"};
   if (std::find(commands.begin(), commands.end(), a.command) == commands.end()) {
     const std::string hint = loom::closest_match(a.command, commands);
     usage_error("unknown command '" + a.command + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
-                "; commands: run, validate, study, render, view, check, plugins");
+                "; commands: run, validate, study, render, view, check, plot, plugins");
   }
   for (int i = 2; i < argc; ++i) {
     const std::string s = argv[i];
@@ -134,6 +143,8 @@ Args parse_args(int argc, char** argv) {
       a.render_scene = value("--scene");
     } else if (a.command == "run" && s == "--render") {
       a.render = true;
+    } else if (a.command == "run" && (s == "--resume" || s.rfind("--resume=", 0) == 0)) {
+      a.resume = value("--resume");
     } else if (a.command == "run" && s == "--overwrite") {
       a.overwrite = true;
     } else if (a.command == "check" && (s == "--allow" || s == "--list")) {
@@ -143,7 +154,7 @@ Args parse_args(int argc, char** argv) {
     } else if (s == "--quiet" || s == "-q") {
       a.quiet = true;
     } else if (!s.empty() && s[0] == '-') {
-      const std::string hint = loom::closest_match(s, {"--out", "--frames", "--set", "--quiet", "--help", "--overwrite", "--render"});
+      const std::string hint = loom::closest_match(s, {"--out", "--frames", "--set", "--quiet", "--help", "--overwrite", "--render", "--resume"});
       usage_error("unknown option '" + s + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)"));
     } else if (a.scene.empty()) {
       a.scene = s;
@@ -157,6 +168,14 @@ Args parse_args(int argc, char** argv) {
     usage_error("study needs a scene and a study file, e.g. loom study scenes/hanging_10x10.yaml studies/hanging_k2000.yaml");
   if (a.command == "render" && a.scene.empty()) usage_error("render needs the output folder of a run, e.g. loom render out/hanging_cloth");
   if (a.command == "check" && a.scene.empty()) usage_error("check needs the output folder of a run, e.g. loom check out/hanging_cloth");
+  if (a.command == "run" && !a.resume.empty()) {
+    if (!a.scene.empty()) usage_error("--resume takes the run's folder, not a scene: loom run --resume RUN_DIR (its scene.yaml is used)");
+    if (!a.sets.empty() || !a.out.empty() || a.overwrite)
+      usage_error("--resume continues a run exactly as it was started: --set, --out and --overwrite do not apply "
+                  "(start a new run for other settings)");
+    a.scene = a.resume;
+  }
+  if (a.command == "plot" && a.scene.empty()) usage_error("plot needs the output folder of a run, e.g. loom plot out/hanging_cloth");
   if (a.command == "view" && a.scene.empty()) usage_error("view needs the output folder of a run, e.g. loom view out/hanging_cloth");
   if (a.command != "plugins" && a.scene.empty()) usage_error(a.command + " needs a scene file, e.g. loom " + a.command + " scenes/hanging_cloth.yaml");
   if (a.command == "plugins" && !a.scene.empty()) usage_error("plugins takes no scene file");
@@ -168,6 +187,8 @@ std::string stem(const std::string& path) {
   const auto dot = s.rfind('.');
   return dot == std::string::npos ? s : s.substr(0, dot);
 }
+
+bool show_resume(bool quiet) { return !quiet && loom::is_output_rank(); }
 
 int cmd_plugins() {
   loom::Registry registry;
@@ -212,6 +233,7 @@ int main(int argc, char** argv) {
       loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
       return loom::cli::render_command(r);
     }
+    if (args.command == "plot") return loom::cli::plot_command(args.scene, args.out, args.quiet);
     if (args.command == "check") return loom::cli::check_command({args.scene, args.allow, args.list, args.quiet});
     if (args.command == "view") {
       loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
@@ -245,12 +267,14 @@ int main(int argc, char** argv) {
                         r.failure.c_str());
           std::printf("loom: wrote %s/stability.csv\n", opt.out_dir.c_str());
         }
+        loom::cli::plot_stability(opt.out_dir, args.quiet);
         return 0;
       }
       const auto rows = loom::run_study(opt);
       if (tty) std::printf("\n");
       int bad = 0;
       for (const auto& r : rows) bad += r.status != "ok";
+      if (!args.quiet) loom::cli::print_study_table(rows);
       if (!args.quiet)
         std::printf("loom: study done in %.1f s: %zu rows (%d not ok: diverged/failed/timeout); wrote %s/study.csv\n",
                     std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), rows.size(), bad,
@@ -259,8 +283,11 @@ int main(int argc, char** argv) {
     }
     loom::Registry registry;
     loom::PluginLoader loader(registry);
-    loom::Simulation sim(args.scene, args.sets, loader);
-    if (args.frames >= 0) sim.set_frames(args.frames);
+    std::unique_ptr<loom::Simulation> owned =
+        args.resume.empty() ? std::make_unique<loom::Simulation>(args.scene, args.sets, loader)
+                            : loom::cli::load_for_resume(args.resume, args.frames, loader);
+    loom::Simulation& sim = *owned;
+    if (args.frames >= 0 && args.resume.empty()) sim.set_frames(args.frames);
     if (args.command == "validate") {
       for (const auto& line : sim.describe()) std::cout << line << "\n";
       bool step_warning = false;
@@ -286,13 +313,16 @@ int main(int argc, char** argv) {
     }
     if (!args.out.empty()) sim.output().dir = args.out;
     if (sim.output().dir.empty()) sim.output().dir = "out/" + stem(args.scene);
+    if (!args.resume.empty() && show_resume(args.quiet))
+      std::printf("loom: resuming %s at frame %d of %d (t = %.6g s)\n", args.resume.c_str(), sim.start_frame(),
+                  sim.frames(), sim.scene().state.time);
     sim.output().overwrite = args.overwrite;
     const bool show = !args.quiet && loom::is_output_rank();
     const bool tty = show && ::isatty(STDOUT_FILENO);
     const auto t0 = std::chrono::steady_clock::now();
     // Progress: on a terminal one line redrawn at most every 0.5 s; elsewhere (a log) one line
     // every 5 s. Steps per second, simulated time, and the time left.
-    const long long total_steps = static_cast<long long>(sim.frames()) * sim.substeps();
+    const long long total_steps = static_cast<long long>(sim.frames() - sim.start_frame()) * sim.substeps();
     const long long first_step = sim.scene().state.step;
     auto last_print = t0;
     auto report = [&](bool final_line) {
@@ -320,8 +350,9 @@ int main(int argc, char** argv) {
       sim.run(progress);
     } catch (const loom::Interrupted& e) {
       if (tty) std::printf("\n");
-      std::fprintf(stderr, "loom: %s; the frames written before it are complete and kept in %s\n", e.what(),
-                   sim.output().dir.c_str());
+      std::fprintf(stderr, "loom: %s; the frames written before it are complete and kept in %s%s\n", e.what(),
+                   sim.output().dir.c_str(),
+                   sim.output().restart ? (" (continue it with: loom run --resume " + sim.output().dir + ")").c_str() : "");
       return finish(130);
     }
     if (tty) std::printf("\n");
@@ -331,8 +362,8 @@ int main(int argc, char** argv) {
       const auto f = st.measure(st.frames());
       std::printf("loom: summary: %lld steps in %.3g s (%.3g ms per step in the integrator); largest strain %.4g; "
                   "final energy %.6g J (kinetic %.4g, elastic %.4g); %lld force evaluations, %lld linear iterations\n",
-                  static_cast<long long>(st.scene().state.step), el,
-                  st.scene().state.step > 0 ? 1e3 * st.step_seconds_total() / st.scene().state.step : 0.0, f.max_strain,
+                  static_cast<long long>(st.scene().state.step - first_step), el,
+                  st.scene().state.step > first_step ? 1e3 * st.step_seconds_total() / (st.scene().state.step - first_step) : 0.0, f.max_strain,
                   f.kinetic + f.gravitational + f.elastic, f.kinetic, f.elastic, st.force_evaluations(), st.linear_iterations());
     }
     if (args.render && loom::is_output_rank()) {
@@ -344,7 +375,7 @@ int main(int argc, char** argv) {
     }
     if (!args.quiet && loom::is_output_rank()) {
       const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      std::printf("loom: %d frames (%lld steps, %.4g s simulated) in %.3g s; wrote %s\n", sim.frames(),
+      std::printf("loom: %d frames (%lld steps, %.4g s simulated) in %.3g s; wrote %s\n", sim.frames() - sim.start_frame(),
                   static_cast<long long>(sim.scene().state.step), sim.scene().state.time, el, sim.output().dir.c_str());
     }
     return 0;

@@ -18,6 +18,7 @@
 #include "loom/registry.hpp"
 #include "loom/renderer.hpp"
 #include "loom/spawn.hpp"
+#include "render_framing.hpp"
 
 namespace fs = std::filesystem;
 
@@ -148,20 +149,16 @@ int render_command(const RenderArgs& args) {
   Mesh mesh = first_frame_mesh(in);
   renderer->begin(mesh);
   // The scene's colliders, drawn with the cloth at each frame's time (a plane as a square
-  // around the first frame's cloth).
+  // around the sequence's cloth).
   ColliderSet colliders;
   if (Params cp = in.root.child("colliders"); cp.valid()) colliders = ColliderSet::parse(cp, in.base_dir);
-  double focus[3] = {0, 0, 0}, plane_size = 1.0;
-  {
-    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
-    for (Index i = 0; i < mesh.num_vertices(); ++i)
-      for (int c = 0; c < 3; ++c) {
-        lo[c] = std::min(lo[c], mesh.positions[3 * i + c]);
-        hi[c] = std::max(hi[c], mesh.positions[3 * i + c]);
-      }
-    for (int c = 0; c < 3; ++c) focus[c] = 0.5 * (lo[c] + hi[c]);
-    plane_size = std::max(1e-3, 2.0 * std::hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]));
-  }
+  // Framing (render_framing.cpp): the camera fits the whole sequence, a ground with the
+  // cloth's shadow lies under its lowest point.
+  const Framing framing = frame_sequence(
+      in.frames, [](const fs::path& f, std::vector<double>& x, double* t) { read_frame_positions(f.string(), x, t); },
+      in.root, render, colliders, registry, type, renderer.get());
+  const double* focus = framing.center;
+  const double plane_size = framing.plane_size;
   // The module's optional obstacle entry point (renderer.hpp); without it the cloth only.
   RendererObstaclesFn set_obstacles = nullptr;
   if (!colliders.empty())

@@ -148,6 +148,33 @@ PointCacheWriter::PointCacheWriter(const std::string& path, int num_points, floa
     throw OutputError("cannot write " + path + " (" + std::strerror(errno) + "; disk full?)");
 }
 
+PointCacheWriter::PointCacheWriter(const std::string& path, int num_points, int keep_samples)
+    : path_(path), points_(num_points), buf_(3 * static_cast<std::size_t>(num_points)) {
+  f_ = std::fopen(path.c_str(), "r+b");
+  if (!f_)
+    throw InputError(path + ": cannot continue the point cache (" + std::strerror(errno) +
+                     "). Fix: rerun the scene with --overwrite instead of --resume.");
+  char header[32] = {0};
+  std::int32_t points = 0, samples = 0;
+  const bool read = std::fread(header, 1, 32, f_) == 32;
+  std::memcpy(&points, header + 16, 4);
+  std::memcpy(&samples, header + 28, 4);
+  if (!read || std::memcmp(header, "POINTCACHE2", 12) != 0 || points != num_points || samples < keep_samples ||
+      keep_samples < 0) {
+    std::fclose(f_);
+    f_ = nullptr;
+    throw InputError(path + ": does not match the run being resumed (" + std::to_string(points) + " points, " +
+                     std::to_string(samples) + " samples; expected " + std::to_string(num_points) + " points and at least " +
+                     std::to_string(keep_samples) + " samples). Fix: rerun the scene with --overwrite instead of --resume.");
+  }
+  samples_ = keep_samples;
+  const std::int32_t count = samples_;
+  const long end = 32L + static_cast<long>(samples_) * static_cast<long>(buf_.size()) * 4L;
+  if (std::fseek(f_, 28, SEEK_SET) != 0 || std::fwrite(&count, 4, 1, f_) != 1 || std::fflush(f_) != 0 ||
+      ::ftruncate(::fileno(f_), end) != 0)
+    throw OutputError("cannot write " + path + " (" + std::strerror(errno) + "; disk full?)");
+}
+
 PointCacheWriter::~PointCacheWriter() {
   if (f_) std::fclose(f_);
 }
@@ -227,7 +254,9 @@ std::vector<std::string> run_files_in(const std::string& dir) {
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();
     const bool frame = name.rfind("frame_", 0) == 0 && name.size() > 4 && name.compare(name.size() - 4, 4, ".obj") == 0;
-    if (frame || name == "stats.csv" || name == "run.pc2" || name == "rest.obj" || name == "scene.yaml")
+    const bool vtu = name.rfind("frame_", 0) == 0 && name.size() > 4 && name.compare(name.size() - 4, 4, ".vtu") == 0;
+    if (frame || vtu || name == "stats.csv" || name == "run.pc2" || name == "rest.obj" || name == "scene.yaml" ||
+        name == "velocity.pc2" || name == "run.pvd" || name == "restart.bin")
       out.push_back(e.path().string());
   }
   std::sort(out.begin(), out.end());

@@ -20,6 +20,9 @@
 
 #include "loom/output.hpp"
 #include "loom/pins.hpp"
+#include "loom/restart.hpp"
+#include "loom/run_output.hpp"
+#include "loom/vtk_output.hpp"
 #include "loom/threads.hpp"
 
 namespace fs = std::filesystem;
@@ -391,6 +394,12 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
     output_.uvs = out.get("uvs", false);
     output_.normals = out.get("normals", false);
     output_.lossless = out.get("lossless", false);
+    output_.vtk = out.get("vtk", false);
+    output_.velocities = out.get("velocities", false);
+    output_.restart = out.get("restart", true);
+    if (output_.velocities && !output_.vtk && !output_.pc2)
+      out.child("velocities").fail("velocities are written into the ParaView frames (vtk: true) and/or velocity.pc2 "
+                                   "beside run.pc2 (pc2: true). Fix: turn one of them on.");
     out.check_unused();
   }
   Params guard = root.child("guard");
@@ -543,7 +552,7 @@ void Simulation::claim_output_dir(const std::string& scene_text) const {
   // stats.csv first: a run killed while clearing never leaves more stats rows than frames.
   auto rank = [](const std::string& f) {
     const std::string name = fs::path(f).filename().string();
-    return name == "stats.csv" ? 0 : name == "run.pc2" ? 1 : name == "scene.yaml" ? 2 : 3;
+    return name == "restart.bin" ? -1 : name == "stats.csv" ? 0 : name == "run.pc2" ? 1 : name == "scene.yaml" ? 2 : 3;
   };
   std::vector<std::string> order = files;
   std::stable_sort(order.begin(), order.end(), [&](const std::string& a, const std::string& b) { return rank(a) < rank(b); });
@@ -562,6 +571,8 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     throw InputError(std::string("the initial state (initial_velocity, initial_scale, pins) is out of bounds, nothing was written: ") + e.what());
   }
   const bool write = !output_.dir.empty() && is_output_rank();
+  const bool resuming = resume_frame_ >= 0;
+  const int first_frame = start_frame();
   std::ofstream stats;
   std::streamoff stats_complete = 0;  // bytes of stats.csv that hold complete rows
   std::unique_ptr<OutputLock> lock;
@@ -569,15 +580,28 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   const std::string abs_base = fs::absolute(base_dir_, ec).lexically_normal().string();
   const std::string scene_text = "# The scene as it ran (overrides applied), written by loom run.\n"
                                  "# Relative paths resolve against the original scene's folder:\n"
-                                 "# loom-scene-dir: " + abs_base + "\n" + resolved_yaml_ + "\n";
+                                 "# loom-scene-dir: " + abs_base + "\n" + scene_file_line() + resolved_yaml_ + "\n";
   std::vector<double> reaction_work, reactions;
   if (write) {
     prepare_output_dir(output_.dir);
     lock = std::make_unique<OutputLock>(output_.dir);
     remove_stale_temporaries(output_.dir);
-    claim_output_dir(scene_text);
+    if (resuming) {
+      // Under the lock: the restart point must still be the one resume() read.
+      if (read_restart(output_.dir).frame != resume_frame_)
+        throw InputError("output folder '" + output_.dir + "' changed while resuming. Fix: run --resume again.");
+      trim_run_for_resume(output_.dir, resume_frame_, output_.stats);
+    } else {
+      claim_output_dir(scene_text);
+    }
     // Record exactly what ran (with --set overrides applied).
-    if (output_.stats) {
+    if (output_.stats && resuming) {
+      const std::string path = (fs::path(output_.dir) / "stats.csv").string();
+      stats_complete = static_cast<std::streamoff>(fs::file_size(path));  // trimmed to complete rows
+      stats.open(path, std::ios::app);
+      if (!stats) throw InputError("cannot write " + path + ". Fix: check the folder's permissions.");
+      stats.precision(10);
+    } else if (output_.stats) {
       stats.open((fs::path(output_.dir) / "stats.csv").string(), std::ios::trunc);
       if (!stats) throw InputError("cannot write " + output_.dir + "/stats.csv. Fix: choose a writable --out folder.");
       stats << "frame,time,kinetic_energy,gravitational_energy,elastic_energy,total_energy,max_strain,"
@@ -590,14 +614,26 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     }
   }
   const ObjOptions obj_options{output_.uvs, output_.normals, output_.lossless};
-  std::optional<PointCacheWriter> pc2;
-  if (write && output_.pc2) {
+  std::optional<PointCacheWriter> pc2, vel_pc2;
+  const std::string pc2_path = (fs::path(output_.dir) / "run.pc2").string();
+  const std::string vel_pc2_path = (fs::path(output_.dir) / "velocity.pc2").string();
+  const int points = static_cast<int>(scene_->mesh.num_vertices());
+  if (write && output_.pc2 && resuming) {
+    const int keep = first_frame / output_.every + 1;  // the samples of frames 0, every, ... <= first_frame
+    pc2.emplace(pc2_path, points, keep);
+    if (output_.velocities) vel_pc2.emplace(vel_pc2_path, points, keep);
+  } else if (write && output_.pc2) {
     // The rest pose (topology, UVs, normals) that the point cache animates.
     write_file_atomic((fs::path(output_.dir) / "rest.obj").string(),
                       obj_text(scene_->mesh, scene_->state.x, "rest pose for run.pc2", {true, true, output_.lossless}));
     // PC2's sample rate is the frame step between samples.
-    pc2.emplace((fs::path(output_.dir) / "run.pc2").string(), static_cast<int>(scene_->mesh.num_vertices()), 0.0f,
-                static_cast<float>(output_.every));
+    pc2.emplace(pc2_path, points, 0.0f, static_cast<float>(output_.every));
+    if (output_.velocities) vel_pc2.emplace(vel_pc2_path, points, 0.0f, static_cast<float>(output_.every));
+  }
+  std::optional<VtkSeriesWriter> vtk;
+  if (write && output_.vtk) {
+    vtk.emplace(output_.dir, scene_->mesh);
+    if (resuming) vtk->adopt_existing(first_frame);
   }
   auto emit = [&](int frame) {
     if (!write) return;
@@ -619,7 +655,11 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
         write_file_atomic((fs::path(output_.dir) / name).string(),
                           obj_text(scene_->mesh, scene_->state.x, "t = " + fmt(scene_->state.time) + " s", obj_options));
       }
+      if (vtk)
+        vtk->write_frame(frame, scene_->state.time, scene_->state.x,
+                         output_.velocities ? std::span<const double>(scene_->state.v) : std::span<const double>());
       if (pc2) pc2->append(scene_->state.x);
+      if (vel_pc2) vel_pc2->append(scene_->state.v);
     }
     if (output_.stats) {
       stats << f.frame << ',' << f.time << ',' << f.kinetic << ',' << f.gravitational << ',' << f.elastic << ','
@@ -644,16 +684,71 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       }
       stats_complete = stats.tellp();
     }
+    // Last: the restart point of this frame, once everything before it is on disk.
+    if (output_.restart) {
+      RestartData r;
+      r.frame = frame;
+      r.frames = frames_;
+      r.step = scene_->state.step;
+      r.time = scene_->state.time;
+      r.force_evaluations = force_evals_;
+      r.linear_iterations = linear_iters_;
+      r.x = scene_->state.x;
+      r.v = scene_->state.v;
+      r.integrator_state = integrator_->restart_state();
+      write_restart(output_.dir, r);
+    }
   };
-  if (write) write_file_atomic((fs::path(output_.dir) / "scene.yaml").string(), scene_text);
-  emit(0);
-  for (int f = 1; f <= frames_; ++f) {
+  if (write && !resuming) write_file_atomic((fs::path(output_.dir) / "scene.yaml").string(), scene_text);
+  if (!resuming) emit(0);
+  for (int f = first_frame + 1; f <= frames_; ++f) {
     step_seconds_ = 0;
     steps_in_frame_ = 0;
     advance_frame();
     emit(f);
     if (progress) progress(f, frames_);
   }
+}
+
+// "# loom-scene-file: PATH\n" (the scene file a run was made from, absolute) for scene.yaml:
+// loom run --resume builds from the copy with that name, so that plugins resolving paths
+// against their scene file (gnatv's material_file) find the same files.
+std::string Simulation::scene_file_line() const {
+  const std::string& src = scene_->source;
+  if (src.empty() || src.front() == '<') return {};
+  std::error_code ec;
+  return "# loom-scene-file: " + fs::absolute(src, ec).lexically_normal().string() + "\n";
+}
+
+int Simulation::resume(int frames) {
+  if (output_.dir.empty()) throw InputError("--resume needs the run's output folder.");
+  const RestartData r = read_restart(output_.dir);
+  frames_ = frames >= 0 ? frames : r.frames;
+  State& st = scene_->state;
+  const std::string where = output_.dir + "/restart.bin";
+  if (r.x.size() != st.x.size())
+    throw InputError(where + ": holds " + std::to_string(r.x.size() / 3) + " vertices, the scene has " +
+                     std::to_string(st.x.size() / 3) + ". Fix: resume with the scene that made the run (its scene.yaml).");
+  if (r.frame > frames_)
+    throw InputError(where + ": the run is already at frame " + std::to_string(r.frame) + " of " + std::to_string(frames_) +
+                     ". Fix: give --frames N with N > " + std::to_string(r.frame) + " to continue it further.");
+  if (r.frame == frames_ && frames < 0)
+    throw InputError(where + ": the run is complete (frame " + std::to_string(r.frame) + " of " + std::to_string(frames_) +
+                     "): nothing to resume. Fix: give --frames N with N > " + std::to_string(r.frame) + " to continue it.");
+  for (std::size_t i = 0; i < r.x.size(); ++i)
+    if (!std::isfinite(r.x[i]) || !std::isfinite(r.v[i])) throw InputError(where + ": holds non-finite values. Fix: rerun with --overwrite.");
+  st.x = r.x;
+  st.v = r.v;
+  st.time = r.time;
+  st.step = r.step;
+  force_evals_ = r.force_evaluations;
+  linear_iters_ = r.linear_iterations;
+  if (!integrator_->set_restart_state(r.integrator_state))
+    throw InputError(where + ": its integrator state (" + std::to_string(r.integrator_state.size()) +
+                     " numbers) does not fit integrator '" + integrator_name_ +
+                     "'. Fix: resume with the scene that made the run, or rerun it with --overwrite.");
+  resume_frame_ = r.frame;
+  return r.frame;
 }
 
 }  // namespace loom

@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "loom/restart.hpp"
 #include "loom/simulation.hpp"
 
 namespace fs = std::filesystem;
@@ -171,7 +172,11 @@ TEST_F(Fixture, DivergenceNamesStepVertexValueAndKeepsFrames) {
     ++files;
     EXPECT_EQ(f.path().string().find(".tmp"), std::string::npos);
   }
-  EXPECT_EQ(files, 6);  // 3 frames + stats.csv + scene.yaml + the run's lock file .loom.lock
+  EXPECT_EQ(files, 7);  // 3 frames + stats.csv + scene.yaml + restart.bin + the run's lock file .loom.lock
+  // The restart point is the last complete frame (loom run --resume continues from it).
+  const loom::RestartData restart = loom::read_restart(out.string());
+  EXPECT_EQ(restart.frame, 2);
+  EXPECT_EQ(restart.step, 10);
   std::ifstream stats(out / "stats.csv");
   std::string line;
   int lines = 0;

@@ -40,6 +40,11 @@ class Integrator {
   /// True when step() honours scene.colliders itself (as constraints, like Baraff-Witkin).
   /// Otherwise the framework resolves contacts after each step (ColliderSet::resolve_contacts).
   virtual bool handles_contacts() const { return false; }
+  /// What step() carries from one step to the next besides positions and velocities (a warm
+  /// start, the active contacts), for an exact restart (loom run --resume). Default: nothing.
+  virtual std::vector<double> restart_state() const { return {}; }
+  /// Restore what restart_state() returned (after prepare()); false when it does not fit.
+  virtual bool set_restart_state(const std::vector<double>& s) { return s.empty(); }
 };
 
 /// Shared helper: advance time bookkeeping after a step of size h.

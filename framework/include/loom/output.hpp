@@ -33,6 +33,10 @@ std::string obj_text(const Mesh& mesh, std::span<const double> x, const std::str
 class PointCacheWriter {
  public:
   PointCacheWriter(const std::string& path, int num_points, float start_frame = 0.0f, float sample_rate = 1.0f);
+  /// Continue an existing cache (loom run --resume): keep its first keep_samples samples and
+  /// append after them. Throws InputError when the file is missing, has another point count or
+  /// fewer samples.
+  PointCacheWriter(const std::string& path, int num_points, int keep_samples);
   ~PointCacheWriter();
   PointCacheWriter(const PointCacheWriter&) = delete;
   PointCacheWriter& operator=(const PointCacheWriter&) = delete;
@@ -67,8 +71,8 @@ class OutputLock {
 /// Remove temporary files (NAME.tmp.PID) that a killed run left in dir; returns how many.
 int remove_stale_temporaries(const std::string& dir);
 
-/// Files a run writes that are present in dir (frame_*.obj, stats.csv, run.pc2, rest.obj,
-/// scene.yaml), sorted.
+/// Files a run writes that are present in dir (frame_*.obj, frame_*.vtu, stats.csv, run.pc2,
+/// velocity.pc2, run.pvd, rest.obj, restart.bin, scene.yaml), sorted.
 std::vector<std::string> run_files_in(const std::string& dir);
 
 /// False on MPI ranks other than 0 (OMPI_COMM_WORLD_RANK / PMI_RANK), which write nothing.

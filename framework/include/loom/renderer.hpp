@@ -29,6 +29,17 @@ class Renderer {
 using RendererObstaclesFn = void (*)(Renderer*, const float*, const float*, std::size_t);
 inline constexpr const char* kRendererObstaclesSymbol = "loom_renderer_set_obstacles";
 
+/// Optional framing entry points of a renderer module, found by dlsym like the obstacles:
+/// `extern "C" void loom_renderer_fit_camera(loom::Renderer*, const float lo[3], const float hi[3])`
+/// fits the default camera to a box (loom render passes the bounds of the whole sequence), and
+/// `extern "C" void loom_renderer_set_ground(loom::Renderer*, const float point[3],
+/// const float normal[3], float half_size)` draws a ground square with the cloth's shadow.
+/// Both are called after begin().
+using RendererFitCameraFn = void (*)(Renderer*, const float*, const float*);
+inline constexpr const char* kRendererFitCameraSymbol = "loom_renderer_fit_camera";
+using RendererGroundFn = void (*)(Renderer*, const float*, const float*, float);
+inline constexpr const char* kRendererGroundSymbol = "loom_renderer_set_ground";
+
 /// What `loom view` hands a renderer module's optional interactive viewer. A module that has
 /// one exports `extern "C" int loom_renderer_view(const loom::RendererViewArgs&)` (found by
 /// dlsym; see kRendererViewSymbol); it returns an exit code and throws InputError on bad input.

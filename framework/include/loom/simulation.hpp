@@ -31,6 +31,9 @@ struct OutputOptions {
   bool uvs = false;            ///< OBJ frames carry vt (when the mesh has UVs)
   bool normals = false;        ///< OBJ frames carry vn
   bool lossless = false;       ///< OBJ coordinates in full double precision
+  bool vtk = false;            ///< ParaView: frame_NNNNN.vtu per written frame and run.pvd (loom/vtk_output.hpp)
+  bool velocities = false;     ///< per-vertex velocities: a "velocity" array in the .vtu frames, velocity.pc2
+  bool restart = true;         ///< restart.bin after every frame, for loom run --resume (loom/restart.hpp)
 };
 
 /// Thrown by Simulation::step when request_stop() was called (Ctrl-C): the frames written so
@@ -107,11 +110,21 @@ class Simulation {
   /// after the frames written so far are on disk.
   void run(const std::function<void(int, int)>& progress = {});
 
+  /// Continue the stopped run in output().dir (loom run --resume) from the last complete frame
+  /// of its restart.bin: positions, velocities, time, step, counters and the integrator's
+  /// carried state are restored, and run() then writes the frames after it. Returns that frame.
+  /// frames >= 0: the run's new last frame (else the frames the run was started with).
+  /// Throws InputError when the restart point does not fit this scene.
+  int resume(int frames = -1);
+  /// The frame the run starts from (0, or the frame resume() restored).
+  int start_frame() const { return resume_frame_ < 0 ? 0 : resume_frame_; }
+
  private:
   Simulation();
   void build(const Params& root, const std::string& base_dir, PluginLoader& loader);
   void check_state(bool check_strain);
   void claim_output_dir(const std::string& scene_text) const;
+  std::string scene_file_line() const;
 
   std::unique_ptr<Scene> scene_;
   std::unique_ptr<Integrator> integrator_;
@@ -123,6 +136,7 @@ class Simulation {
   int substeps_ = 1;
   int frames_ = 1;
   bool prepared_ = false;
+  int resume_frame_ = -1;
   OutputOptions output_;
   GuardOptions guard_;
   long long force_evals_ = 0, linear_iters_ = 0;

@@ -446,4 +446,17 @@ void BaraffWitkin::step(Scene& scene, double h) {
   last_ = st;
 }
 
+std::vector<double> BaraffWitkin::restart_state() const {
+  std::vector<double> s(dv_.begin(), dv_.end());
+  for (char c : in_contact_) s.push_back(c ? 1.0 : 0.0);
+  return s;
+}
+
+bool BaraffWitkin::set_restart_state(const std::vector<double>& s) {
+  if (s.size() != dv_.size() + in_contact_.size()) return false;
+  std::copy(s.begin(), s.begin() + static_cast<std::ptrdiff_t>(dv_.size()), dv_.begin());
+  for (std::size_t i = 0; i < in_contact_.size(); ++i) in_contact_[i] = s[dv_.size() + i] != 0.0;
+  return true;
+}
+
 }  // namespace loom

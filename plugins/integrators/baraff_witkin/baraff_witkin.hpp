@@ -52,6 +52,9 @@ class BaraffWitkin final : public Integrator {
   StepStats last_step() const override { return last_; }
   /// Contacts with the scene's colliders become constraints of the filter (see contacts below).
   bool handles_contacts() const override { return true; }
+  /// The warm start dv and the per-vertex contact flags (loom run --resume restarts exactly).
+  std::vector<double> restart_state() const override;
+  bool set_restart_state(const std::vector<double>& s) override;
   /// Vertices constrained by a collider in the last step (after releases).
   int contact_count() const { return static_cast<int>(contacts_.size()); }
 

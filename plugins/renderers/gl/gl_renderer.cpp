@@ -203,6 +203,9 @@ GlRenderer::~GlRenderer() {
     if (obstacle_program_) glDeleteProgram(obstacle_program_);
     if (obstacle_vao_) glDeleteVertexArrays(1, &obstacle_vao_);
     if (obstacle_vao_) glDeleteBuffers(2, obstacle_vbo_);
+    if (ground_program_) glDeleteProgram(ground_program_);
+    if (ground_vao_) glDeleteVertexArrays(1, &ground_vao_);
+    if (ground_vbo_) glDeleteBuffers(1, &ground_vbo_);
     if (vao_) glDeleteVertexArrays(1, &vao_);
     glDeleteBuffers(4, vbo_);
     if (ebo_) glDeleteBuffers(1, &ebo_);
@@ -393,6 +396,7 @@ void GlRenderer::draw(unsigned fbo, int w, int h) {
   glDepthFunc(GL_LEQUAL);
   glClearColor(settings_.background.x, settings_.background.y, settings_.background.z, 1.0f);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  draw_ground();
   glUseProgram(program_);
   glBindVertexArray(vao_);
   glDrawElements(GL_TRIANGLES, GLsizei(triangles_.size()), GL_UNSIGNED_INT, nullptr);
@@ -402,6 +406,10 @@ void GlRenderer::draw(unsigned fbo, int w, int h) {
     glDrawArrays(GL_TRIANGLES, 0, GLsizei(obstacle_vertices_));
   }
   glBindVertexArray(0);
+}
+
+void GlRenderer::make_current() {
+  if (egl_) egl_->make_current();
 }
 
 void GlRenderer::set_camera(const Camera& cam) {

@@ -96,6 +96,14 @@ class GlRenderer final : public Renderer {
   /// Colliders to draw (plain grey, Lambert) with the following frames (the module's
   /// loom_renderer_set_obstacles; see renderer.hpp).
   void set_obstacles(std::span<const float> positions, std::span<const float> normals);
+  /// Fit the default camera (and the light that follows it) to a box, e.g. the bounds of a
+  /// whole sequence (loom render), instead of the first frame given to begin().
+  void fit_camera(glm::vec3 lo, glm::vec3 hi);
+  /// Draw a ground: the square of half size `half_size` around `point` on the plane with
+  /// `normal` (pointing up), and the cloth's shadow on it (ground.cpp).
+  void set_ground(glm::vec3 point, glm::vec3 normal, float half_size);
+  /// The ground's reflectance (linear RGB).
+  static constexpr glm::vec3 kGroundAlbedo{0.80f, 0.78f, 0.74f};
 
   /// Render positions x into the RGB image returned (width*height*3 bytes, top row first).
   const std::vector<unsigned char>& render_image(std::span<const double> x);
@@ -114,6 +122,9 @@ class GlRenderer final : public Renderer {
  private:
   void create_gl_objects();
   void set_uniforms();
+  void update_light();
+  void draw_ground();
+  void make_current();  ///< the headless context, when this renderer owns one
   RenderSettings settings_;
   std::unique_ptr<EglContext> egl_;
   Camera camera_;
@@ -124,6 +135,10 @@ class GlRenderer final : public Renderer {
   std::vector<unsigned char> readback_, image_;
   unsigned program_ = 0, vao_ = 0, vbo_[4] = {0, 0, 0, 0}, ebo_ = 0, fbo_ = 0, rb_color_ = 0, rb_depth_ = 0;
   unsigned obstacle_program_ = 0, obstacle_vao_ = 0, obstacle_vbo_[2] = {0, 0};
+  unsigned ground_program_ = 0, ground_vao_ = 0, ground_vbo_ = 0;
+  bool ground_ = false;
+  glm::vec3 ground_point_{0.0f}, ground_normal_{0.0f, 1.0f, 0.0f};
+  float ground_size_ = 1.0f;
   std::size_t obstacle_vertices_ = 0;
   bool begun_ = false;
   bool external_context_ = false;

@@ -17,3 +17,14 @@ LOOM_PLUGIN_EXPORT void loom_renderer_set_obstacles(loom::Renderer* r, const flo
   if (auto* gl = dynamic_cast<loom::render::GlRenderer*>(r))
     gl->set_obstacles({positions, floats}, {normals, floats});
 }
+
+// Framing for `loom render` (renderer.hpp: kRendererFitCameraSymbol, kRendererGroundSymbol).
+LOOM_PLUGIN_EXPORT void loom_renderer_fit_camera(loom::Renderer* r, const float* lo, const float* hi) {
+  if (auto* gl = dynamic_cast<loom::render::GlRenderer*>(r))
+    gl->fit_camera(glm::vec3(lo[0], lo[1], lo[2]), glm::vec3(hi[0], hi[1], hi[2]));
+}
+LOOM_PLUGIN_EXPORT void loom_renderer_set_ground(loom::Renderer* r, const float* point, const float* normal,
+                                                    float half_size) {
+  if (auto* gl = dynamic_cast<loom::render::GlRenderer*>(r))
+    gl->set_ground(glm::vec3(point[0], point[1], point[2]), glm::vec3(normal[0], normal[1], normal[2]), half_size);
+}

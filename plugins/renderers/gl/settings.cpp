@@ -184,6 +184,8 @@ RenderSettings parse_render_settings(const Params& render, const std::string& ba
   render.mark_used("type");
   render.mark_used("video");
   render.mark_used("fps");
+  render.mark_used("fit");     // read by loom render (render_cmd.cpp): sequence | first_frame
+  render.mark_used("ground");  // read by loom render: true | false
   auto read_size = [&](const char* key, int def) {
     const std::int64_t v = render.get(key, std::int64_t(def));
     if (v < 1 || v > 8192) render.child(key).fail(std::string(key) + " must be between 1 and 8192 pixels.");

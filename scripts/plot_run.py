@@ -1,0 +1,76 @@
+#!/usr/bin/env python3
+"""Plot the stats.csv of a Loom run: energies, largest strain, solver work and time per step
+against simulated time (what `loom plot RUN_DIR` draws).
+
+usage: plot_run.py stats.csv stats.png
+Exit 3 when matplotlib cannot be imported (loom plot then names the package to install)."""
+import csv
+import os
+import sys
+
+
+def _import_matplotlib():
+    """matplotlib comes from Debian's python3-matplotlib: if this interpreter (a pyenv or venv
+    python) lacks it, run the script again with the system's python3; exit 3 if that fails too."""
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError:
+        system = "/usr/bin/python3"
+        if os.path.exists(system) and os.path.realpath(sys.executable) != os.path.realpath(system):
+            os.execv(system, [system] + sys.argv)
+        sys.stderr.write("plot_run.py: python3 cannot import matplotlib\n")
+        sys.exit(3)
+
+
+def main(src, dst):
+    _import_matplotlib()
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with open(src, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        sys.exit(f"plot_run.py: {src} has no rows")
+    t = [float(r["time"]) for r in rows]
+    col = lambda k: [float(r[k]) for r in rows]  # noqa: E731
+    # force_evaluations and linear_iterations are running totals: per frame = differences.
+    def per_frame(k):
+        v = col(k)
+        return [0.0] + [b - a for a, b in zip(v, v[1:])]
+
+    fig, ax = plt.subplots(2, 2, figsize=(11, 7), sharex=True)
+    e = ax[0][0]
+    for k, label in (("kinetic_energy", "kinetic"), ("gravitational_energy", "gravitational"),
+                     ("elastic_energy", "elastic"), ("total_energy", "total")):
+        e.plot(t, col(k), label=label, lw=2 if k == "total_energy" else 1)
+    e.set_ylabel("energy (J)")
+    e.legend(fontsize=8)
+    e.set_title("energies")
+    s = ax[0][1]
+    s.plot(t, col("max_strain"), color="C3")
+    s.set_ylabel("largest strain")
+    s.set_title("largest strain")
+    it = ax[1][0]
+    it.plot(t, per_frame("linear_iterations"), label="linear iterations", color="C4")
+    it.plot(t, per_frame("force_evaluations"), label="force evaluations", color="C5")
+    it.set_ylabel("per frame")
+    it.set_title("solver work")
+    it.legend(fontsize=8)
+    w = ax[1][1]
+    w.plot(t, col("wall_ms_per_step"), color="C2")
+    w.set_ylabel("wall time per step (ms)")
+    w.set_title("step time")
+    for a in (it, w):
+        a.set_xlabel("simulated time (s)")
+    for a in fig.axes:
+        a.grid(True, alpha=0.3)
+    fig.suptitle(os.path.basename(os.path.dirname(os.path.abspath(src))) or src)
+    fig.tight_layout()
+    fig.savefig(dst, dpi=100)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        sys.exit(__doc__)
+    main(sys.argv[1], sys.argv[2])
