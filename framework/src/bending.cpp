@@ -1,5 +1,7 @@
 #include "loom/bending.hpp"
 
+#include "loom/device_material.hpp"
+
 #include <omp.h>
 
 #include <algorithm>
@@ -275,6 +277,25 @@ std::vector<std::pair<std::string, std::string>> BentMaterial::describe() const 
   return d;
 }
 
+bool BentMaterial::describe_device(DeviceDescription& out) const {
+  DeviceDescription d;
+  if (!membrane_->describe_device(d)) return false;
+  ElementBlock b;
+  b.kernel = ElementKernel::Hinge;
+  b.flags = hinges_.options().exact_jacobian ? ElementBlock::kExactJacobian : 0u;
+  const Index nh = hinges_.num_hinges();
+  b.vertices.resize(4 * static_cast<std::size_t>(nh));
+  b.data.resize(2 * static_cast<std::size_t>(nh));
+  for (Index h = 0; h < nh; ++h) {
+    for (int a = 0; a < 4; ++a) b.vertices[4 * h + a] = hinges_.hinges()[h][a];
+    b.data[2 * h] = hinges_.rest()[h].k;
+    b.data[2 * h + 1] = hinges_.rest()[h].theta0;
+  }
+  d.blocks.push_back(std::move(b));
+  for (auto& blk : d.blocks) out.blocks.push_back(std::move(blk));
+  return true;
+}
+
 void BentMaterial::jacobian_pairs(std::vector<std::array<Index, 2>>& pairs) const {
   membrane_->jacobian_pairs(pairs);
   hinges_.jacobian_pairs(pairs);
@@ -294,9 +315,9 @@ void BentMaterial::compute_jacobians(std::span<const double> x, std::span<const 
 std::unique_ptr<Material> add_bending(std::unique_ptr<Material> material, const Params& bending, const Mesh& mesh,
                                       const std::string& backend) {
   if (!bending.valid()) return material;
-  if (backend != "cpu")
+  if (backend != "cpu" && backend != "cuda")  // cuda: the Hinge block of describe_device()
     bending.fail("bending is not supported on backend '" + backend +
-                 "' yet (its device code has no hinge forces). Fix: set backend: cpu, or remove the bending block.");
+                 "' (it has no hinge kernel). Fix: set backend: cpu or cuda, or remove the bending block.");
   const BendingOptions opt = read_bending_options(bending);
   auto m = std::make_unique<BentMaterial>(std::move(material), mesh, opt);
   for (const auto& w : m->hinges().warnings()) std::cerr << "loom: warning: " << w << "\n";

@@ -87,6 +87,8 @@ class BentMaterial final : public Material {
   /// No springs: a per-spring integrator would ignore the hinges.
   const SpringSet* springs() const override { return nullptr; }
   std::vector<std::pair<std::string, std::string>> describe() const override;
+  /// The membrane's blocks plus one Hinge block; false when the membrane has none.
+  bool describe_device(DeviceDescription& out) const override;
 
   bool has_jacobian() const override { return membrane_->has_jacobian(); }
   void jacobian_pairs(std::vector<std::array<Index, 2>>& pairs) const override;
@@ -104,8 +106,8 @@ class BentMaterial final : public Material {
 };
 
 /// The scene hook: returns `material` unchanged when `bending` is not a valid node, else
-/// reads the block and wraps the material. Refuses backends other than cpu (the CUDA
-/// backend has no device version of the adapter yet). Prints the non-manifold warnings.
+/// reads the block and wraps the material. Refuses backends other than cpu and cuda (the
+/// CUDA backend runs the hinges through describe_device()). Prints the non-manifold warnings.
 std::unique_ptr<Material> add_bending(std::unique_ptr<Material> material, const Params& bending, const Mesh& mesh,
                                       const std::string& backend);
 

@@ -15,6 +15,7 @@ namespace loom {
 
 struct Mesh;
 struct State;
+struct DeviceDescription;
 
 class Material {
  public:
@@ -54,6 +55,14 @@ class Material {
                                  BsrMatrix& dfdx, BsrMatrix* dfdv) const {
     (void)x; (void)v; (void)dfdx; (void)dfdv;
   }
+
+  // ---- Device backends ----
+  /// The material's elements as plain arrays plus the per-element kernel ids
+  /// (loom/device_material.hpp), for backends that run the kernels themselves (CUDA). Called
+  /// once at set-up. Append blocks to `out` and return true when they reproduce
+  /// compute_forces / compute_jacobians exactly; return false (the default) to be evaluated
+  /// on the host instead.
+  virtual bool describe_device(DeviceDescription& out) const { (void)out; return false; }
 };
 
 }  // namespace loom

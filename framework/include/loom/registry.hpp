@@ -25,7 +25,7 @@
 namespace loom {
 
 /// Bumped whenever an interface in framework/include/loom changes incompatibly.
-constexpr int kPluginAbiVersion = 3;  // 2: LinearSolver::set_coordinates; 3: Integrator::restart_state
+constexpr int kPluginAbiVersion = 4;  // 2: LinearSolver::set_coordinates; 3: Integrator::restart_state; 4: Material::describe_device
 
 enum class PluginKind { Material, Integrator, Solver, Renderer };
 const char* to_string(PluginKind k);

@@ -4,21 +4,14 @@
 #include <stdexcept>
 
 #include "device_model.hpp"
+#include "loom/kernels/bending.hpp"
 #include "loom/kernels/spring.hpp"
-
-#ifdef LOOM_CUDA_WITH_MASS_SPRING
-#include "mass_spring.hpp"
-#endif
-#ifdef LOOM_CUDA_WITH_GNATV
-#include "gnatv_material.hpp"
-#endif
 
 namespace loom::cuda {
 
 const char* to_string(ForceModelKind k) {
   switch (k) {
-    case ForceModelKind::Springs: return "springs on device";
-    case ForceModelKind::Gnatv: return "gnatv triangles on device";
+    case ForceModelKind::Device: return "device kernels";
     case ForceModelKind::Host: return "host material (copies per evaluation)";
   }
   return "?";
@@ -48,6 +41,7 @@ struct GatherForce {
   const signed char* sign;
   const T* g;
   T* f;
+  bool accumulate;  // add to f (another block wrote it first) instead of overwriting
   LOOM_HD void operator()(Index i) const {
     T a0 = T(0), a1 = T(0), a2 = T(0);
     for (Index e = ptr[i]; e < ptr[i + 1]; ++e) {
@@ -57,6 +51,11 @@ struct GatherForce {
       } else {
         a0 -= gs[0]; a1 -= gs[1]; a2 -= gs[2];
       }
+    }
+    if (accumulate) {
+      a0 += f[3LL * i];
+      a1 += f[3LL * i + 1];
+      a2 += f[3LL * i + 2];
     }
     f[3LL * i] = a0;
     f[3LL * i + 1] = a1;
@@ -84,8 +83,10 @@ struct GatherBlocks {
   const Index *row_ptr, *diag, *ptr, *spring, *block;
   const T* kb;
   T* A;
+  bool accumulate;  // add to the row (another block wrote it first) instead of overwriting
   LOOM_HD void operator()(Index i) const {
-    for (long long q = 9LL * row_ptr[i]; q < 9LL * row_ptr[i + 1]; ++q) A[q] = T(0);
+    if (!accumulate)
+      for (long long q = 9LL * row_ptr[i]; q < 9LL * row_ptr[i + 1]; ++q) A[q] = T(0);
     T* D = A + 9LL * diag[i];
     for (Index e = ptr[i]; e < ptr[i + 1]; ++e) {
       const T* B = kb + 9LL * spring[e];
@@ -98,11 +99,22 @@ struct GatherBlocks {
   }
 };
 
-// ---- gnatv: one launch per colour ----
+// ---- coloured elements (GnatvTriangle, Hinge): one launch per colour ----
+template <class T>
+LOOM_HD inline gnatv::RestTriangle<T> rest_triangle(const T* d) {
+  gnatv::RestTriangle<T> r;
+  for (int a = 0; a < 3; ++a) {
+    r.ru[a] = d[a];
+    r.rv[a] = d[3 + a];
+  }
+  r.area = d[6];
+  return r;
+}
+
 template <class T>
 struct GnatvForces {
   const Index* tri;
-  const gnatv::RestTriangle<T>* rest;
+  const T* data;
   gnatv::Curves<T> curves;
   const T* x;
   T* f;
@@ -111,7 +123,7 @@ struct GnatvForces {
     T P[3][3], F[3][3];
     for (int j = 0; j < 3; ++j)
       for (int k = 0; k < 3; ++k) P[j][k] = x[3LL * tv[j] + k];
-    gnatv::forces(rest[t], curves, P, F);
+    gnatv::forces(rest_triangle(data + 7LL * t), curves, P, F);
     for (int j = 0; j < 3; ++j)
       for (int k = 0; k < 3; ++k) f[3LL * tv[j] + k] += F[j][k];
   }
@@ -120,7 +132,7 @@ struct GnatvForces {
 template <class T>
 struct GnatvJacobian {
   const Index *tri, *scatter;
-  const gnatv::RestTriangle<T>* rest;
+  const T* data;
   gnatv::Curves<T> curves;
   bool psd;
   const T* x;
@@ -130,7 +142,7 @@ struct GnatvJacobian {
     T P[3][3], J[3][3][9];
     for (int j = 0; j < 3; ++j)
       for (int k = 0; k < 3; ++k) P[j][k] = x[3LL * tv[j] + k];
-    gnatv::jacobian(rest[t], curves, P, psd, J);
+    gnatv::jacobian(rest_triangle(data + 7LL * t), curves, P, psd, J);
     const Index* sc = scatter + 9LL * t;
     for (int b = 0; b < 9; ++b) {
       T* dst = A + 9LL * sc[b];
@@ -141,13 +153,54 @@ struct GnatvJacobian {
 };
 
 template <class T>
+struct HingeForces {
+  const Index* hv;
+  const T* data;  // {k, theta0} per hinge
+  const T* x;
+  T* f;
+  LOOM_HD void operator()(Index h) const {
+    const Index* v = hv + 4LL * h;
+    T P[4][3], F[4][3];
+    for (int a = 0; a < 4; ++a)
+      for (int k = 0; k < 3; ++k) P[a][k] = x[3LL * v[a] + k];
+    const bending::RestHinge<T> r{data[2LL * h], data[2LL * h + 1]};
+    bending::forces(r, P, F);
+    for (int a = 0; a < 4; ++a)
+      for (int k = 0; k < 3; ++k) f[3LL * v[a] + k] += F[a][k];
+  }
+};
+
+template <class T>
+struct HingeJacobian {  // the kernel's Jacobian is in double (its exact Hessian uses dual numbers)
+  const Index *hv, *scatter;
+  const T* data;
+  bool exact;
+  const T* x;
+  T* A;
+  LOOM_HD void operator()(Index h) const {
+    const Index* v = hv + 4LL * h;
+    double P[4][3], J[4][4][9];
+    for (int a = 0; a < 4; ++a)
+      for (int k = 0; k < 3; ++k) P[a][k] = static_cast<double>(x[3LL * v[a] + k]);
+    const bending::RestHinge<double> r{static_cast<double>(data[2LL * h]), static_cast<double>(data[2LL * h + 1])};
+    bending::jacobian(r, P, exact, J);
+    const Index* sc = scatter + 16LL * h;
+    for (int b = 0; b < 16; ++b) {
+      T* dst = A + 9LL * sc[b];
+      const double* src = J[b / 4][b % 4];
+      for (int q = 0; q < 9; ++q) dst[q] += static_cast<T>(src[q]);
+    }
+  }
+};
+
+template <class T>
 void warn_host_fallback(const std::string& name) {
   static bool once = false;
   if (once) return;
   once = true;
   std::fprintf(stderr,
-               "loom: backend cuda: material '%s' has no device version; its forces are computed on the host "
-               "(x, v and f are copied for every evaluation)\n",
+               "loom: backend cuda: material '%s' has no device description (Material::describe_device); its forces "
+               "are computed on the host (x, v and f are copied for every evaluation)\n",
                name.c_str());
 }
 
@@ -160,140 +213,24 @@ void DeviceForceModel<T>::build(const Scene& scene, const BsrPattern* pattern) {
   n_ = scene.state.size();
   pattern_ = pattern;
   kind_ = ForceModelKind::Host;
-#ifdef LOOM_CUDA_WITH_MASS_SPRING
-  if (const auto* ms = dynamic_cast<const mass_spring::MassSpringMaterial*>(material_)) {
-    kind_ = ForceModelKind::Springs;
-    const SpringSet& s = *ms->springs();
-    const Index S = s.size();
-    clamp_ = ms->clamp_compressed();
-    damped_ = false;
-    for (double c : s.damping) damped_ = damped_ || c != 0.0;
-    cuda::upload(s.i, si_);
-    cuda::upload(s.j, sj_);
-    cuda::upload(s.rest_length, l0_);
-    cuda::upload(s.stiffness, k_);
-    cuda::upload(s.damping, c_);
-    // Incidence: vertex -> (spring, sign), springs in increasing order.
-    std::vector<Index> ptr(n_ + 1, 0), sp(2 * static_cast<std::size_t>(S)), blk;
-    std::vector<signed char> sg(2 * static_cast<std::size_t>(S));
-    for (Index q = 0; q < S; ++q) {
-      ptr[s.i[q] + 1]++;
-      ptr[s.j[q] + 1]++;
-    }
-    for (Index i = 0; i < n_; ++i) ptr[i + 1] += ptr[i];
-    std::vector<Index> fillp(ptr.begin(), ptr.end() - 1);
-    for (Index q = 0; q < S; ++q) {
-      sp[fillp[s.i[q]]] = q;
-      sg[fillp[s.i[q]]++] = 1;
-      sp[fillp[s.j[q]]] = q;
-      sg[fillp[s.j[q]]++] = -1;
-    }
+  kernels_.clear();
+  springs_.clear();
+  coloured_.clear();
+  DeviceDescription desc;
+  if (material_->describe_device(desc)) {
+    validate(desc, n_, material_->name());
+    kind_ = ForceModelKind::Device;
     if (pattern) {
-      blk.resize(sp.size());
-      for (Index i = 0; i < n_; ++i)
-        for (Index e = ptr[i]; e < ptr[i + 1]; ++e) {
-          const Index q = sp[e];
-          const Index other = sg[e] > 0 ? s.j[q] : s.i[q];
-          blk[e] = pattern->find(i, other);
-          if (blk[e] < 0) throw std::logic_error("backend cuda: a spring is missing from the Jacobian pattern");
-        }
-      cuda::upload(blk, inc_block_);
       cuda::upload(pattern->row_ptr, pat_row_ptr_);
       cuda::upload(pattern->diag, pat_diag_);
-      per_spring_d_.assign(damped_ ? 9 * static_cast<std::size_t>(S) : 0, T(0));
     }
-    cuda::upload(ptr, inc_ptr_);
-    cuda::upload(sp, inc_spring_);
-    cuda::upload(sg, inc_sign_);
-    per_spring_.assign((pattern ? 9 : 3) * static_cast<std::size_t>(S), T(0));
+    // Spring blocks first: the first one overwrites f and the Jacobian rows, the rest add.
+    for (const ElementBlock& b : desc.blocks)
+      if (b.kernel == ElementKernel::Spring) add_springs(b, pattern);
+    for (const ElementBlock& b : desc.blocks)
+      if (b.kernel != ElementKernel::Spring) add_coloured(b, pattern);
     return;
   }
-#endif
-#ifdef LOOM_CUDA_WITH_GNATV
-  if (const auto* gm = dynamic_cast<const gnatv::GnatvMaterial*>(material_)) {
-    kind_ = ForceModelKind::Gnatv;
-    psd_ = gm->psd_projection();
-    // Own greedy vertex colouring (triangles of one colour share no vertex), independent of
-    // the material's internal execution order: triangles stored colour by colour.
-    const auto& all = gm->triangles();
-    const Index nt = static_cast<Index>(all.size());
-    std::vector<std::uint64_t> used(n_, 0);
-    std::vector<int> colour(nt);
-    int ncol = 0;
-    for (Index t = 0; t < nt; ++t) {
-      const std::uint64_t busy = used[all[t][0]] | used[all[t][1]] | used[all[t][2]];
-      int c = 0;
-      while (c < 64 && (busy >> c) & 1u) ++c;
-      if (c == 64) throw std::logic_error("backend cuda: more than 64 triangle colours (a vertex in > 63 triangles)");
-      colour[t] = c;
-      ncol = std::max(ncol, c + 1);
-      for (int a = 0; a < 3; ++a) used[all[t][a]] |= std::uint64_t(1) << c;
-    }
-    colour_start_.assign(ncol + 1, 0);
-    for (Index t = 0; t < nt; ++t) colour_start_[colour[t] + 1]++;
-    for (int c = 0; c < ncol; ++c) colour_start_[c + 1] += colour_start_[c];
-    std::vector<Index> order(nt);
-    {
-      std::vector<Index> pos(colour_start_.begin(), colour_start_.end() - 1);
-      for (Index t = 0; t < nt; ++t) order[pos[colour[t]]++] = t;
-    }
-    std::vector<std::array<Index, 3>> tris(nt);
-    for (Index k = 0; k < nt; ++k) tris[k] = all[order[k]];
-    std::vector<Index> tv(3 * static_cast<std::size_t>(nt));
-    for (Index t = 0; t < nt; ++t)
-      for (int a = 0; a < 3; ++a) tv[3 * t + a] = tris[t][a];
-    cuda::upload(tv, tri_);
-    std::vector<gnatv::RestTriangle<T>> rest(nt);
-    for (Index t = 0; t < nt; ++t) {
-      const auto& r = gm->rest()[order[t]];
-      for (int a = 0; a < 3; ++a) {
-        rest[t].ru[a] = static_cast<T>(r.ru[a]);
-        rest[t].rv[a] = static_cast<T>(r.rv[a]);
-      }
-      rest[t].area = static_cast<T>(r.area);
-    }
-    rest_.assign(rest.begin(), rest.end());
-    // Curves: x, y, m, cum of the three curves in one device array.
-    const CurveView<double>* cv[3] = {&gm->curves().uu, &gm->curves().vv, &gm->curves().uv};
-    std::vector<double> data;
-    std::size_t off[3];
-    for (int c = 0; c < 3; ++c) {
-      off[c] = data.size();
-      const int m = cv[c]->n;
-      data.insert(data.end(), cv[c]->x, cv[c]->x + m);
-      data.insert(data.end(), cv[c]->y, cv[c]->y + m);
-      data.insert(data.end(), cv[c]->m, cv[c]->m + m);
-      data.insert(data.end(), cv[c]->cum, cv[c]->cum + m);
-    }
-    cuda::upload(data, curve_data_);
-    CurveView<T>* out[3] = {&curves_.uu, &curves_.vv, &curves_.uv};
-    for (int c = 0; c < 3; ++c) {
-      const int m = cv[c]->n;
-      const T* base = raw(curve_data_) + off[c];
-      out[c]->x = base;
-      out[c]->y = base + m;
-      out[c]->m = base + 2 * m;
-      out[c]->cum = base + 3 * m;
-      out[c]->n = m;
-      out[c]->inv_step = static_cast<T>(cv[c]->inv_step);
-      out[c]->left_slope = static_cast<T>(cv[c]->left_slope);
-      out[c]->right_slope = static_cast<T>(cv[c]->right_slope);
-      out[c]->w_offset = static_cast<T>(cv[c]->w_offset);
-    }
-    if (pattern) {
-      std::vector<Index> sc(9 * static_cast<std::size_t>(nt));
-      for (Index t = 0; t < nt; ++t)
-        for (int j = 0; j < 3; ++j)
-          for (int i = 0; i < 3; ++i) {
-            const Index k = pattern->find(tris[t][j], tris[t][i]);
-            if (k < 0) throw std::logic_error("backend cuda: a triangle is missing from the Jacobian pattern");
-            sc[9 * t + 3 * j + i] = k;
-          }
-      cuda::upload(sc, tri_scatter_);
-    }
-    return;
-  }
-#endif
   warn_host_fallback<T>(material_->name());
   hx_.assign(3 * static_cast<std::size_t>(n_), 0.0);
   hv_ = hx_;
@@ -305,69 +242,195 @@ void DeviceForceModel<T>::build(const Scene& scene, const BsrPattern* pattern) {
 }
 
 template <class T>
+void DeviceForceModel<T>::add_springs(const ElementBlock& b, const BsrPattern* pattern) {
+  auto d = std::make_unique<DeviceSprings<T>>();
+  const Index S = b.size();
+  d->count = S;
+  d->clamp = (b.flags & ElementBlock::kClampCompressed) != 0;
+  std::vector<Index> I(S), J(S);
+  std::vector<double> l0(S), k(S), c(S);
+  for (Index q = 0; q < S; ++q) {
+    I[q] = b.vertices[2 * q];
+    J[q] = b.vertices[2 * q + 1];
+    l0[q] = b.data[3 * q];
+    k[q] = b.data[3 * q + 1];
+    c[q] = b.data[3 * q + 2];
+    d->damped = d->damped || c[q] != 0.0;
+  }
+  cuda::upload(I, d->si);
+  cuda::upload(J, d->sj);
+  cuda::upload(l0, d->l0);
+  cuda::upload(k, d->k);
+  cuda::upload(c, d->c);
+  // Incidence: vertex -> (spring, sign), springs in increasing order.
+  std::vector<Index> ptr(n_ + 1, 0), sp(2 * static_cast<std::size_t>(S)), blk;
+  std::vector<signed char> sg(2 * static_cast<std::size_t>(S));
+  for (Index q = 0; q < S; ++q) {
+    ptr[I[q] + 1]++;
+    ptr[J[q] + 1]++;
+  }
+  for (Index i = 0; i < n_; ++i) ptr[i + 1] += ptr[i];
+  std::vector<Index> fillp(ptr.begin(), ptr.end() - 1);
+  for (Index q = 0; q < S; ++q) {
+    sp[fillp[I[q]]] = q;
+    sg[fillp[I[q]]++] = 1;
+    sp[fillp[J[q]]] = q;
+    sg[fillp[J[q]]++] = -1;
+  }
+  if (pattern) {
+    blk.resize(sp.size());
+    for (Index i = 0; i < n_; ++i)
+      for (Index e = ptr[i]; e < ptr[i + 1]; ++e) {
+        const Index q = sp[e];
+        const Index other = sg[e] > 0 ? J[q] : I[q];
+        blk[e] = pattern->find(i, other);
+        if (blk[e] < 0) throw std::logic_error("backend cuda: a spring is missing from the Jacobian pattern");
+      }
+    cuda::upload(blk, d->inc_block);
+    d->per_spring_d.assign(d->damped ? 9 * static_cast<std::size_t>(S) : 0, T(0));
+  }
+  cuda::upload(ptr, d->inc_ptr);
+  cuda::upload(sp, d->inc_spring);
+  cuda::upload(sg, d->inc_sign);
+  d->per_spring.assign((pattern ? 9 : 3) * static_cast<std::size_t>(S), T(0));
+  springs_.push_back(std::move(d));
+  kernels_.push_back(ElementKernel::Spring);
+}
+
+template <class T>
+void DeviceForceModel<T>::add_coloured(const ElementBlock& b, const BsrPattern* pattern) {
+  auto d = std::make_unique<DeviceColoured<T>>();
+  d->kernel = b.kernel;
+  d->arity = kernel_arity(b.kernel);
+  d->stride = kernel_stride(b.kernel);
+  d->flags = b.flags;
+  const int ar = d->arity, st = d->stride;
+  // Own greedy vertex colouring (elements of one colour share no vertex), independent of the
+  // material's internal order: elements stored colour by colour.
+  const Index ne = b.size();
+  std::vector<std::uint64_t> used(n_, 0);
+  std::vector<int> colour(ne);
+  int ncol = 0;
+  for (Index e = 0; e < ne; ++e) {
+    const Index* v = &b.vertices[static_cast<std::size_t>(ar) * e];
+    std::uint64_t busy = 0;
+    for (int a = 0; a < ar; ++a) busy |= used[v[a]];
+    int c = 0;
+    while (c < 64 && (busy >> c) & 1u) ++c;
+    if (c == 64)
+      throw std::logic_error(std::string("backend cuda: more than 64 colours of ") + to_string(b.kernel) +
+                             " elements (a vertex in too many elements)");
+    colour[e] = c;
+    ncol = std::max(ncol, c + 1);
+    for (int a = 0; a < ar; ++a) used[v[a]] |= std::uint64_t(1) << c;
+  }
+  d->colour_start.assign(ncol + 1, 0);
+  for (Index e = 0; e < ne; ++e) d->colour_start[colour[e] + 1]++;
+  for (int c = 0; c < ncol; ++c) d->colour_start[c + 1] += d->colour_start[c];
+  std::vector<Index> order(ne);
+  {
+    std::vector<Index> pos(d->colour_start.begin(), d->colour_start.end() - 1);
+    for (Index e = 0; e < ne; ++e) order[pos[colour[e]]++] = e;
+  }
+  std::vector<Index> vert(static_cast<std::size_t>(ar) * ne);
+  std::vector<double> data(static_cast<std::size_t>(st) * ne);
+  for (Index k = 0; k < ne; ++k) {
+    for (int a = 0; a < ar; ++a) vert[ar * k + a] = b.vertices[static_cast<std::size_t>(ar) * order[k] + a];
+    for (int a = 0; a < st; ++a) data[st * k + a] = b.data[static_cast<std::size_t>(st) * order[k] + a];
+  }
+  cuda::upload(vert, d->vert);
+  cuda::upload(data, d->data);
+  if (b.kernel == ElementKernel::GnatvTriangle) {
+    cuda::upload(b.shared, d->shared);
+    CurveView<T> views[3];
+    unpack_curves<T>(b.shared, raw(d->shared), views);
+    d->curves = {views[0], views[1], views[2]};
+  }
+  if (pattern) {  // block (v_a, v_b) of element k at ar*ar*k + ar*a + b
+    std::vector<Index> sc(static_cast<std::size_t>(ar) * ar * ne);
+    for (Index k = 0; k < ne; ++k)
+      for (int a = 0; a < ar; ++a)
+        for (int c = 0; c < ar; ++c) {
+          const Index q = pattern->find(vert[ar * k + a], vert[ar * k + c]);
+          if (q < 0)
+            throw std::logic_error(std::string("backend cuda: a ") + to_string(b.kernel) +
+                                   " element is missing from the Jacobian pattern");
+          sc[static_cast<std::size_t>(ar) * ar * k + ar * a + c] = q;
+        }
+    cuda::upload(sc, d->scatter);
+  }
+  kernels_.push_back(b.kernel);
+  coloured_.push_back(std::move(d));
+}
+
+template <class T>
 void DeviceForceModel<T>::forces(const DVec<T>& x, const DVec<T>& v, DVec<T>& f) {
   ++force_calls_;
-  switch (kind_) {
-    case ForceModelKind::Springs: {
-      const Index S = static_cast<Index>(si_.size());
-      parallel_for(S, SpringForce<T>{raw(si_), raw(sj_), raw(l0_), raw(k_), raw(c_), raw(x), raw(v), raw(per_spring_)});
-      parallel_for(n_, GatherForce<T>{raw(inc_ptr_), raw(inc_spring_), raw(inc_sign_), raw(per_spring_), raw(f)});
-      return;
-    }
-    case ForceModelKind::Gnatv: {
-      fill(f, T(0));
-      for (std::size_t c = 0; c + 1 < colour_start_.size(); ++c)
-        parallel_for(colour_start_[c], colour_start_[c + 1],
-                     GnatvForces<T>{raw(tri_), raw(rest_), curves_, raw(x), raw(f)});
-      return;
-    }
-    case ForceModelKind::Host: {
-      cuda::download(x, hx_, stage_);
-      cuda::download(v, hv_, stage_);
-      material_->compute_forces(hx_, hv_, hf_);
-      cuda::upload(hf_, f);
-      return;
-    }
+  if (kind_ == ForceModelKind::Host) {
+    cuda::download(x, hx_, stage_);
+    cuda::download(v, hv_, stage_);
+    material_->compute_forces(hx_, hv_, hf_);
+    cuda::upload(hf_, f);
+    return;
   }
+  bool written = false;
+  for (auto& s : springs_) {
+    parallel_for(s->count, SpringForce<T>{raw(s->si), raw(s->sj), raw(s->l0), raw(s->k), raw(s->c), raw(x), raw(v),
+                                          raw(s->per_spring)});
+    parallel_for(n_, GatherForce<T>{raw(s->inc_ptr), raw(s->inc_spring), raw(s->inc_sign), raw(s->per_spring), raw(f),
+                                    written});
+    written = true;
+  }
+  if (!written) fill(f, T(0));
+  for (auto& c : coloured_)
+    for (std::size_t k = 0; k + 1 < c->colour_start.size(); ++k) {
+      const Index b = c->colour_start[k], e = c->colour_start[k + 1];
+      if (c->kernel == ElementKernel::GnatvTriangle)
+        parallel_for(b, e, GnatvForces<T>{raw(c->vert), raw(c->data), c->curves, raw(x), raw(f)});
+      else
+        parallel_for(b, e, HingeForces<T>{raw(c->vert), raw(c->data), raw(x), raw(f)});
+    }
 }
 
 template <class T>
 void DeviceForceModel<T>::jacobians(const DVec<T>& x, const DVec<T>& v, DVec<T>& dfdx, DVec<T>* dfdv) {
   if (!pattern_) throw std::logic_error("backend cuda: jacobians() without a pattern");
-  switch (kind_) {
-    case ForceModelKind::Springs: {
-      const Index S = static_cast<Index>(si_.size());
-      const bool with_v = dfdv && damped_;
-      parallel_for(S, SpringBlocks<T>{raw(si_), raw(sj_), raw(l0_), raw(k_), raw(c_), raw(x), clamp_, raw(per_spring_),
-                                      with_v ? raw(per_spring_d_) : nullptr});
-      parallel_for(n_, GatherBlocks<T>{raw(pat_row_ptr_), raw(pat_diag_), raw(inc_ptr_), raw(inc_spring_), raw(inc_block_),
-                                       raw(per_spring_), raw(dfdx)});
-      if (dfdv) {
-        if (with_v)
-          parallel_for(n_, GatherBlocks<T>{raw(pat_row_ptr_), raw(pat_diag_), raw(inc_ptr_), raw(inc_spring_),
-                                           raw(inc_block_), raw(per_spring_d_), raw(*dfdv)});
-        else
-          fill(*dfdv, T(0));
-      }
-      return;
-    }
-    case ForceModelKind::Gnatv: {
-      fill(dfdx, T(0));
-      if (dfdv) fill(*dfdv, T(0));  // no material damping: df/dv = 0
-      for (std::size_t c = 0; c + 1 < colour_start_.size(); ++c)
-        parallel_for(colour_start_[c], colour_start_[c + 1],
-                     GnatvJacobian<T>{raw(tri_), raw(tri_scatter_), raw(rest_), curves_, psd_, raw(x), raw(dfdx)});
-      return;
-    }
-    case ForceModelKind::Host: {
-      cuda::download(x, hx_, stage_);
-      cuda::download(v, hv_, stage_);
-      material_->compute_jacobians(hx_, hv_, *hdfdx_, hdfdv_.get());
-      cuda::upload(hdfdx_->values(), dfdx);
-      if (dfdv) cuda::upload(hdfdv_->values(), *dfdv);
-      return;
+  if (kind_ == ForceModelKind::Host) {
+    cuda::download(x, hx_, stage_);
+    cuda::download(v, hv_, stage_);
+    material_->compute_jacobians(hx_, hv_, *hdfdx_, hdfdv_.get());
+    cuda::upload(hdfdx_->values(), dfdx);
+    if (dfdv) cuda::upload(hdfdv_->values(), *dfdv);
+    return;
+  }
+  bool written = false, written_v = false;
+  for (auto& s : springs_) {
+    const bool with_v = dfdv && s->damped;
+    parallel_for(s->count, SpringBlocks<T>{raw(s->si), raw(s->sj), raw(s->l0), raw(s->k), raw(s->c), raw(x), s->clamp,
+                                           raw(s->per_spring), with_v ? raw(s->per_spring_d) : nullptr});
+    parallel_for(n_, GatherBlocks<T>{raw(pat_row_ptr_), raw(pat_diag_), raw(s->inc_ptr), raw(s->inc_spring),
+                                     raw(s->inc_block), raw(s->per_spring), raw(dfdx), written});
+    written = true;
+    if (with_v) {
+      parallel_for(n_, GatherBlocks<T>{raw(pat_row_ptr_), raw(pat_diag_), raw(s->inc_ptr), raw(s->inc_spring),
+                                       raw(s->inc_block), raw(s->per_spring_d), raw(*dfdv), written_v});
+      written_v = true;
     }
   }
+  // Blocks of the pattern no spring touches must be zeroed too: zero everything unless a
+  // spring block covered every row (its gather assigns whole rows).
+  if (!written) fill(dfdx, T(0));
+  if (dfdv && !written_v) fill(*dfdv, T(0));  // no other kernel has damping: df/dv = 0
+  for (auto& c : coloured_)
+    for (std::size_t k = 0; k + 1 < c->colour_start.size(); ++k) {
+      const Index b = c->colour_start[k], e = c->colour_start[k + 1];
+      if (c->kernel == ElementKernel::GnatvTriangle)
+        parallel_for(b, e, GnatvJacobian<T>{raw(c->vert), raw(c->scatter), raw(c->data), c->curves,
+                                            (c->flags & ElementBlock::kPsd) != 0, raw(x), raw(dfdx)});
+      else
+        parallel_for(b, e, HingeJacobian<T>{raw(c->vert), raw(c->scatter), raw(c->data),
+                                            (c->flags & ElementBlock::kExactJacobian) != 0, raw(x), raw(dfdx)});
+    }
 }
 
 template class DeviceForceModel<double>;

@@ -1,17 +1,18 @@
 // Device-resident pieces of a run: the state, a 3x3 BSR matrix over a fixed pattern, and the
-// force model (forces and force Jacobians) read from the scene's CPU material in build().
+// force model (forces and force Jacobians) built from the material's device description.
 //
-// Force models:
-//   * mass_spring: Hooke springs with axial dampers (loom/kernels/spring.hpp). Two phases,
-//     race free without atomics: one thread per spring writes its force / its 3x3 blocks into
-//     a per-spring buffer, then one thread per vertex (block row) gathers over its incident
-//     springs (a CSR incidence list built once). Deterministic.
-//   * gnatv: triangles (loom/kernels/gnatv.hpp), greedily vertex-coloured once: one launch
-//     per colour, triangles of one colour share no vertex, so each triangle adds its forces and
-//     its 9 Jacobian blocks with plain read-modify-writes (a precomputed scatter map into the
-//     pattern), no atomics, deterministic. A grid needs 6-8 colours.
-//   * any other material: the host material is called (x, v copied down, f / Jacobians copied
-//     up). Correct, slow; the module says so once on stderr.
+// The force model never names a concrete material: build() asks the scene's material for its
+// DeviceDescription (loom/device_material.hpp, Material::describe_device), blocks of elements
+// with the id of the per-element kernel (loom/kernels/) that evaluates them, and sums the blocks:
+//   * Spring blocks: two phases, race free without atomics: one thread per spring writes its
+//     force / its 3x3 blocks into a per-spring buffer, then one thread per vertex (block row)
+//     gathers over its incident springs (a CSR incidence list built once). Deterministic.
+//   * GnatvTriangle and Hinge blocks: elements greedily vertex-coloured once: one launch per
+//     colour, elements of one colour share no vertex, so each element adds its forces and its
+//     arity^2 Jacobian blocks with plain read-modify-writes (a precomputed scatter map into the
+//     pattern), no atomics, deterministic. A grid needs 6-8 colours for triangles, ~10 for hinges.
+//   * a material without a description (describe_device returns false): the host material is
+//     called (x, v copied down, f / Jacobians copied up). Correct, slow; said once on stderr.
 #pragma once
 
 #include <array>
@@ -22,6 +23,7 @@
 #include "device.hpp"
 #include "loom/bsr.hpp"
 #include "loom/curves.hpp"
+#include "loom/device_material.hpp"
 #include "loom/kernels/gnatv.hpp"
 #include "loom/material.hpp"
 #include "loom/scene.hpp"
@@ -69,17 +71,41 @@ struct DeviceBsr {
   void multiply(const T* x, T* y) const { seam_bsr_spmv(n, nnzb, raw(row_ptr), raw(col), raw(values), x, y); }
 };
 
-enum class ForceModelKind { Springs, Gnatv, Host };
+enum class ForceModelKind { Device, Host };
 const char* to_string(ForceModelKind k);
+
+/// One block of a device description, resident on the device.
+template <class T>
+struct DeviceSprings {
+  Index count = 0;
+  bool damped = false, clamp = true;
+  DVec<Index> si, sj;
+  DVec<T> l0, k, c;
+  DVec<Index> inc_ptr, inc_spring, inc_block;
+  DVec<signed char> inc_sign;
+  DVec<T> per_spring, per_spring_d;
+};
+template <class T>
+struct DeviceColoured {  // GnatvTriangle or Hinge
+  ElementKernel kernel = ElementKernel::GnatvTriangle;
+  int arity = 3, stride = 7;
+  std::uint32_t flags = 0;
+  DVec<Index> vert, scatter;  // colour-sorted; scatter: arity^2 per element
+  DVec<T> data, shared;
+  gnatv::Curves<T> curves{};
+  std::vector<Index> colour_start;
+};
 
 template <class T>
 class DeviceForceModel {
  public:
-  /// Read the material's description. With `pattern` (implicit integrators) also build the
-  /// Jacobian scatter maps over it (the material's bind_pattern must already have been called
-  /// with the same pattern, for the host fallback).
+  /// Read the material's device description. With `pattern` (implicit integrators) also build
+  /// the Jacobian scatter maps over it (the material's bind_pattern must already have been
+  /// called with the same pattern, for the host fallback).
   void build(const Scene& scene, const BsrPattern* pattern);
   ForceModelKind kind() const { return kind_; }
+  /// Kernel ids of the blocks on the device, in evaluation order (tests, messages).
+  const std::vector<ElementKernel>& kernels() const { return kernels_; }
 
   /// f = internal forces at (x, v) (3n device vectors; f overwritten).
   void forces(const DVec<T>& x, const DVec<T>& v, DVec<T>& f);
@@ -88,24 +114,17 @@ class DeviceForceModel {
   int force_calls() const { return force_calls_; }
 
  private:
+  void add_springs(const ElementBlock& b, const BsrPattern* pattern);
+  void add_coloured(const ElementBlock& b, const BsrPattern* pattern);
+
   ForceModelKind kind_ = ForceModelKind::Host;
   Index n_ = 0;
   int force_calls_ = 0;
   const Material* material_ = nullptr;
-  // springs
-  DVec<Index> si_, sj_;
-  DVec<T> l0_, k_, c_;
-  bool damped_ = false, clamp_ = true;
-  DVec<Index> inc_ptr_, inc_spring_, inc_block_, pat_row_ptr_, pat_diag_;
-  DVec<signed char> inc_sign_;
-  DVec<T> per_spring_, per_spring_d_;
-  // gnatv
-  DVec<Index> tri_, tri_scatter_;
-  DVec<gnatv::RestTriangle<T>> rest_;
-  DVec<T> curve_data_;
-  gnatv::Curves<T> curves_{};
-  std::vector<Index> colour_start_;
-  bool psd_ = true;
+  std::vector<ElementKernel> kernels_;
+  std::vector<std::unique_ptr<DeviceSprings<T>>> springs_;
+  std::vector<std::unique_ptr<DeviceColoured<T>>> coloured_;
+  DVec<Index> pat_row_ptr_, pat_diag_;
   // host fallback
   std::vector<double> hx_, hv_, hf_;
   std::vector<T> stage_;

@@ -1,5 +1,7 @@
 #include "gnatv_material.hpp"
 
+#include "loom/device_material.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -360,6 +362,26 @@ void GnatvMaterial::compute_jacobians(std::span<const double> x, std::span<const
       }
     }
   }
+}
+
+bool GnatvMaterial::describe_device(DeviceDescription& out) const {
+  ElementBlock b;
+  b.kernel = ElementKernel::GnatvTriangle;
+  b.flags = opt_.psd_projection ? ElementBlock::kPsd : 0u;
+  const Index nt = num_triangles();
+  b.vertices.resize(3 * static_cast<std::size_t>(nt));
+  b.data.resize(7 * static_cast<std::size_t>(nt));
+  for (Index t = 0; t < nt; ++t) {
+    for (int a = 0; a < 3; ++a) {
+      b.vertices[3 * t + a] = tri_[t][a];
+      b.data[7 * t + a] = rest_[t].ru[a];
+      b.data[7 * t + 3 + a] = rest_[t].rv[a];
+    }
+    b.data[7 * t + 6] = rest_[t].area;
+  }
+  b.shared = pack_curves(views_.uu, views_.vv, views_.uv);
+  out.blocks.push_back(std::move(b));
+  return true;
 }
 
 }  // namespace loom::gnatv

@@ -37,6 +37,8 @@ class GnatvMaterial final : public Material {
   double elastic_energy(std::span<const double> x) const override;
   double max_strain(std::span<const double> x) const override;
   std::vector<std::pair<std::string, std::string>> describe() const override;
+  /// One GnatvTriangle block (loom/device_material.hpp).
+  bool describe_device(DeviceDescription& out) const override;
 
   bool has_jacobian() const override { return true; }
   void jacobian_pairs(std::vector<std::array<Index, 2>>& pairs) const override;

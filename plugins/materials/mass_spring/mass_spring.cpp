@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <tuple>
 
+#include "loom/device_material.hpp"
 #include "loom/kernels/spring.hpp"
 
 namespace loom::mass_spring {
@@ -449,6 +450,24 @@ void MassSpringMaterial::compute_jacobians(std::span<const double> x, std::span<
       scatter(B, m, fw, blk);
     }
   });
+}
+
+bool MassSpringMaterial::describe_device(DeviceDescription& out) const {
+  ElementBlock b;
+  b.kernel = ElementKernel::Spring;
+  b.flags = clamp_ ? ElementBlock::kClampCompressed : 0u;
+  const Index S = springs_.size();
+  b.vertices.resize(2 * static_cast<std::size_t>(S));
+  b.data.resize(3 * static_cast<std::size_t>(S));
+  for (Index s = 0; s < S; ++s) {
+    b.vertices[2 * s] = springs_.i[s];
+    b.vertices[2 * s + 1] = springs_.j[s];
+    b.data[3 * s] = springs_.rest_length[s];
+    b.data[3 * s + 1] = springs_.stiffness[s];
+    b.data[3 * s + 2] = springs_.damping[s];
+  }
+  out.blocks.push_back(std::move(b));
+  return true;
 }
 
 }  // namespace loom::mass_spring

@@ -49,6 +49,8 @@ class MassSpringMaterial final : public Material {
   double max_strain(std::span<const double> x) const override;
   const SpringSet* springs() const override { return &springs_; }
   std::vector<std::pair<std::string, std::string>> describe() const override;
+  /// One Spring block (loom/device_material.hpp).
+  bool describe_device(DeviceDescription& out) const override;
 
   bool has_jacobian() const override { return true; }
   void jacobian_pairs(std::vector<std::array<Index, 2>>& pairs) const override;
