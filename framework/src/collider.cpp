@@ -135,6 +135,22 @@ Collider::Frame Collider::frame_at(double t) const {
   return f;
 }
 
+kernels::ContactShape<double> Collider::contact_shape(const Frame& f) const {
+  kernels::ContactShape<double> c;
+  c.sphere = shape == Shape::Sphere ? 1 : 0;
+  for (int k = 0; k < 3; ++k) {
+    c.center[k] = f.center[k];
+    c.normal[k] = f.normal[k];
+    c.omega[k] = f.omega[k];
+    c.vlin[k] = f.vlin[k];
+  }
+  c.radius = radius;
+  c.thickness = thickness;
+  c.mu_static = mu_static;
+  c.mu_kinetic = mu_kinetic;
+  return c;
+}
+
 Collider::Contact Collider::query(const Frame& f, const double xp[3]) const {
   return query(f, xp, INFINITY);
 }
@@ -142,13 +158,9 @@ Collider::Contact Collider::query(const Frame& f, const double xp[3]) const {
 Collider::Contact Collider::query(const Frame& f, const double xp[3], double cutoff) const {
   const Vec3 x{xp[0], xp[1], xp[2]};
   Contact ct{};
-  if (shape == Shape::Sphere) {
-    const Vec3 r = sub(x, f.center);
-    const double len = norm(r);
-    ct.normal = len > 1e-300 ? scale(r, 1.0 / len) : Vec3{0, 1, 0};
-    ct.distance = len - radius - thickness;
-    ct.velocity = add(f.vlin, cross(f.omega, scale(ct.normal, radius)));
-  } else if (shape == Shape::Mesh) {
+  if (shape != Shape::Mesh) {  // sphere, plane: the shared kernel (loom/kernels/contact.hpp)
+    ct.distance = kernels::contact_query(contact_shape(f), xp, ct.normal.data(), ct.velocity.data());
+  } else {
     // Into the body frame: y = R^T (x - c(t)) + c0; the answer back: R n, R (q - c0) + c(t).
     const Vec3 r = sub(x, f.center);
     const double* R = f.rot;
@@ -165,11 +177,6 @@ Collider::Contact Collider::query(const Frame& f, const double xp[3], double cut
                    R[6] * q[0] + R[7] * q[1] + R[8] * q[2]};
     ct.distance = sd - thickness;
     ct.velocity = add(f.vlin, cross(f.omega, arm));
-  } else {
-    ct.normal = f.normal;
-    ct.distance = dot(sub(x, f.center), ct.normal) - thickness;
-    const Vec3 surface = sub(x, scale(ct.normal, ct.distance + thickness));
-    ct.velocity = add(f.vlin, cross(f.omega, sub(surface, f.center)));
   }
   return ct;
 }
@@ -204,23 +211,8 @@ int ColliderSet::resolve_with_frames(State& s, const Collider::Frame* frames, do
       const Collider::Contact ct = col.query(frames[c], x, 0.0);  // exact where < 0: all this pass needs
       if (ct.distance >= 0) continue;
       ++contacts;
-      for (int k = 0; k < 3; ++k) x[k] -= ct.distance * ct.normal[k];   // onto the offset surface
-      const Vec3 vrel{v[0] - ct.velocity[0], v[1] - ct.velocity[1], v[2] - ct.velocity[2]};
-      const double vn = dot(vrel, ct.normal);
-      if (vn >= 0) continue;                                     // already separating
-      Vec3 vt = sub(vrel, scale(ct.normal, vn));                 // tangential part
-      const double dvn = -vn;                                    // normal velocity removed (>= 0)
-      const double vt_len = norm(vt);
-      if (vt_len <= col.mu_static * dvn) {
-        vt = {0, 0, 0};                                          // static friction: stick
-      } else if (col.mu_kinetic > 0) {
-        vt = scale(vt, std::max(0.0, 1.0 - col.mu_kinetic * dvn / vt_len));
-      }
-      const Vec3 vt_old = sub(vrel, scale(ct.normal, vn));
-      for (int k = 0; k < 3; ++k) {
-        v[k] = ct.velocity[k] + vt[k];
-        x[k] += h * (vt[k] - vt_old[k]);  // move as the corrected tangential velocity would have
-      }
+      // Projection, inelastic normal part, Coulomb friction: one source with the CUDA backend.
+      kernels::contact_respond(x, v, ct.distance, ct.normal.data(), ct.velocity.data(), col.mu_static, col.mu_kinetic, h);
     }
   }
   return contacts;

@@ -15,6 +15,7 @@
 
 #include "loom/bsr.hpp"
 #include "loom/common.hpp"
+#include "loom/kernels/contact.hpp"
 #include "loom/params.hpp"
 #include "loom/state.hpp"
 
@@ -93,6 +94,9 @@ struct Collider {
   Contact query(const Frame& f, const double x[3], double cutoff) const;
   /// Same, at time t (computes the frame: use frame_at + query in loops).
   Contact query(const double x[3], double t) const { return query(frame_at(t), x); }
+  /// A sphere or plane at a placement as the contact kernel's plain data
+  /// (loom/kernels/contact.hpp, shared with the CUDA backend). Not for meshes.
+  kernels::ContactShape<double> contact_shape(const Frame& f) const;
 };
 
 /// All colliders of a scene.

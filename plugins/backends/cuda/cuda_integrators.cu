@@ -8,6 +8,7 @@
 
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/kernels/bw_assembly.hpp"
+#include "loom/kernels/contact.hpp"
 #include "loom/kernels/ho.hpp"
 #include "loom/kernels/rk4.hpp"
 
@@ -22,13 +23,27 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-/// Checks shared by the device integrators; throws InputError with the fix.
-void check_device_scene(const Scene& scene, const char* integrator) {
+constexpr int kMaxDeviceColliders = 8;
+
+/// Checks shared by the device integrators; throws InputError with the fix. With
+/// `device_colliders` (the explicit integrators) sphere and plane colliders are resolved on
+/// the device; otherwise colliders are refused.
+void check_device_scene(const Scene& scene, const char* integrator, bool device_colliders) {
   seam_require_device(scene.source);
-  if (!scene.colliders.empty())
+  if (!scene.colliders.empty() && !device_colliders)
     throw InputError(scene.source + ": integrator " + integrator +
-                     " on backend cuda does not handle colliders yet (contacts are resolved on the host state, which "
-                     "the device would not see). Fix: set backend: cpu for scenes with colliders.");
+                     " on backend cuda does not handle colliders (its contacts are constraints of the implicit solve, "
+                     "not on the device yet). Fix: use integrator rk4 or harmonic_oscillation with backend: cuda, or "
+                     "backend: cpu for baraff_witkin with colliders.");
+  for (const Collider& c : scene.colliders.colliders())
+    if (c.shape == Collider::Shape::Mesh)
+      throw InputError(scene.source + ": collider '" + c.name + "' is a mesh collider; backend cuda handles sphere and "
+                       "plane colliders only (the mesh BVH is not on the device). Fix: set backend: cpu, or replace "
+                       "it with a sphere or plane.");
+  if (scene.colliders.size() > static_cast<std::size_t>(kMaxDeviceColliders))
+    throw InputError(scene.source + ": backend cuda handles at most " + std::to_string(kMaxDeviceColliders) +
+                     " colliders, the scene has " + std::to_string(scene.colliders.size()) +
+                     ". Fix: merge colliders, or set backend: cpu.");
   if (scene.pins.moving())
     throw InputError(scene.source + ": integrator " + integrator +
                      " on backend cuda does not implement pins with a prescribed motion (the device keeps pinned "
@@ -38,6 +53,70 @@ void check_device_scene(const Scene& scene, const char* integrator) {
                      " on backend cuda does not handle self_collision yet (it is resolved on the host state, which "
                      "the device would not see). Fix: set backend: cpu for scenes with self_collision.");
 }
+
+/// Sphere and plane colliders on the device: after an explicit step, per vertex, the same
+/// query and response as the CPU's ColliderSet::resolve_contacts (loom/kernels/contact.hpp),
+/// colliders in scene order, pinned vertices skipped. The placements (frame_at) are computed
+/// on the host once per step and passed by value.
+template <class T>
+struct ContactKernel {
+  kernels::ContactShape<T> shapes[kMaxDeviceColliders];
+  int count;
+  const std::uint8_t* pinned;
+  T *x, *v;
+  T h;
+  LOOM_HD void operator()(Index i) const {
+    if (pinned[i]) return;
+    T* xi = x + 3LL * i;
+    T* vi = v + 3LL * i;
+    for (int c = 0; c < count; ++c) {
+      T n[3], vs[3];
+      const T d = kernels::contact_query(shapes[c], xi, n, vs);
+      if (d >= T(0)) continue;
+      kernels::contact_respond(xi, vi, d, n, vs, shapes[c].mu_static, shapes[c].mu_kinetic, h);
+    }
+  }
+};
+
+template <class T>
+class DeviceColliders {
+ public:
+  void prepare(const Scene& scene) {
+    colliders_ = &scene.colliders;
+    if (!colliders_->empty()) cuda::upload(scene.state.pinned, pinned_);
+  }
+  bool active() const { return colliders_ && !colliders_->empty(); }
+  /// Resolve contacts at time t (the end of a step of size h).
+  void resolve(DeviceState<T>& ds, double t, double h) {
+    ContactKernel<T> k{};
+    k.count = static_cast<int>(colliders_->size());
+    for (int c = 0; c < k.count; ++c) {
+      const Collider& col = colliders_->colliders()[c];
+      const kernels::ContactShape<double> s = col.contact_shape(col.frame_at(t));
+      kernels::ContactShape<T>& o = k.shapes[c];
+      o.sphere = s.sphere;
+      for (int a = 0; a < 3; ++a) {
+        o.center[a] = static_cast<T>(s.center[a]);
+        o.normal[a] = static_cast<T>(s.normal[a]);
+        o.omega[a] = static_cast<T>(s.omega[a]);
+        o.vlin[a] = static_cast<T>(s.vlin[a]);
+      }
+      o.radius = static_cast<T>(s.radius);
+      o.thickness = static_cast<T>(s.thickness);
+      o.mu_static = static_cast<T>(s.mu_static);
+      o.mu_kinetic = static_cast<T>(s.mu_kinetic);
+    }
+    k.pinned = raw(pinned_);
+    k.x = raw(ds.x);
+    k.v = raw(ds.v);
+    k.h = static_cast<T>(h);
+    parallel_for(ds.n, k);
+  }
+
+ private:
+  const ColliderSet* colliders_ = nullptr;
+  DVec<std::uint8_t> pinned_;
+};
 
 /// Reads host_sync_every (>= 1): copy x, v back into scene.state after every n-th step.
 int parse_sync_every(const Params& p) {
@@ -140,9 +219,11 @@ class CudaHo final : public Integrator {
   CudaHo(HoVariantD v, int sync_every) : variant_(v), sync_every_(sync_every) {}
   std::string name() const override { return "harmonic_oscillation"; }
   IntegratorNeeds needs() const override { return {true, false, false}; }
+  bool handles_contacts() const override { return true; }  // on the device
 
   void prepare(Scene& scene, double h) override {
-    check_device_scene(scene, "harmonic_oscillation");
+    check_device_scene(scene, "harmonic_oscillation", true);
+    colliders_.prepare(scene);
     const Material* mat = scene.material.get();
     const SpringSet* set = mat ? mat->springs() : nullptr;
     if (!set)
@@ -190,6 +271,7 @@ class CudaHo final : public Integrator {
       case HoVariantD::AnalyticPosition: run<HoVariantD::AnalyticPosition>(scene, h); break;
       case HoVariantD::KangCho2011: run<HoVariantD::KangCho2011>(scene, h); break;
     }
+    if (colliders_.active()) colliders_.resolve(ds_, scene.state.time + h, h);
     sync_after_step(ds_, scene.state, sync_every_);
     finish_step(scene.state, h);
   }
@@ -241,6 +323,7 @@ class CudaHo final : public Integrator {
   HoVariantD variant_;
   int sync_every_ = 1;
   DeviceState<T> ds_;
+  DeviceColliders<T> colliders_;
   std::vector<Index> hi_, hj_;
   std::vector<double> hk_, hc_;
   DVec<Index> si_, sj_, inc_ptr_, inc_spring_;
@@ -277,8 +360,10 @@ class CudaRk4 final : public Integrator {
  public:
   explicit CudaRk4(int sync_every) : sync_every_(sync_every) {}
   std::string name() const override { return "rk4"; }
+  bool handles_contacts() const override { return true; }  // on the device
   void prepare(Scene& scene, double) override {
-    check_device_scene(scene, "rk4");
+    check_device_scene(scene, "rk4", true);
+    colliders_.prepare(scene);
     if (!scene.material) throw InputError(scene.source + ": rk4 needs a material; add a 'material:' section");
     model_.build(scene, nullptr);
     ds_.upload(scene.state);
@@ -308,6 +393,7 @@ class CudaRk4 final : public Integrator {
     stage(1, h);
     model_.forces(xs_, vs_, f_);
     stage(2, h);
+    if (colliders_.active()) colliders_.resolve(ds_, scene.state.time + hd, hd);
     sync_after_step(ds_, scene.state, sync_every_);
     finish_step(scene.state, hd);
   }
@@ -316,6 +402,7 @@ class CudaRk4 final : public Integrator {
  private:
   int sync_every_ = 1;
   DeviceState<T> ds_;
+  DeviceColliders<T> colliders_;
   DeviceForceModel<T> model_;
   DVec<T> xs_, vs_, f_, ax_, av_;
   StepStats stats_;
@@ -358,7 +445,7 @@ class CudaBw final : public Integrator {
   IntegratorNeeds needs() const override { return {false, true, true}; }
 
   void prepare(Scene& scene, double h) override {
-    check_device_scene(scene, "baraff_witkin");
+    check_device_scene(scene, "baraff_witkin", false);
     if (!(h > 0) || !std::isfinite(h))
       throw InputError("baraff_witkin: the time step must be positive and finite; set integrator.dt");
     if (!scene.material || !scene.material->has_jacobian())
