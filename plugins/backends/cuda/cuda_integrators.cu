@@ -188,7 +188,6 @@ struct HoVertexKernel {  // per vertex: gather the impulses, then update x and v
     constexpr bool kPos = V == HoVariantD::AnalyticPosition;
     const long long d = 3LL * i;
     const T wi = w[i];
-    const T f = wi > T(0) ? T(1) : T(0);
     const T g[3] = {g0, g1, g2};
     T dv[3] = {T(0), T(0), T(0)}, dx[3] = {T(0), T(0), T(0)};
     for (Index k = ptr[i]; k < ptr[i + 1]; ++k) {
@@ -203,13 +202,10 @@ struct HoVertexKernel {  // per vertex: gather the impulses, then update x and v
         }
       }
     }
-    // Same expressions as the CPU plugin's finalisation (x += h v_old + f h^2/2 g + dx for
-    // analytic_position; v += dv + f h g; x += h v_new otherwise).
-    for (int e = 0; e < 3; ++e) {
-      if constexpr (kPos) x[d + e] += h * v[d + e] + f * (hh2 * g[e]) + dx[e];
-      v[d + e] += dv[e] + f * (h * g[e]);
-      if constexpr (!kPos) x[d + e] += h * v[d + e];
-    }
+    // The CPU plugin's finalisation, one source (loom/kernels/ho.hpp).
+    const T hg[3] = {h * g[0], h * g[1], h * g[2]};
+    const T gg[3] = {hh2 * g[0], hh2 * g[1], hh2 * g[2]};
+    kernels::ho_finalise_vertex<T, kPos>(x + d, v + d, dv, dx, wi, h, hg, gg);
   }
 };
 

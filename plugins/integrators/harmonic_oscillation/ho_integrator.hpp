@@ -332,21 +332,13 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
   const T hg[3] = {h * g[0], h * g[1], h * g[2]};
   const T gg[3] = {hh2 * g[0], hh2 * g[1], hh2 * g[2]};
 
-  auto finalize = [&](Index q) {
-    const T f = w[q] > T(0) ? T(1) : T(0);
-    T* xq = x + 3 * static_cast<std::size_t>(q);
-    T* vq = v + 3 * static_cast<std::size_t>(q);
-    T* dq = dv + 3 * static_cast<std::size_t>(q);
-    for (int e = 0; e < 3; ++e) {
-      if constexpr (kPos) {
-        T* pq = dx + 3 * static_cast<std::size_t>(q);
-        xq[e] += h * vq[e] + f * gg[e] + pq[e];
-        pq[e] = T(0);
-      }
-      vq[e] += dq[e] + f * hg[e];
-      dq[e] = T(0);
-      if constexpr (!kPos) xq[e] += h * vq[e];
-    }
+  auto finalize = [&](Index q) {  // kernels::ho_finalise_vertex, shared with the CUDA backend
+    const std::size_t o = 3 * static_cast<std::size_t>(q);
+    T* dq = dv + o;
+    T* pq = kPos ? dx + o : nullptr;
+    kernels::ho_finalise_vertex<T, kPos>(x + o, v + o, dq, pq, w[q], h, hg, gg);
+    dq[0] = dq[1] = dq[2] = T(0);
+    if constexpr (kPos) pq[0] = pq[1] = pq[2] = T(0);
   };
   // One spring, computed and scattered directly (cross springs).
   auto single = [&](Index q) {

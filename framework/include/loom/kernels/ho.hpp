@@ -241,4 +241,19 @@ LOOM_HD inline void kang_cho_spring_velocity(const T* x, const T* v, I a, I b, T
   g[2] = s * n[2];
 }
 
+/// The end of an HO step for one vertex, shared by the CPU plugin and the CUDA backend: dv is
+/// the summed velocity change of the vertex's springs (already times its inverse mass) and, for
+/// analytic_position, dx their summed displacement. Free vertices (w > 0) also get gravity:
+/// hg = h g and gg = h^2 g / 2. velocity: v += dv + h g, then x += h v (the new v);
+/// analytic_position: x += h v_old + h^2 g / 2 + dx, then v += dv + h g.
+template <class T, bool AnalyticPosition>
+LOOM_HD inline void ho_finalise_vertex(T* x, T* v, const T* dv, const T* dx, T w, T h, const T hg[3], const T gg[3]) {
+  const T f = w > T(0) ? T(1) : T(0);
+  for (int e = 0; e < 3; ++e) {
+    if constexpr (AnalyticPosition) x[e] += h * v[e] + f * gg[e] + dx[e];
+    v[e] += dv[e] + f * hg[e];
+    if constexpr (!AnalyticPosition) x[e] += h * v[e];
+  }
+}
+
 }  // namespace loom::kernels
