@@ -125,7 +125,7 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
   // prescribed to the surface's minus the remaining distance over h, so that it ends the
   // step exactly on the surface: a vertex still in the air closes the gap within the step
   // (lands), a vertex on the surface moves with it, one inside leaves the penetration.
-  const double t0 = s.time, t1 = s.time + h;
+  const double t0 = t0_, t1 = t0_ + h;  // t0_: this (half) step's start, also when halving
   const auto& cols = scene.colliders.colliders();
   for (std::size_t c = 0; c < cols.size(); ++c) {
     frames0_[c] = cols[c].frame_at(t0);
@@ -389,7 +389,7 @@ bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& r
     std::fill(in_contact_.begin(), in_contact_.end(), 0);
     for (const Contact& ct : contacts_) in_contact_[ct.vertex] = 1;
   }
-  if (!scene.colliders.empty()) project_positions(scene, s.time + h);
+  if (!scene.colliders.empty()) project_positions(scene, t0_ + h);
   return true;
 }
 
