@@ -40,7 +40,7 @@ note "start $(date -u +%FT%TZ) on $(hostname)"
 # ---- 1. the gpu tests (they skip, with the reason, when no device is usable)
 timeout 300 bash "$bundle/run.sh" test_cuda_gpu --gtest_output=xml:"$out/test_cuda_gpu.xml" > "$out/test_cuda_gpu.txt" 2>&1
 rc=$?
-skipped=$(grep -c '^\[  SKIPPED \]' "$out/test_cuda_gpu.txt" || true)
+skipped=$(grep -c -E '^\[  SKIPPED \]|no usable CUDA device' "$out/test_cuda_gpu.txt" || true)
 note "test_cuda_gpu: exit $rc, $(grep -E '^\[  PASSED  \]|^\[  FAILED  \]' "$out/test_cuda_gpu.txt" | head -2 | tr '\n' ' ') skipped lines: $skipped"
 if [ "$rc" -ne 0 ] || [ "$skipped" -gt 0 ]; then status=1; fi
 

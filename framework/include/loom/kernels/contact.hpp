@@ -46,7 +46,7 @@ LOOM_HD inline T contact_query(const ContactShape<T>& c, const T x[3], T n[3], T
     const T r[3] = {x[0] - c.center[0], x[1] - c.center[1], x[2] - c.center[2]};
     using std::sqrt;
     const T len = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
-    if (len > T(1e-300)) {
+    if (static_cast<double>(len) > 1e-300) {  // (compared in double: a float length is > 0 then)
       const T il = T(1) / len;
       for (int k = 0; k < 3; ++k) n[k] = r[k] * il;
     } else {
