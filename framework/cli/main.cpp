@@ -59,8 +59,11 @@ usage:
       Count the intersecting non-adjacent triangle pairs of every frame of a run (exact
       test; touching counts). Exit 5 when any frame has some, unless --allow; --list
       prints the pairs (triangle indices, from 0).
-  loom plugins
+  loom plugins [--params NAME [--markdown]]
       List the plugins on the plugin path (kind, name, backend, version, description).
+      --params NAME: the keys plugin NAME accepts (type, default, range, units, backends,
+      help), the framework's keys of its section first; --markdown: as the table of
+      docs/plugins/*.md.
   loom --help | --version
 
 options:
@@ -89,6 +92,8 @@ struct Args {
   bool overwrite = false;
   bool allow = false, list = false;
   std::vector<std::string> sets;
+  std::string params;   // plugins --params NAME
+  bool markdown = false;
 };
 
 [[noreturn]] void usage_error(const std::string& msg) {
@@ -147,6 +152,10 @@ Args parse_args(int argc, char** argv) {
       a.resume = value("--resume");
     } else if (a.command == "run" && s == "--overwrite") {
       a.overwrite = true;
+    } else if (a.command == "plugins" && (s == "--params" || s.rfind("--params=", 0) == 0)) {
+      a.params = value("--params");
+    } else if (a.command == "plugins" && s == "--markdown") {
+      a.markdown = true;
     } else if (a.command == "check" && (s == "--allow" || s == "--list")) {
       (s == "--allow" ? a.allow : a.list) = true;
     } else if (a.command == "study" && s == "--stability") {
@@ -179,6 +188,7 @@ Args parse_args(int argc, char** argv) {
   if (a.command == "view" && a.scene.empty()) usage_error("view needs the output folder of a run, e.g. loom view out/hanging_cloth");
   if (a.command != "plugins" && a.scene.empty()) usage_error(a.command + " needs a scene file, e.g. loom " + a.command + " scenes/hanging_cloth.yaml");
   if (a.command == "plugins" && !a.scene.empty()) usage_error("plugins takes no scene file");
+  if (a.markdown && a.params.empty()) usage_error("--markdown goes with --params NAME, e.g. loom plugins --params gnatv --markdown");
   return a;
 }
 
@@ -190,11 +200,16 @@ std::string stem(const std::string& path) {
 
 bool show_resume(bool quiet) { return !quiet && loom::is_output_rank(); }
 
-int cmd_plugins() {
+int cmd_plugins(const Args& args) {
   loom::Registry registry;
   loom::PluginLoader loader(registry);
   std::vector<std::string> errors;
   loader.load_all(errors);
+  if (!args.params.empty()) {
+    for (const auto& e : errors) std::fprintf(stderr, "loom: warning: %s\n", e.c_str());
+    std::fputs(loom::params_table(registry, args.params, args.markdown).c_str(), stdout);
+    return 0;
+  }
   std::printf("plugin path:\n");
   for (const auto& d : loader.search_path()) std::printf("  %s\n", d.c_str());
   std::printf("\n%-11s %-22s %-8s %-8s %s\n", "KIND", "NAME", "BACKEND", "VERSION", "DESCRIPTION");
@@ -228,7 +243,7 @@ int finish(int code) {
 int main(int argc, char** argv) {
   const Args args = parse_args(argc, argv);
   try {
-    if (args.command == "plugins") return cmd_plugins();
+    if (args.command == "plugins") return cmd_plugins(args);
     if (args.command == "render") {
       loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
       return loom::cli::render_command(r);

@@ -1,5 +1,7 @@
 #include "loom/params.hpp"
 
+#include "loom/param_spec.hpp"
+
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -10,6 +12,7 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <stdexcept>
 
 namespace loom {
 
@@ -27,6 +30,7 @@ struct Params::Impl {
   std::string path;   // dotted path, "" for the root
   bool present = true;
   int line = -1;      // 1-based line of this node (or of its parent when missing)
+  const ParamSpec* spec = nullptr;  // declared keys of this mapping (with_spec), or none
 };
 
 namespace {
@@ -214,10 +218,32 @@ void Params::fail(const std::string& message) const {
   throw InputError(where() + ": " + p + message);
 }
 
+namespace {
+// A read of a key the attached spec does not declare is a bug in the reading code.
+const ParamDecl* declared(const ParamSpec* spec, const std::string& key, const std::string& path) {
+  if (!spec) return nullptr;
+  const ParamDecl* d = spec->find(key);
+  if (!d)
+    throw std::logic_error("'" + spec->name() + "' reads the key '" + (path.empty() ? key : path + "." + key) +
+                           "', which its parameter spec does not declare. Fix (in the code): declare it in the "
+                           "spec (loom/param_spec.hpp).");
+  return d;
+}
+}  // namespace
+
+Params Params::with_spec(const ParamSpec* spec) const {
+  auto impl = std::make_shared<Impl>(*impl_);
+  impl->spec = spec;
+  return Params(impl);
+}
+const ParamSpec* Params::spec() const { return impl_->spec; }
+
 Params Params::child(const std::string& key) const {
+  const ParamDecl* decl = declared(impl_->spec, key, impl_->path);
   impl_->doc->asked[impl_->path].insert(key);
   auto impl = std::make_shared<Impl>();
   impl->doc = impl_->doc;
+  impl->spec = decl && decl->fields ? decl->fields.get() : nullptr;
   impl->path = join_path(impl_->path, key);
   impl->line = impl_->line;
   impl->present = false;
@@ -363,17 +389,33 @@ std::string Params::get_choice(const std::string& key, const std::string& def,
   c.fail("unknown value '" + v + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") + ". Choose one of: " + list + ".");
 }
 
-void Params::mark_used(const std::string& key) const { impl_->doc->asked[impl_->path].insert(key); }
+void Params::mark_used(const std::string& key) const {
+  declared(impl_->spec, key, impl_->path);
+  impl_->doc->asked[impl_->path].insert(key);
+}
 
 void Params::check_unused(const std::vector<std::string>& also_known) const {
   if (!is_map()) return;
   const auto& asked = impl_->doc->asked[impl_->path];
   std::vector<std::string> known(asked.begin(), asked.end());
   known.insert(known.end(), also_known.begin(), also_known.end());
+  if (impl_->spec)  // declared keys are suggestions for a typo even when not read
+    for (const auto& d : impl_->spec->decls())
+      if (d.backends.empty() || asked.count(d.name)) known.push_back(d.name);
   for (auto it = impl_->node.begin(); it != impl_->node.end(); ++it) {
     const std::string k = it->first.Scalar();
     if (asked.count(k) || std::find(also_known.begin(), also_known.end(), k) != also_known.end()) continue;
     if (it->second.IsNull()) continue;  // `key: null` (or --set key=null) removes a key
+    const int key_line = line_of(it->first, impl_->line);
+    const std::string& key_src = impl_->doc->source.empty() ? std::string("<params>") : impl_->doc->source;
+    if (const ParamDecl* d = impl_->spec ? impl_->spec->find(k) : nullptr; d && !d->backends.empty()) {
+      std::string list;
+      for (const auto& b : d->backends) list += (list.empty() ? "" : ", ") + b;
+      throw InputError(key_src + ":" + std::to_string(key_line) + ": key '" + k + "'" +
+                       (impl_->path.empty() ? "" : " in '" + impl_->path + "'") + " is honoured only by the " + list +
+                       " backend of '" + impl_->spec->name() + "'. Fix: remove it, or set backend: " +
+                       d->backends.front() + ".");
+    }
     std::string msg = "unknown key '" + k + "'";
     if (!impl_->path.empty()) msg += " in '" + impl_->path + "'";
     const std::string hint = closest_match(k, known);

@@ -18,31 +18,61 @@ namespace {
 auto key(PluginKind k, const std::string& name, const std::string& backend) {
   return std::make_tuple(static_cast<int>(k), name, backend);
 }
+
+/// The framework's keys of a plugin kind's scene section (none for solvers: a solver's block
+/// holds only its own keys).
+const ParamSpec* section_spec(PluginKind k) {
+  switch (k) {
+    case PluginKind::Material: return &material_section_spec();
+    case PluginKind::Integrator: return &integrator_section_spec();
+    case PluginKind::Renderer: return &render_section_spec();
+    case PluginKind::Solver: return nullptr;
+  }
+  return nullptr;
+}
+
+std::shared_ptr<const ParamSpec> effective_spec(const PluginInfo& info) {
+  if (!info.params) return nullptr;
+  auto s = std::make_shared<ParamSpec>(info.name, info.params->summary());
+  if (const ParamSpec* sec = section_spec(info.kind)) s->append(*sec);
+  s->append(*info.params);
+  return s;
+}
+
+std::vector<std::string> section_keys(PluginKind k) {
+  const ParamSpec* sec = section_spec(k);
+  return sec ? sec->keys() : std::vector<std::string>{};
+}
+
+/// The Params a factory reads: with the plugin's spec attached when it declares one.
+Params view(const Params& p, const std::shared_ptr<const ParamSpec>& spec) {
+  return spec ? p.with_spec(spec.get()) : p;
+}
 }  // namespace
 
 void Registry::add_material(PluginInfo info, MaterialFactory f) {
   info.kind = PluginKind::Material;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, std::move(f), {}, {}, {}};
+  Entry e{info, effective_spec(info), std::move(f), {}, {}, {}};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 void Registry::add_integrator(PluginInfo info, IntegratorFactory f) {
   info.kind = PluginKind::Integrator;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, {}, std::move(f), {}, {}};
+  Entry e{info, effective_spec(info), {}, std::move(f), {}, {}};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 void Registry::add_solver(PluginInfo info, SolverFactory f) {
   info.kind = PluginKind::Solver;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, {}, {}, std::move(f), {}};
+  Entry e{info, effective_spec(info), {}, {}, std::move(f), {}};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 
 void Registry::add_renderer(PluginInfo info, RendererFactory f) {
   info.kind = PluginKind::Renderer;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, {}, {}, {}, std::move(f)};
+  Entry e{info, effective_spec(info), {}, {}, {}, std::move(f)};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 
@@ -78,34 +108,78 @@ const Registry::Entry& Registry::find(PluginKind kind, const std::string& name, 
 
 std::unique_ptr<Material> Registry::make_material(const std::string& name, const std::string& backend,
                                                   const Params& params, const Mesh& mesh) const {
-  auto m = find(PluginKind::Material, name, backend).material(params, mesh);
-  params.check_unused({"type"});
+  const Entry& e = find(PluginKind::Material, name, backend);
+  const Params p = view(params, e.spec);
+  auto m = e.material(p, mesh);
+  p.check_unused(section_keys(PluginKind::Material));
   return m;
 }
 std::unique_ptr<Integrator> Registry::make_integrator(const std::string& name, const std::string& backend,
                                                       const Params& params) const {
-  auto m = find(PluginKind::Integrator, name, backend).integrator(params);
-  params.check_unused({"type", "dt", "substeps", "frame_time"});
+  const Entry& e = find(PluginKind::Integrator, name, backend);
+  const Params p = view(params, e.spec);
+  auto m = e.integrator(p);
+  p.check_unused(section_keys(PluginKind::Integrator));
   return m;
 }
 std::unique_ptr<LinearSolver> Registry::make_solver(const std::string& name, const std::string& backend,
                                                     const Params& params) const {
-  auto m = find(PluginKind::Solver, name, backend).solver(params);
-  params.check_unused();
+  const Entry& e = find(PluginKind::Solver, name, backend);
+  const Params p = view(params, e.spec);
+  auto m = e.solver(p);
+  p.check_unused();
   return m;
 }
 
 std::unique_ptr<Renderer> Registry::make_renderer(const std::string& name, const Params& params,
                                                   const std::string& base_dir) const {
-  auto r = find(PluginKind::Renderer, name, "cpu").renderer(params, base_dir);
-  params.check_unused({"type"});
+  const Entry& e = find(PluginKind::Renderer, name, "cpu");
+  const Params p = view(params, e.spec);
+  auto r = e.renderer(p, base_dir);
+  p.check_unused(section_keys(PluginKind::Renderer));
   return r;
+}
+
+const ParamSpec* Registry::params(PluginKind kind, const std::string& name, const std::string& backend) const {
+  return find(kind, name, backend).spec.get();
 }
 
 std::vector<PluginInfo> Registry::list() const {
   std::vector<PluginInfo> out;
   for (const auto& [k, e] : entries_) out.push_back(e.info);
   return out;
+}
+
+std::string params_table(const Registry& registry, const std::string& name, bool markdown) {
+  std::string out;
+  std::vector<std::string> names;
+  for (PluginKind kind : {PluginKind::Material, PluginKind::Integrator, PluginKind::Solver, PluginKind::Renderer}) {
+    std::vector<std::string> bs = registry.backends(kind, name);
+    if (bs.empty()) continue;
+    // One spec serves every backend of a plugin: show the cpu variant's when there is one.
+    const std::string backend = std::find(bs.begin(), bs.end(), "cpu") != bs.end() ? "cpu" : bs.front();
+    const ParamSpec* spec = registry.params(kind, name, backend);
+    std::string info_text;
+    for (const auto& i : registry.list())
+      if (i.kind == kind && i.name == name && i.backend == backend) info_text = i.description;
+    if (!markdown) {
+      std::string list;
+      for (const auto& b : bs) list += (list.empty() ? "" : ", ") + b;
+      out += name + " (" + to_string(kind) + "; backends " + list + "): " + info_text + "\n\n";
+    }
+    if (spec) out += spec->table(markdown);
+    else out += "(this plugin declares no parameter spec)\n";
+    if (!markdown) out += "\n";
+  }
+  if (!out.empty()) return out;
+  for (const auto& i : registry.list()) names.push_back(i.name);
+  std::sort(names.begin(), names.end());
+  names.erase(std::unique(names.begin(), names.end()), names.end());
+  const std::string hint = closest_match(name, names);
+  std::string list;
+  for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+  throw InputError("no plugin named '" + name + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
+                   ". Plugins: " + list + ".");
 }
 
 }  // namespace loom

@@ -296,15 +296,16 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   // ---- integrator ----
   Params integ = root.child("integrator");
   if (!integ.is_map()) root.fail("missing 'integrator' section. Fix: add integrator: {type: symplectic_euler, dt: 0.001, substeps: 10}.");
-  integrator_name_ = integ.require_string("type");
-  dt_ = integ.get_positive("dt", 1e-3);
+  const ParamReader integ_keys(integ, integrator_section_spec());  // the framework's keys (param_spec.cpp)
+  integrator_name_ = integ_keys.text("type");
+  dt_ = integ_keys.number("dt");
   std::int64_t substeps = integ.get("substeps", static_cast<std::int64_t>(1));
   if (integ.has("frame_time")) {
     // The frame time fixes the output rate; substeps follow dt (so --set integrator.dt=...
     // keeps the frames' spacing).
     if (integ.has("substeps"))
       integ.child("substeps").fail("give either frame_time or substeps, not both (frame_time sets substeps = frame_time / dt).");
-    const double ft = integ.get_positive("frame_time", 1.0 / 60.0);
+    const double ft = integ_keys.number("frame_time");
     const double ratio = ft / dt_;
     substeps = std::llround(ratio);
     if (substeps < 1 || std::abs(ratio - static_cast<double>(substeps)) > 1e-6 * ratio)

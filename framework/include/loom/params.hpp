@@ -16,6 +16,8 @@
 
 namespace loom {
 
+class ParamSpec;
+
 class Params {
  public:
   struct Impl;
@@ -90,6 +92,12 @@ class Params {
 
   /// Emit this node as YAML text (flow = on one line: [a, b], {k: v}).
   std::string dump(bool flow = false) const;
+
+  /// This node with a declared spec attached (loom/param_spec.hpp): child() and mark_used()
+  /// of an undeclared key then throw std::logic_error, children of a Map key carry its nested
+  /// spec, and check_unused() suggests declared keys. The spec must outlive the returned view.
+  Params with_spec(const ParamSpec* spec) const;
+  const ParamSpec* spec() const;
 
   const std::shared_ptr<Impl>& impl() const { return impl_; }
 

@@ -19,13 +19,14 @@
 #include "loom/linear_solver.hpp"
 #include "loom/material.hpp"
 #include "loom/mesh.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "loom/renderer.hpp"
 
 namespace loom {
 
 /// Bumped whenever an interface in framework/include/loom changes incompatibly.
-constexpr int kPluginAbiVersion = 4;  // 2: LinearSolver::set_coordinates; 3: Integrator::restart_state; 4: Material::describe_device
+constexpr int kPluginAbiVersion = 5;  // 2: LinearSolver::set_coordinates; 3: Integrator::restart_state; 4: Material::describe_device; 5: PluginInfo::params
 
 enum class PluginKind { Material, Integrator, Solver, Renderer };
 const char* to_string(PluginKind k);
@@ -37,6 +38,12 @@ struct PluginInfo {
   std::string version = "1.0";
   std::string description;
   std::string module_path;   ///< filled in by the loader
+  /// The plugin's declared parameters (loom/param_spec.hpp), in static storage of the module;
+  /// the cpu and device variants of a plugin share one. The registry merges the framework's
+  /// keys of the section in front, attaches the result to the Params the factory reads and
+  /// rejects reads of undeclared keys. nullptr: an undeclared plugin (keys are not checked
+  /// against a spec, only by check_unused).
+  const ParamSpec* params = nullptr;
 };
 
 using MaterialFactory = std::function<std::unique_ptr<Material>(const Params&, const Mesh&)>;
@@ -64,6 +71,9 @@ class Registry {
   std::unique_ptr<Renderer> make_renderer(const std::string& name, const Params& params,
                                           const std::string& base_dir) const;
   std::vector<PluginInfo> list() const;
+  /// The parameters a (kind, name, backend) plugin accepts: the framework's keys of its scene
+  /// section, then the plugin's own; nullptr when the plugin declares none.
+  const ParamSpec* params(PluginKind kind, const std::string& name, const std::string& backend = "cpu") const;
   /// Backends registered for (kind, name).
   std::vector<std::string> backends(PluginKind kind, const std::string& name) const;
   void set_current_module(const std::string& path) { current_module_ = path; }
@@ -71,6 +81,7 @@ class Registry {
  private:
   struct Entry {
     PluginInfo info;
+    std::shared_ptr<const ParamSpec> spec;  ///< section keys + the plugin's (nullptr: none declared)
     MaterialFactory material;
     IntegratorFactory integrator;
     SolverFactory solver;
@@ -80,6 +91,11 @@ class Registry {
   std::map<std::tuple<int, std::string, std::string>, Entry> entries_;
   std::string current_module_;
 };
+
+/// `loom plugins --params NAME`: for each kind with a plugin NAME, its kind, backends,
+/// description and parameter table (ParamSpec::table); `markdown`: the table only, as in
+/// docs/plugins/*.md. Throws InputError (with "did you mean") for an unknown name.
+std::string params_table(const Registry& registry, const std::string& name, bool markdown);
 
 class PluginLoader {
  public:
