@@ -465,6 +465,9 @@ const ParamSpec& render_section_spec() {
     s.choice("video", "auto", {"auto", "on", "off"}).framework().help(
         "encode the frames as render.mp4 with ffmpeg (auto: when ffmpeg is on the PATH)");
     s.number("fps", 30).range(ParamRange::positive()).units("1/s").framework().help("frame rate of the video");
+    s.choice("fit", "sequence", {"sequence", "first_frame"}).framework().help(
+        "camera framing: the bounds of the whole sequence, or of the first frame");
+    s.flag("ground", true).framework().help("draw the ground (a plane collider is the scene's own)");
     return s;
   }();
   return s;

@@ -16,7 +16,7 @@ namespace loom::cuda {
 
 Precision parse_precision(const Params& p) {
   if (!p.valid()) return Precision::Double;
-  return p.get_choice("precision", "double", {"double", "float"}) == "float" ? Precision::Float : Precision::Double;
+  return ParamReader(p, device_keys_spec()).text("precision") == "float" ? Precision::Float : Precision::Double;
 }
 
 namespace {
@@ -121,9 +121,7 @@ class DeviceColliders {
 /// Reads host_sync_every (>= 1): copy x, v back into scene.state after every n-th step.
 int parse_sync_every(const Params& p) {
   if (!p.valid()) return 1;
-  const std::int64_t k = p.get("host_sync_every", static_cast<std::int64_t>(1));
-  if (k < 1 || k > 1000000) p.child("host_sync_every").fail("host_sync_every must be an integer >= 1 (1 = every step)");
-  return static_cast<int>(k);
+  return ParamReader(p, device_keys_spec()).int32("host_sync_every");
 }
 
 /// Copy back after the step that makes state.step a multiple of `every` (call before finish_step).
@@ -559,12 +557,12 @@ class CudaBw final : public Integrator {
   StepStats last_;
 };
 
+/// The cpu plugin's reading of `variant` (one spec for both backends).
 HoVariantD parse_variant(const Params& p) {
-  if (!p.valid()) return HoVariantD::Velocity;
-  const std::string v = p.get_choice("variant", "velocity", {"velocity", "analytic_position", "kang_cho_2011"});
-  return v == "velocity" ? HoVariantD::Velocity
-         : v == "analytic_position" ? HoVariantD::AnalyticPosition
-                                    : HoVariantD::KangCho2011;
+  const HoVariant v = read_ho_variant(p);
+  return v == HoVariant::Velocity           ? HoVariantD::Velocity
+         : v == HoVariant::AnalyticPosition ? HoVariantD::AnalyticPosition
+                                            : HoVariantD::KangCho2011;
 }
 
 }  // namespace
@@ -590,23 +588,16 @@ std::unique_ptr<Integrator> make_cuda_baraff_witkin(const BwOptionsD& o, Precisi
   return std::make_unique<CudaBw<double>>(o);
 }
 std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p) {
+  // The keys both backends honour are read by the cpu plugin's parser (one spec, one struct).
+  const BaraffWitkinOptions c = parse_baraff_witkin_options(p);
   BwOptionsD o;
-  if (p.valid()) {
-    o.kang_cho_damping = p.get_nonnegative("kang_cho_damping", 0.0);
-    if (p.has("rayleigh")) {
-      const Params r = p.child("rayleigh");
-      if (!r.is_map()) r.fail("rayleigh must be a mapping {alpha: <1/s>, beta: <s>}");
-      o.rayleigh_alpha = r.get_nonnegative("alpha", 0.0);
-      o.rayleigh_beta = r.get_nonnegative("beta", 0.0);
-      r.check_unused();
-    }
-    o.halve_on_failure = p.get_choice("on_solver_failure", "stop", {"stop", "halve_step"}) == "halve_step";
-    const std::int64_t mh = p.get("max_halvings", static_cast<std::int64_t>(o.max_halvings));
-    if (mh < 1 || mh > 20) p.child("max_halvings").fail("max_halvings must be between 1 and 20");
-    o.max_halvings = static_cast<int>(mh);
-    o.warm_start = p.get("warm_start", o.warm_start);
-    o.host_sync_every = parse_sync_every(p);
-  }
+  o.kang_cho_damping = c.kang_cho_damping;
+  o.rayleigh_alpha = c.rayleigh_alpha;
+  o.rayleigh_beta = c.rayleigh_beta;
+  o.halve_on_failure = c.on_failure == BaraffWitkinOptions::OnFailure::HalveStep;
+  o.max_halvings = c.max_halvings;
+  o.warm_start = c.warm_start;
+  o.host_sync_every = parse_sync_every(p);
   return make_cuda_baraff_witkin(o, parse_precision(p));
 }
 

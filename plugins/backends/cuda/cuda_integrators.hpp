@@ -19,13 +19,17 @@
 
 #include "device_model.hpp"
 #include "device_pcg.hpp"
+#include "baraff_witkin.hpp"
+#include "ho_integrator.hpp"
 #include "loom/integrator.hpp"
 #include "loom/params.hpp"
+#include "rk4_integrator.hpp"
 
 namespace loom::cuda {
 
 enum class Precision { Double, Float };
-/// Reads `precision` (double | float).
+/// Reads `precision` (double | float) through loom::device_keys_spec(), which the cpu
+/// integrators' specs (baraff_witkin_spec, harmonic_oscillation_spec, rk4_spec) include.
 Precision parse_precision(const Params& p);
 
 enum class HoVariantD { Velocity = 0, AnalyticPosition = 1, KangCho2011 = 2 };

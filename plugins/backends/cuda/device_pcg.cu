@@ -8,14 +8,27 @@
 
 namespace loom::cuda {
 
+const ParamSpec& cusparse_pcg_spec() {
+  static const ParamSpec spec = [] {
+    const PcgOptions d;
+    ParamSpec s("cusparse_pcg", "modified (filtered) PCG on the GPU");
+    s.number("tolerance", d.tolerance).range(ParamRange::closed(1e-16, 0.5)).help(
+        "on sqrt(r.P^-1 r / b.P^-1 b) of the filtered residual");
+    s.integer("max_iterations", d.max_iterations).range(ParamRange::at_least(1)).help(
+        "iterations before the solve counts as failed");
+    s.choice("preconditioner", "block_jacobi", {"none", "jacobi", "block_jacobi"}).help("diagonal preconditioner");
+    return s;
+  }();
+  return spec;
+}
+
 PcgOptions parse_pcg_options(const Params& p) {
   PcgOptions o;
   if (!p.valid()) return o;
-  o.tolerance = p.get_in_range("tolerance", o.tolerance, 1e-16, 0.5);
-  const std::int64_t it = p.get("max_iterations", static_cast<std::int64_t>(o.max_iterations));
-  if (it < 1) p.child("max_iterations").fail("max_iterations must be >= 1");
-  o.max_iterations = static_cast<int>(it);
-  const std::string pc = p.get_choice("preconditioner", "block_jacobi", {"none", "jacobi", "block_jacobi"});
+  const ParamReader r(p, cusparse_pcg_spec());
+  o.tolerance = r.number("tolerance");
+  o.max_iterations = r.int32("max_iterations");
+  const std::string pc = r.text("preconditioner");
   o.preconditioner = pc == "none"     ? PcgOptions::Preconditioner::None
                      : pc == "jacobi" ? PcgOptions::Preconditioner::Jacobi
                                       : PcgOptions::Preconditioner::BlockJacobi;

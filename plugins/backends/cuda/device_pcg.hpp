@@ -13,6 +13,7 @@
 #include "device_model.hpp"
 #include "loom/bsr.hpp"
 #include "loom/linear_solver.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 
 namespace loom::cuda {
@@ -22,7 +23,9 @@ struct PcgOptions {
   int max_iterations = 10000;
   enum class Preconditioner { None, Jacobi, BlockJacobi } preconditioner = Preconditioner::BlockJacobi;
 };
-/// Reads tolerance, max_iterations, preconditioner (none | jacobi | block_jacobi).
+/// The keys of cusparse_pcg: tolerance, max_iterations, preconditioner (none | jacobi |
+/// block_jacobi), read by parse_pcg_options.
+const ParamSpec& cusparse_pcg_spec();
 PcgOptions parse_pcg_options(const Params& p);
 
 /// The constraint filter on the device: free DOF count and projector per vertex, and the

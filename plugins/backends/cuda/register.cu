@@ -9,16 +9,18 @@ static void register_cuda(loom::Registry& r) {
   using loom::PluginKind;
   r.add_integrator({PluginKind::Integrator, "harmonic_oscillation", "cuda", "1.0",
                     "harmonic-oscillation spring integration on the GPU (variants velocity, analytic_position, "
-                    "kang_cho_2011; precision double | float)", ""},
+                    "kang_cho_2011; precision double | float)", "", &loom::harmonic_oscillation_spec()},
                    [](const loom::Params& p) { return loom::cuda::make_cuda_ho(p); });
   r.add_integrator({PluginKind::Integrator, "rk4", "cuda", "1.0",
-                    "classical RK4 on the GPU (precision double | float)", ""},
+                    "classical RK4 on the GPU (precision double | float)", "", &loom::rk4_spec()},
                    [](const loom::Params& p) { return loom::cuda::make_cuda_rk4(p); });
   r.add_integrator({PluginKind::Integrator, "baraff_witkin", "cuda", "1.0",
-                    "Baraff-Witkin implicit step assembled and solved on the GPU (needs solver cusparse_pcg)", ""},
+                    "Baraff-Witkin implicit step assembled and solved on the GPU (needs solver cusparse_pcg)", "",
+                    &loom::baraff_witkin_spec()},
                    [](const loom::Params& p) { return loom::cuda::make_cuda_baraff_witkin(p); });
   r.add_solver({PluginKind::Solver, "cusparse_pcg", "cuda", "1.0",
-                "modified (filtered) PCG on the GPU: cuSPARSE bsrmv, Thrust reductions, (block) Jacobi", ""},
+                "modified (filtered) PCG on the GPU: cuSPARSE bsrmv, Thrust reductions, (block) Jacobi", "",
+                &loom::cuda::cusparse_pcg_spec()},
                [](const loom::Params& p) { return std::make_unique<loom::cuda::CusparsePcg>(p); });
 }
 

@@ -13,10 +13,21 @@ double seconds_since(Clock::time_point t0) {
 }
 }  // namespace
 
+const ParamSpec& ldlt_spec() {
+  static const ParamSpec spec = [] {
+    const LdltOptions d;
+    ParamSpec s("eigen_ldlt", "Eigen SimplicialLDLT of the projected system");
+    s.number("pivot_tolerance", d.pivot_tolerance).range(ParamRange::closed(0, 1e-2)).help(
+        "a pivot d_k <= pivot_tolerance max|d| counts as non-positive (A not SPD: the solve fails)");
+    return s;
+  }();
+  return spec;
+}
+
 LdltOptions parse_ldlt_options(const Params& p) {
   LdltOptions o;
   if (!p.valid()) return o;
-  o.pivot_tolerance = p.get_in_range("pivot_tolerance", o.pivot_tolerance, 0.0, 1e-2);
+  o.pivot_tolerance = ParamReader(p, ldlt_spec()).number("pivot_tolerance");
   return o;
 }
 

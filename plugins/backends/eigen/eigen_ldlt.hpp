@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "loom/linear_solver.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "loom/solver_common.hpp"
 
@@ -21,6 +22,8 @@ struct LdltOptions {
   double pivot_tolerance = 1e-14;
 };
 
+/// The keys of eigen_ldlt (pivot_tolerance), read by parse_ldlt_options.
+const ParamSpec& ldlt_spec();
 LdltOptions parse_ldlt_options(const Params& p);
 
 class EigenLdlt final : public LinearSolver {

@@ -39,50 +39,68 @@ const char* precond_name(PcgPreconditioner p) {
 
 }  // namespace
 
+const ParamSpec& pcg_spec() {
+  static const ParamSpec spec = [] {
+    const PcgOptions d;
+    const amg::SaAmgOptions m;
+    ParamSpec s("eigen_pcg", "modified (filtered) PCG of Baraff-Witkin on the 3x3 block matrix");
+    s.number("tolerance", d.tolerance).range(ParamRange::closed(1e-16, 0.5)).help(
+        "relative residual: |S(b - A dv)| <= tolerance |S(b - A z)|");
+    s.integer("max_iterations", d.max_iterations).range(ParamRange::closed(1, 1e8)).help(
+        "iterations before the solve counts as failed");
+    s.choice("preconditioner", precond_name(d.preconditioner), {"none", "jacobi", "block_jacobi", "sa_amg"}).help(
+        "sa_amg: smoothed-aggregation multigrid V-cycle (options under sa_amg)");
+    s.integer("parallel_min_rows", d.parallel_min_rows).range(ParamRange::closed(0, 1e9)).units("vertices").help(
+        "loops run on all OpenMP threads from this many block rows on");
+    ParamSpec a("sa_amg");
+    a.choice("near_null_space", m.near_null_modes == 6 ? "rigid" : "translations", {"rigid", "translations"}).help(
+        "rigid: translations and rotations (needs coordinates); translations: 3 modes");
+    a.number("strength_threshold", m.strength_threshold).range(ParamRange::closed(0, 1)).help(
+        "block (i,j) strong if |A_ij| > theta sqrt(|A_ii| |A_jj|)");
+    a.integer("smoothing_sweeps", m.smoothing_sweeps).range(ParamRange::closed(1, 10)).help(
+        "Gauss-Seidel sweeps before and after the coarse correction");
+    a.integer("coarse_dofs", m.coarse_dofs).range(ParamRange::closed(6, 4000)).units("DOFs").help(
+        "levels are added until one has at most this many DOFs (dense Cholesky)");
+    a.integer("max_levels", m.max_levels).range(ParamRange::closed(1, 30)).help("most levels of the hierarchy");
+    a.integer("prolongator_refresh_steps", m.prolongator_refresh_steps).range(ParamRange::closed(1, 1e6))
+        .units("refreshes").help("rebuild the prolongator every k refreshes (1 = every step)");
+    a.integer("hierarchy_refresh_steps", m.hierarchy_refresh_steps).range(ParamRange::closed(1, 1e6))
+        .units("refreshes").help("recompute the coarse levels every k refreshes (1 = every step)");
+    a.number("prolongator_damping", m.prolongator_damping).range(ParamRange::closed(0, 1.9)).help(
+        "omega = damping / lambda_max(D^-1 A)");
+    s.map("sa_amg", std::move(a)).help("options of preconditioner: sa_amg");
+    return s;
+  }();
+  return spec;
+}
+
 PcgOptions parse_pcg_options(const Params& p) {
   PcgOptions o;
   if (!p.valid()) return o;
-  o.tolerance = p.get_in_range("tolerance", o.tolerance, 1e-16, 0.5);
-  const std::int64_t it = p.get("max_iterations", static_cast<std::int64_t>(o.max_iterations));
-  if (it < 1 || it > 100000000) p.child("max_iterations").fail("max_iterations must be between 1 and 1e8");
-  o.max_iterations = static_cast<int>(it);
-  const std::string pc =
-      p.get_choice("preconditioner", "block_jacobi", {"none", "jacobi", "block_jacobi", "sa_amg"});
-  const std::int64_t pm = p.get("parallel_min_rows", static_cast<std::int64_t>(o.parallel_min_rows));
-  if (pm < 0 || pm > 1000000000) p.child("parallel_min_rows").fail("parallel_min_rows must be >= 0 (vertices)");
-  o.parallel_min_rows = static_cast<Index>(pm);
+  const ParamReader r(p, pcg_spec());
+  o.tolerance = r.number("tolerance");
+  o.max_iterations = r.int32("max_iterations");
+  const std::string pc = r.text("preconditioner");
+  o.parallel_min_rows = static_cast<Index>(r.integer("parallel_min_rows"));
   o.preconditioner = pc == "none"     ? PcgPreconditioner::None
                      : pc == "jacobi" ? PcgPreconditioner::Jacobi
                      : pc == "sa_amg" ? PcgPreconditioner::SaAmg
                                       : PcgPreconditioner::BlockJacobi;
   if (p.has("sa_amg")) {
-    const Params a = p.child("sa_amg");
+    const ParamReader a = r.section("sa_amg");
     if (o.preconditioner != PcgPreconditioner::SaAmg)
-      a.fail("the sa_amg: options apply only with preconditioner: sa_amg");
-    if (!a.is_map()) a.fail("sa_amg: must be a map, e.g. sa_amg: {near_null_space: rigid}");
+      a.params().fail("the sa_amg: options apply only with preconditioner: sa_amg");
+    if (!a.params().is_map()) a.params().fail("sa_amg: must be a map, e.g. sa_amg: {near_null_space: rigid}");
     amg::SaAmgOptions& m = o.amg;
-    const std::string nn = a.get_choice("near_null_space", "rigid", {"rigid", "translations"});
-    m.near_null_modes = nn == "rigid" ? 6 : 3;
-    m.strength_threshold = a.get_in_range("strength_threshold", m.strength_threshold, 0.0, 1.0);
-    const std::int64_t sw = a.get("smoothing_sweeps", static_cast<std::int64_t>(m.smoothing_sweeps));
-    if (sw < 1 || sw > 10) a.child("smoothing_sweeps").fail("smoothing_sweeps must be between 1 and 10");
-    m.smoothing_sweeps = static_cast<int>(sw);
-    const std::int64_t cd = a.get("coarse_dofs", static_cast<std::int64_t>(m.coarse_dofs));
-    if (cd < 6 || cd > 4000) a.child("coarse_dofs").fail("coarse_dofs must be between 6 and 4000 (dense Cholesky)");
-    m.coarse_dofs = static_cast<Index>(cd);
-    const std::int64_t ml = a.get("max_levels", static_cast<std::int64_t>(m.max_levels));
-    if (ml < 1 || ml > 30) a.child("max_levels").fail("max_levels must be between 1 and 30");
-    m.max_levels = static_cast<int>(ml);
-    const std::int64_t rs = a.get("prolongator_refresh_steps", static_cast<std::int64_t>(m.prolongator_refresh_steps));
-    if (rs < 1 || rs > 1000000)
-      a.child("prolongator_refresh_steps").fail("prolongator_refresh_steps must be >= 1 (1 = every step)");
-    m.prolongator_refresh_steps = static_cast<int>(rs);
-    const std::int64_t hs = a.get("hierarchy_refresh_steps", static_cast<std::int64_t>(m.hierarchy_refresh_steps));
-    if (hs < 1 || hs > 1000000)
-      a.child("hierarchy_refresh_steps").fail("hierarchy_refresh_steps must be >= 1 (1 = every step)");
-    m.hierarchy_refresh_steps = static_cast<int>(hs);
-    m.prolongator_damping = a.get_in_range("prolongator_damping", m.prolongator_damping, 0.0, 1.9);
-    a.check_unused();
+    m.near_null_modes = a.text("near_null_space") == "rigid" ? 6 : 3;
+    m.strength_threshold = a.number("strength_threshold");
+    m.smoothing_sweeps = a.int32("smoothing_sweeps");
+    m.coarse_dofs = static_cast<Index>(a.integer("coarse_dofs"));
+    m.max_levels = a.int32("max_levels");
+    m.prolongator_refresh_steps = a.int32("prolongator_refresh_steps");
+    m.hierarchy_refresh_steps = a.int32("hierarchy_refresh_steps");
+    m.prolongator_damping = a.number("prolongator_damping");
+    a.params().check_unused();
   }
   return o;
 }

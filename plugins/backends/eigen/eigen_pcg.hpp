@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "loom/linear_solver.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "sa_amg.hpp"
 
@@ -26,8 +27,10 @@ struct PcgOptions {
   amg::SaAmgOptions amg;       ///< preconditioner: sa_amg (the `sa_amg:` map)
 };
 
-/// Read tolerance, max_iterations, preconditioner (none | jacobi | block_jacobi | sa_amg) and the
-/// sa_amg: map.
+/// The keys of eigen_pcg: tolerance, max_iterations, preconditioner (none | jacobi |
+/// block_jacobi | sa_amg), parallel_min_rows and the sa_amg: map.
+const ParamSpec& pcg_spec();
+/// Reads them through pcg_spec().
 PcgOptions parse_pcg_options(const Params& p);
 
 class EigenPcg final : public LinearSolver {

@@ -125,22 +125,39 @@ int launcher_rank() {
   return 0;
 }
 
+const ParamSpec& PetscSolverOptions::spec() {
+  static const ParamSpec spec = [] {
+    const PetscSolverOptions d;
+    ParamSpec s("petsc", "PETSc KSP on the bs=3 projected system, distributed under mpirun");
+    s.choice("ksp", d.ksp, {"cg", "cr", "minres", "gmres", "fgmres", "bcgs", "pipecg", "preonly"}).help("KSP type");
+    s.choice("pc", d.pc, {"jacobi", "bjacobi", "gamg", "none", "sor", "ilu", "icc", "hypre", "boomeramg", "cholesky", "lu"})
+        .help("PC type");
+    s.choice("near_null_space", d.near_null_space, {"auto", "rigid", "none"}).help(
+        "rigid-body modes for gamg/hypre (auto: when the integrator passes positions)");
+    s.number("tolerance", d.tolerance).range(ParamRange::positive()).help(
+        "relative residual |S(b - A dv)| / |S(b - A z)|");
+    s.integer("max_iterations", d.max_iterations).range(ParamRange::closed(1, 1e8)).help(
+        "iterations before the solve counts as failed");
+    s.integer("reuse_preconditioner_steps", d.reuse_preconditioner_steps).range(ParamRange::closed(1, 1e6))
+        .units("steps").help("rebuild the preconditioner every N steps (1 = every step)");
+    s.text("options", d.options).help("PETSc options, e.g. \"-ksp_monitor -pc_gamg_threshold 0.01\"");
+    s.choice("matrix", d.matrix, {"auto", "baij", "aij"}).help("matrix format (auto: BAIJ, AIJ for gamg/hypre)");
+    return s;
+  }();
+  return spec;
+}
+
 PetscSolverOptions PetscSolverOptions::from_params(const Params& p) {
   PetscSolverOptions o;
-  o.ksp = p.get_choice("ksp", o.ksp, {"cg", "cr", "minres", "gmres", "fgmres", "bcgs", "pipecg", "preonly"});
-  o.pc = p.get_choice("pc", o.pc,
-                      {"jacobi", "bjacobi", "gamg", "none", "sor", "ilu", "icc", "hypre", "boomeramg", "cholesky", "lu"});
-  o.near_null_space = p.get_choice("near_null_space", o.near_null_space, {"auto", "rigid", "none"});
-  o.tolerance = p.get_positive("tolerance", o.tolerance);
-  const std::int64_t it = p.get("max_iterations", std::int64_t{o.max_iterations});
-  if (it < 1 || it > 100000000) p.child("max_iterations").fail("max_iterations must be an integer >= 1");
-  o.max_iterations = static_cast<int>(it);
-  const std::int64_t reuse = p.get("reuse_preconditioner_steps", std::int64_t{1});
-  if (reuse < 1 || reuse > 1000000)
-    p.child("reuse_preconditioner_steps").fail("reuse_preconditioner_steps must be an integer >= 1 (1 = rebuild every step)");
-  o.reuse_preconditioner_steps = static_cast<int>(reuse);
-  o.options = p.get("options", std::string{});
-  o.matrix = p.get_choice("matrix", o.matrix, {"auto", "baij", "aij"});
+  const ParamReader r(p, spec());
+  o.ksp = r.text("ksp");
+  o.pc = r.text("pc");
+  o.near_null_space = r.text("near_null_space");
+  o.tolerance = r.number("tolerance");
+  o.max_iterations = r.int32("max_iterations");
+  o.reuse_preconditioner_steps = r.int32("reuse_preconditioner_steps");
+  o.options = r.text("options");
+  o.matrix = r.text("matrix");
   return o;
 }
 

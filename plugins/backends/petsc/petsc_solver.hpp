@@ -10,6 +10,7 @@
 #include <string>
 
 #include "loom/linear_solver.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 
 namespace loom {
@@ -26,6 +27,8 @@ struct PetscSolverOptions {
   /// vertex) as the near-null space for gamg / hypre / boomeramg when the integrator passes
   /// positions (set_coordinates); rigid: always (an error without positions); none: never.
   std::string near_null_space = "auto";
+  /// The keys of petsc, read by from_params.
+  static const ParamSpec& spec();
   static PetscSolverOptions from_params(const Params& p);
 };
 

@@ -73,21 +73,34 @@ void apply_blas_threads(int requested, Index vertices) {
 
 }  // namespace
 
+const ParamSpec& CholmodOptions::spec() {
+  static const ParamSpec spec = [] {
+    const CholmodOptions d;
+    ParamSpec s("cholmod", "SuiteSparse CHOLMOD Cholesky of the projected system");
+    s.number("tolerance", d.tolerance).range(ParamRange::positive()).help(
+        "relative residual |S(b - A dv)| / |S(b - A z)| a solve with a reused factor must reach");
+    s.integer("reuse_factorization_steps", d.reuse_factorization_steps).range(ParamRange::closed(1, 1e6))
+        .units("steps").help("refactor every N steps (1 = every step); in between PCG with the old factor");
+    s.integer("max_iterations", d.max_iterations).range(ParamRange::closed(0, 100000)).help(
+        "PCG iterations with a stale factor before refactoring");
+    s.choice("ordering", d.ordering, {"auto", "amd", "metis", "nesdis", "natural"}).help("fill-reducing ordering");
+    s.choice("factorization", d.factorization, {"supernodal", "simplicial", "auto"}).help("CHOLMOD factorization kind");
+    s.integer("blas_threads", d.blas_threads).range(ParamRange::closed(0, 1024)).units("threads").help(
+        "OpenBLAS threads (0: $OPENBLAS_NUM_THREADS if set, else 1 below 10000 vertices and the OpenMP count above)");
+    return s;
+  }();
+  return spec;
+}
+
 CholmodOptions CholmodOptions::from_params(const Params& p) {
   CholmodOptions o;
-  o.tolerance = p.get_positive("tolerance", o.tolerance);
-  const std::int64_t reuse = p.get("reuse_factorization_steps", std::int64_t{1});
-  if (reuse < 1 || reuse > 1000000)
-    p.child("reuse_factorization_steps").fail("reuse_factorization_steps must be an integer >= 1 (1 = refactor every step)");
-  o.reuse_factorization_steps = static_cast<int>(reuse);
-  const std::int64_t it = p.get("max_iterations", std::int64_t{50});
-  if (it < 0 || it > 100000) p.child("max_iterations").fail("max_iterations must be an integer in [0, 100000]");
-  o.max_iterations = static_cast<int>(it);
-  o.ordering = p.get_choice("ordering", o.ordering, {"auto", "amd", "metis", "nesdis", "natural"});
-  o.factorization = p.get_choice("factorization", o.factorization, {"supernodal", "simplicial", "auto"});
-  const std::int64_t bt = p.get("blas_threads", std::int64_t{0});
-  if (bt < 0 || bt > 1024) p.child("blas_threads").fail("blas_threads must be an integer >= 0 (0 = OpenMP thread count)");
-  o.blas_threads = static_cast<int>(bt);
+  const ParamReader r(p, spec());
+  o.tolerance = r.number("tolerance");
+  o.reuse_factorization_steps = r.int32("reuse_factorization_steps");
+  o.max_iterations = r.int32("max_iterations");
+  o.ordering = r.text("ordering");
+  o.factorization = r.text("factorization");
+  o.blas_threads = r.int32("blas_threads");
   return o;
 }
 

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "loom/linear_solver.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 
 namespace loom {
@@ -20,6 +21,8 @@ struct CholmodOptions {
   std::string ordering = "auto";    ///< auto | amd | metis | nesdis | natural
   std::string factorization = "supernodal";  ///< supernodal | simplicial | auto
   int blas_threads = 0;             ///< 0: $OPENBLAS_NUM_THREADS if set, else omp_get_max_threads()
+  /// The keys of cholmod, read by from_params.
+  static const ParamSpec& spec();
   static CholmodOptions from_params(const Params& p);
 };
 

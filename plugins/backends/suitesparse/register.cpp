@@ -4,7 +4,8 @@
 
 static void register_cholmod(loom::Registry& r) {
   r.add_solver({loom::PluginKind::Solver, "cholmod", "cpu", "1.0",
-                "SuiteSparse CHOLMOD supernodal Cholesky of the projected system (OpenBLAS)", ""},
+                "SuiteSparse CHOLMOD supernodal Cholesky of the projected system (OpenBLAS)", "",
+                &loom::CholmodOptions::spec()},
                [](const loom::Params& p) { return std::make_unique<loom::CholmodSolver>(p); });
 }
 

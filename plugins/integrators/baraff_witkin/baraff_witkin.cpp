@@ -20,24 +20,47 @@ double seconds_between(Clock::time_point a, Clock::time_point b) {
 }
 }  // namespace
 
+const ParamSpec& baraff_witkin_spec() {
+  static const ParamSpec spec = [] {
+    const BaraffWitkinOptions d;
+    ParamSpec s("baraff_witkin", "linearised implicit Euler (Baraff & Witkin 1998) with the constraint filter");
+    s.number("kang_cho_damping", d.kang_cho_damping).range(ParamRange::nonnegative()).units("N s/m").help(
+        "c_d of the graph-Laplacian damper (NUMERICS 3.2)");
+    ParamSpec ray("rayleigh");
+    ray.number("alpha", d.rayleigh_alpha).range(ParamRange::nonnegative()).units("1/s").help("mass-proportional damping");
+    ray.number("beta", d.rayleigh_beta).range(ParamRange::nonnegative()).units("s").help("stiffness-proportional damping");
+    s.map("rayleigh", std::move(ray)).help("Rayleigh damping {alpha, beta}");
+    s.choice("on_solver_failure", d.on_failure == BaraffWitkinOptions::OnFailure::Stop ? "stop" : "halve_step",
+             {"stop", "halve_step"})
+        .help("when the linear solver fails: stop the run, or retry the step as two halves");
+    s.integer("max_halvings", d.max_halvings).range(ParamRange::closed(1, 20)).help(
+        "nesting depth of halve_step retries");
+    s.flag("warm_start", d.warm_start).help("start each solve from the previous step's dv");
+    s.flag("implicit_self_contact", d.implicit_self_contact).backends({"cpu"}).help(
+        "self-contacts of self_collision as stiff springs inside the implicit solve (docs/CONTACT.md)");
+    declare_device_keys(s);
+    return s;
+  }();
+  return spec;
+}
+
 BaraffWitkinOptions parse_baraff_witkin_options(const Params& p) {
   BaraffWitkinOptions o;
   if (!p.valid()) return o;
-  o.kang_cho_damping = p.get_nonnegative("kang_cho_damping", 0.0);
+  const ParamReader r(p, baraff_witkin_spec());
+  o.kang_cho_damping = r.number("kang_cho_damping");
   if (p.has("rayleigh")) {
-    const Params r = p.child("rayleigh");
-    if (!r.is_map()) r.fail("rayleigh must be a mapping {alpha: <1/s>, beta: <s>}");
-    o.rayleigh_alpha = r.get_nonnegative("alpha", 0.0);
-    o.rayleigh_beta = r.get_nonnegative("beta", 0.0);
-    r.check_unused();
+    const ParamReader ray = r.section("rayleigh");
+    if (!ray.params().is_map()) ray.params().fail("rayleigh must be a mapping {alpha: <1/s>, beta: <s>}");
+    o.rayleigh_alpha = ray.number("alpha");
+    o.rayleigh_beta = ray.number("beta");
+    ray.params().check_unused();
   }
-  const std::string pol = p.get_choice("on_solver_failure", "stop", {"stop", "halve_step"});
+  const std::string pol = r.text("on_solver_failure");
   o.on_failure = pol == "stop" ? BaraffWitkinOptions::OnFailure::Stop : BaraffWitkinOptions::OnFailure::HalveStep;
-  const std::int64_t mh = p.get("max_halvings", static_cast<std::int64_t>(o.max_halvings));
-  if (mh < 1 || mh > 20) p.child("max_halvings").fail("max_halvings must be between 1 and 20");
-  o.max_halvings = static_cast<int>(mh);
-  o.warm_start = p.get("warm_start", o.warm_start);
-  o.implicit_self_contact = p.get("implicit_self_contact", o.implicit_self_contact);
+  o.max_halvings = r.int32("max_halvings");
+  o.warm_start = r.flag("warm_start");
+  o.implicit_self_contact = r.flag("implicit_self_contact");
   return o;
 }
 

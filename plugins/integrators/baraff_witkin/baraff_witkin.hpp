@@ -17,6 +17,7 @@
 
 #include "loom/bsr.hpp"
 #include "loom/integrator.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "self_contact.hpp"
 
@@ -32,8 +33,11 @@ struct BaraffWitkinOptions {
   bool implicit_self_contact = true;  ///< self-contacts as springs in the solve (self_contact.hpp)
 };
 
-/// Reads kang_cho_damping, rayleigh {alpha, beta}, on_solver_failure (stop | halve_step),
-/// max_halvings, warm_start and implicit_self_contact.
+/// The keys of baraff_witkin (cpu and cuda): kang_cho_damping, rayleigh {alpha, beta},
+/// on_solver_failure (stop | halve_step), max_halvings, warm_start, implicit_self_contact
+/// (cpu); precision and host_sync_every for the cuda backend.
+const ParamSpec& baraff_witkin_spec();
+/// Reads the keys the cpu and cuda variants share, through baraff_witkin_spec().
 BaraffWitkinOptions parse_baraff_witkin_options(const Params& p);
 
 class BaraffWitkin final : public Integrator {

@@ -25,11 +25,28 @@ const char* to_string(HoVariant v) {
   return "?";
 }
 
+const ParamSpec& harmonic_oscillation_spec() {
+  static const ParamSpec spec = [] {
+    ParamSpec s("harmonic_oscillation", "Kang & Cho 2011 harmonic-oscillation spring integration, corrected");
+    s.choice("variant", "velocity", {"velocity", "analytic_position", "kang_cho_2011"}).help(
+        "velocity: corrected velocity update; analytic_position: closed-form position; kang_cho_2011: as published");
+    s.choice("storage", "auto", {"auto", "direct"}).backends({"cpu"}).help(
+        "auto: shared per-spring constants in a table when springs repeat; direct: per-spring constants");
+    declare_device_keys(s);
+    return s;
+  }();
+  return spec;
+}
+
+HoVariant read_ho_variant(const Params& p) {
+  if (!p.valid()) return HoVariant::Velocity;
+  return parse_ho_variant(ParamReader(p, harmonic_oscillation_spec()).text("variant"));
+}
+
 HoIntegrator::HoIntegrator(const Params& p) {
   if (p.valid()) {
-    variant_ = parse_ho_variant(
-        p.get_choice("variant", "velocity", {"velocity", "analytic_position", "kang_cho_2011"}));
-    allow_table_ = p.get_choice("storage", "auto", {"auto", "direct"}) == "auto";
+    variant_ = read_ho_variant(p);
+    allow_table_ = ParamReader(p, harmonic_oscillation_spec()).text("storage") == "auto";
   }
 }
 

@@ -18,6 +18,7 @@
 
 #include "loom/integrator.hpp"
 #include "loom/kernels/ho.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "loom/spring_layout.hpp"
 
@@ -32,6 +33,11 @@ namespace loom {
 enum class HoVariant { Velocity, AnalyticPosition, KangCho2011 };
 HoVariant parse_ho_variant(const std::string& s);
 const char* to_string(HoVariant v);
+/// The keys of harmonic_oscillation (cpu and cuda): variant, storage (cpu); precision and
+/// host_sync_every (cuda).
+const ParamSpec& harmonic_oscillation_spec();
+/// Reads `variant` through harmonic_oscillation_spec() (the cpu and cuda variants share it).
+HoVariant read_ho_variant(const Params& p);
 
 /// A run of springs (i0 + step r, i0 + step r + off), r < len, stored at [begin, begin + len).
 struct HoSegment {

@@ -4,6 +4,15 @@
 
 namespace loom {
 
+const ParamSpec& rk4_spec() {
+  static const ParamSpec spec = [] {
+    ParamSpec s("rk4", "classical 4th-order Runge-Kutta: no keys of its own on the cpu");
+    declare_device_keys(s);
+    return s;
+  }();
+  return spec;
+}
+
 Rk4Integrator::Rk4Integrator(const Params&) {}
 
 void Rk4Integrator::prepare(Scene& scene, double) {

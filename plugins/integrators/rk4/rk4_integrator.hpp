@@ -8,6 +8,7 @@
 
 #include "loom/integrator.hpp"
 #include "loom/kernels/rk4.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 
 namespace loom {
@@ -48,6 +49,9 @@ void rk4_step_arrays(Index n, T* x, T* v, const T* w, const std::array<T, 3>& g,
       rk4_last(x[d], v[d], rk4_accel(f[d], w[i], g[a]), vs[d], ax[d], av[d], h);
     }
 }
+
+/// The keys of rk4 (cpu and cuda): none on the cpu; precision and host_sync_every on cuda.
+const ParamSpec& rk4_spec();
 
 class Rk4Integrator final : public Integrator {
  public:

@@ -6,6 +6,11 @@
 
 namespace loom::symplectic_euler {
 
+const ParamSpec& spec() {
+  static const ParamSpec s("symplectic_euler", "explicit symplectic Euler: no keys of its own");
+  return s;
+}
+
 SymplecticEuler::SymplecticEuler(const Params& p) {
   // No parameters of its own: dt and substeps are the framework's.
   if (p.valid() && p.has("type")) p.mark_used("type");

@@ -6,9 +6,13 @@
 #include <vector>
 
 #include "loom/integrator.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 
 namespace loom::symplectic_euler {
+
+/// symplectic_euler has no keys of its own (dt, substeps: the framework's).
+const ParamSpec& spec();
 
 class SymplecticEuler final : public Integrator {
  public:

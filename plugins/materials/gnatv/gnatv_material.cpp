@@ -10,6 +10,29 @@
 #include <stdexcept>
 
 namespace loom::gnatv {
+
+const ParamSpec& gnatv_spec() {
+  static const ParamSpec spec = [] {
+    const GnatvOptions d;
+    ParamSpec s("gnatv", "Volino et al. 2009 triangle material from measured stress-strain curves");
+    s.text("material_file", "").required().default_text("required, or fabric: NAME").help(
+        "the fabric's curves (YAML; relative to the scene's folder), or give fabric: NAME instead");
+    s.choice("interpolation", d.interpolation == CurveInterpolation::BSpline ? "bspline" : "monotone_cubic",
+             {"monotone_cubic", "bspline"})
+        .help("how the measured stress samples are interpolated");
+    s.choice("orientation", "auto", {"auto", "uv", "x_axis"}).help(
+        "reference (weft) direction: the mesh's uv, the x axis, or auto (uv when present)");
+    s.number("weft_angle", d.weft_angle).range(ParamRange::closed(-2 * std::numbers::pi, 2 * std::numbers::pi))
+        .units("rad").help("rotates the weft from the reference direction in the cloth's plane");
+    s.number("density", 0).no_default("from the material file").range(ParamRange::positive()).units("kg/m^2").help(
+        "areal density (overrides the material file's areal_density)");
+    s.number("stress_scale", d.stress_scale).range(ParamRange::positive()).help("multiplies every stress curve");
+    s.flag("psd_projection", d.psd_projection).help("project element Jacobians to positive semi-definite");
+    return s;
+  }();
+  return spec;
+}
+
 namespace {
 
 using V3 = std::array<double, 3>;
@@ -30,9 +53,11 @@ std::string resolve_against(const std::string& source, const std::string& path) 
   return (base / p).lexically_normal().string();
 }
 
-GnatvOptions read_options(const Params& p) {
+GnatvOptions read_options(const Params& params) {
   GnatvOptions o;
-  const std::string file = p.require_string("material_file");
+  const ParamReader r(params, gnatv_spec());
+  const Params& p = r.params();
+  const std::string file = r.text("material_file");
   o.material_file = resolve_against(p.source(), file);
   {
     std::error_code ec;
@@ -43,17 +68,16 @@ GnatvOptions read_options(const Params& p) {
                                     ". Fix: paths are relative to the scene file's folder; measured fabrics are also "
                                     "available by name (fabric: 11oz-black-denim, see materials/wang2011).");
   }
-  o.interpolation = p.get_choice("interpolation", "monotone_cubic", {"monotone_cubic", "bspline"}) == "bspline"
-                        ? CurveInterpolation::BSpline
-                        : CurveInterpolation::MonotoneCubic;
-  const std::string orient = p.get_choice("orientation", "auto", {"auto", "uv", "x_axis"});
+  o.interpolation = r.text("interpolation") == "bspline" ? CurveInterpolation::BSpline
+                                                          : CurveInterpolation::MonotoneCubic;
+  const std::string orient = r.text("orientation");
   o.orientation = orient == "uv"       ? GnatvOptions::Orientation::UV
                   : orient == "x_axis" ? GnatvOptions::Orientation::XAxis
                                        : GnatvOptions::Orientation::Auto;
-  o.weft_angle = p.get_in_range("weft_angle", 0.0, -2 * std::numbers::pi, 2 * std::numbers::pi);
-  o.density = p.has("density") ? p.get_positive("density", 1.0) : 0.0;
-  o.stress_scale = p.get_positive("stress_scale", 1.0);
-  o.psd_projection = p.get("psd_projection", true);
+  o.weft_angle = r.number("weft_angle");
+  o.density = r.has("density") ? r.number("density") : 0.0;
+  o.stress_scale = r.number("stress_scale");
+  o.psd_projection = r.flag("psd_projection");
   return o;
 }
 

@@ -9,6 +9,7 @@
 #include "loom/kernels/gnatv.hpp"
 #include "loom/material.hpp"
 #include "loom/mesh.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "material_file.hpp"
 
@@ -23,6 +24,10 @@ struct GnatvOptions {
   double stress_scale = 1;
   bool psd_projection = true;
 };
+
+/// The keys of gnatv (material_file, interpolation, orientation, weft_angle, density,
+/// stress_scale, psd_projection), read through this spec by the Params constructor.
+const ParamSpec& gnatv_spec();
 
 class GnatvMaterial final : public Material {
  public:

@@ -144,10 +144,13 @@ SpringSet build_springs(const Mesh& mesh, Stencil stencil, const ClassValues& st
 namespace {
 
 // Reads a value per spring class: a number, or a map {structural, shear, bend}. Missing map
-// entries default to the structural value.
-ClassValues read_classes(const Params& p, const std::string& key, double def, bool positive,
-                         bool single_class, const char* unit) {
-  const Params node = p.child(key);  // asks for the key even when absent ("did you mean")
+// entries default to the structural value. Default, sign and units come from the spec.
+ClassValues read_classes(const ParamReader& r, const std::string& key, bool single_class) {
+  const ParamDecl& d = *r.spec().find(key);
+  const double def = d.default_number;
+  const bool positive = d.range.min_open;
+  const char* unit = d.units.c_str();
+  const Params node = r.node(key);  // asks for the key even when absent ("did you mean")
   if (!node.valid()) return ClassValues::all(def);
   auto check = [&](const Params& where, double x, const std::string& what) {
     const bool ok = std::isfinite(x) && (positive ? x > 0 : x >= 0);
@@ -168,7 +171,6 @@ ClassValues read_classes(const Params& p, const std::string& key, double def, bo
   if (single_class && (node.has("shear") || node.has("bend")))
     node.fail("stencil mesh_edges has a single spring class; give " + key +
               " as a number or as {structural: value}");
-  for (const char* c : {"structural", "shear", "bend"}) node.mark_used(c);  // known keys for hints
   ClassValues out;
   const double s = node.has("structural") ? node.child("structural").as_double() : def;
   if (node.has("structural")) check(node.child("structural"), s, key + ".structural");
@@ -182,25 +184,52 @@ ClassValues read_classes(const Params& p, const std::string& key, double def, bo
   return out;
 }
 
+ParamSpec spring_classes(const std::string& what, const char* unit, const ParamRange& range) {
+  ParamSpec c(what);
+  c.number("structural", 0).no_default("the default of " + what).range(range).units(unit).help(
+      "structural springs (all springs of mesh_edges)");
+  c.number("shear", 0).no_default("structural").range(range).units(unit).help("shear (diagonal) springs of a grid stencil");
+  c.number("bend", 0).no_default("structural").range(range).units(unit).help("bend (skip-one) springs of a grid stencil");
+  return c;
+}
+
 }  // namespace
 
-MassSpringMaterial::MassSpringMaterial(const Params& p, const Mesh& mesh) {
-  if (p.has("type")) p.mark_used("type");
-  // Every supported key counts as known, so check_unused can suggest it for a typo.
-  for (const char* k : {"stencil", "stiffness", "damping", "density", "vertex_mass", "clamp_compressed"})
-    p.mark_used(k);
+const ParamSpec& mass_spring_spec() {
+  static const ParamSpec spec = [] {
+    ParamSpec s("mass_spring", "Hooke springs on mesh edges or a grid stencil, axial dampers");
+    s.choice("stencil", "mesh_edges", {"mesh_edges", "structural_shear_bend", "radius_sqrt5", "kang_cho_table1"})
+        .default_text("structural_shear_bend on a grid mesh, mesh_edges on an OBJ mesh")
+        .help("which vertex pairs get springs (grid stencils need mesh: {grid: ...})");
+    s.number_or_map("stiffness", 2000.0, spring_classes("stiffness", "N/m", ParamRange::positive())).range(ParamRange::positive()).units("N/m")
+        .help("spring constant: a number, or per class {structural, shear, bend}");
+    s.number_or_map("damping", 0.0, spring_classes("damping", "N s/m", ParamRange::nonnegative())).range(ParamRange::nonnegative()).units("N s/m")
+        .help("axial damper constant: a number, or per class {structural, shear, bend}");
+    s.number("density", 0.1).range(ParamRange::positive()).units("kg/m^2").help(
+        "areal density, lumped per triangle (give density or vertex_mass)");
+    s.number("vertex_mass", 1.0).range(ParamRange::positive()).units("kg").default_text("none (density is used)").help(
+        "the same mass for every vertex, instead of density");
+    s.flag("clamp_compressed", true).help("springs shorter than their rest length exert no force");
+    return s;
+  }();
+  return spec;
+}
+
+MassSpringMaterial::MassSpringMaterial(const Params& params, const Mesh& mesh) {
+  const ParamReader r(params, mass_spring_spec());
+  const Params& p = r.params();
+  if (params.has("type")) params.mark_used("type");  // the framework's key (declared by the material section)
   n_ = mesh.num_vertices();
   const std::string def_stencil = mesh.grid ? "structural_shear_bend" : "mesh_edges";
-  const std::string st = p.get_choice(
-      "stencil", def_stencil, {"mesh_edges", "structural_shear_bend", "radius_sqrt5", "kang_cho_table1"});
+  const std::string st = r.has("stencil") ? r.text("stencil") : def_stencil;
   parse_stencil(st, stencil_);
   if (stencil_ != Stencil::MeshEdges && !mesh.grid)
     p.child("stencil").fail("stencil " + st + " needs a generated grid mesh (mesh: {grid: ...}), but the mesh is '" +
                             mesh.source + "'; use stencil: mesh_edges for OBJ meshes");
   const bool single = stencil_ == Stencil::MeshEdges;
-  const ClassValues k = read_classes(p, "stiffness", 2000.0, true, single, "N/m");
-  const ClassValues c = read_classes(p, "damping", 0.0, false, single, "N s/m");
-  clamp_ = p.get("clamp_compressed", true);
+  const ClassValues k = read_classes(r, "stiffness", single);
+  const ClassValues c = read_classes(r, "damping", single);
+  clamp_ = r.flag("clamp_compressed");
 
   // Masses.
   const bool has_density = p.has("density"), has_vm = p.has("vertex_mass");
@@ -208,10 +237,10 @@ MassSpringMaterial::MassSpringMaterial(const Params& p, const Mesh& mesh) {
     p.child("vertex_mass").fail("give either density (kg/m^2, lumped per triangle) or vertex_mass (kg per vertex), not both");
   mass_.assign(static_cast<std::size_t>(n_), 0.0);
   if (has_vm) {
-    const double m = p.get_positive("vertex_mass", 1.0);
+    const double m = r.number("vertex_mass");
     std::fill(mass_.begin(), mass_.end(), m);
   } else {
-    const double rho = p.get_positive("density", 0.1);
+    const double rho = r.number("density");
     const double* X = mesh.positions.data();
     for (Index t = 0; t < mesh.num_triangles(); ++t) {
       const Index* v = &mesh.triangles[3 * static_cast<std::size_t>(t)];

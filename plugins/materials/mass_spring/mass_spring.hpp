@@ -10,6 +10,7 @@
 
 #include "loom/material.hpp"
 #include "loom/mesh.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "loom/spring_layout.hpp"
 #include "loom/springs.hpp"
@@ -35,6 +36,9 @@ struct ClassValues {
 /// Rest lengths are not validated here (the material does that).
 SpringSet build_springs(const Mesh& mesh, Stencil stencil, const ClassValues& stiffness,
                         const ClassValues& damping);
+
+/// The keys of mass_spring: stencil, stiffness, damping, density, vertex_mass, clamp_compressed.
+const ParamSpec& mass_spring_spec();
 
 class MassSpringMaterial final : public Material {
  public:

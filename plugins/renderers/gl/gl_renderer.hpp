@@ -11,6 +11,7 @@
 
 #include "loom/kernels/shading.hpp"
 #include "loom/mesh.hpp"
+#include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "loom/renderer.hpp"
 
@@ -55,7 +56,11 @@ struct RenderSettings {
   float exposure = 1.0f;
 };
 
-/// Parse the `render:` section; relative fabric paths are resolved against base_dir.
+/// The keys of the `render:` section the gl renderer reads (the fabric mapping's keys are
+/// checked by parse_fabric, which also reads fabric files).
+const ParamSpec& render_spec();
+/// Parse the `render:` section through render_spec(); relative fabric paths are resolved
+/// against base_dir.
 RenderSettings parse_render_settings(const Params& render, const std::string& base_dir);
 
 struct Camera {

@@ -4,7 +4,8 @@
 
 static void register_gl(loom::Registry& r) {
   r.add_renderer({loom::PluginKind::Renderer, "gl", "cpu", "1.0",
-                  "woven-fabric renderer (Kang & Cho 2011 sec. 4): OpenGL ES 3 via headless EGL, PNG per frame", ""},
+                  "woven-fabric renderer (Kang & Cho 2011 sec. 4): OpenGL ES 3 via headless EGL, PNG per frame", "",
+                  &loom::render::render_spec()},
                  [](const loom::Params& p, const std::string& base_dir) {
                    return std::make_unique<loom::render::GlRenderer>(loom::render::parse_render_settings(p, base_dir));
                  });

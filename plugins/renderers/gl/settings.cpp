@@ -178,6 +178,39 @@ shading::Fabric load_fabric_file(const std::string& path) {
   return f;
 }
 
+const ParamSpec& render_spec() {
+  static const ParamSpec spec = [] {
+    const RenderSettings d;
+    auto vec = [](glm::vec3 v) { return std::array<double, 3>{v[0], v[1], v[2]}; };
+    ParamSpec s("gl", "woven-fabric renderer: the keys of the render: section");
+    s.integer("width", d.width).range(ParamRange::closed(1, 8192)).units("pixels").help("image width");
+    s.integer("height", d.height).range(ParamRange::closed(1, 8192)).units("pixels").help("image height");
+    s.integer("supersample", d.supersample).range(ParamRange::closed(1, 4)).help(
+        "render at supersample x the size and box-filter down");
+    s.open_map("fabric").shown_type("string | map").default_text("plain-woven cotton").help(
+        "a fabric file (relative to the scene's folder; materials/fabrics/) or a fabric mapping (docs/RENDERING.md)");
+    s.choice("shading", "mdf_rotation", {"mdf_rotation", "normal_mapping", "flat"}).help("fabric shading model");
+    s.choice("rotation", "exact", {"exact", "paper"}).help("MDF rotation of mdf_rotation shading");
+    ParamSpec cam("camera");
+    cam.vec3("position", {0, 0, 0}).default_text("framed from the cloth's bounds").units("m").help("eye position");
+    cam.vec3("target", {0, 0, 0}).default_text("the cloth's centre").units("m").help("point looked at");
+    cam.vec3("up", vec(d.camera.up)).help("up direction (non-zero)");
+    cam.number("fov", d.camera.fov_deg).range(ParamRange::closed(1, 170)).units("deg").help("vertical field of view");
+    s.map("camera", std::move(cam)).help("the view");
+    ParamSpec light("light");
+    light.vec3("direction", vec(d.light.direction)).default_text("from the camera").help(
+        "towards the light (world space, non-zero)");
+    light.vec3("color", vec(d.light.color)).range(ParamRange::closed(0, 1e6)).help("light colour (a number: grey)");
+    light.number("intensity", d.light.intensity).range(ParamRange::nonnegative()).help("light intensity");
+    light.number("ambient", d.light.ambient).range(ParamRange::nonnegative()).help("ambient term");
+    s.map("light", std::move(light)).help("one directional light");
+    s.vec3("background", vec(d.background)).range(ParamRange::closed(0, 1)).help("display-space RGB (a number: grey)");
+    s.number("exposure", d.exposure).range(ParamRange::positive()).help("multiplies the linear radiance");
+    return s;
+  }();
+  return spec;
+}
+
 RenderSettings parse_render_settings(const Params& render, const std::string& base_dir) {
   RenderSettings s;
   if (!render.valid()) return s;
@@ -186,20 +219,14 @@ RenderSettings parse_render_settings(const Params& render, const std::string& ba
   render.mark_used("fps");
   render.mark_used("fit");     // read by loom render (render_cmd.cpp): sequence | first_frame
   render.mark_used("ground");  // read by loom render: true | false
-  auto read_size = [&](const char* key, int def) {
-    const std::int64_t v = render.get(key, std::int64_t(def));
-    if (v < 1 || v > 8192) render.child(key).fail(std::string(key) + " must be between 1 and 8192 pixels.");
-    return int(v);
-  };
-  s.width = read_size("width", s.width);
-  s.height = read_size("height", s.height);
-  const std::int64_t ss = render.get("supersample", std::int64_t(s.supersample));
-  if (ss < 1 || ss > 4) render.child("supersample").fail("supersample must be 1, 2, 3 or 4.");
-  s.supersample = int(ss);
-  if (std::int64_t(s.width) * ss > 16384 || std::int64_t(s.height) * ss > 16384)
+  const ParamReader r(render, render_spec());
+  s.width = r.int32("width");
+  s.height = r.int32("height");
+  s.supersample = r.int32("supersample");
+  if (std::int64_t(s.width) * s.supersample > 16384 || std::int64_t(s.height) * s.supersample > 16384)
     render.fail("width x supersample and height x supersample must stay below 16384.");
 
-  Params fab = render.child("fabric");
+  Params fab = r.node("fabric");
   if (fab.valid()) {
     if (fab.is_scalar()) {
       fs::path fp = fab.as_string();
@@ -210,14 +237,14 @@ RenderSettings parse_render_settings(const Params& render, const std::string& ba
       fab.check_unused();
     }
   }
-  const std::string shading_mode =
-      render.get_choice("shading", "mdf_rotation", {"mdf_rotation", "normal_mapping", "flat"});
-  const std::string rotation = render.get_choice("rotation", "exact", {"exact", "paper"});
+  const std::string shading_mode = r.text("shading");
+  const std::string rotation = r.text("rotation");
   if (shading_mode == "flat") s.fabric.mode = shading::LOOM_MODE_FLAT;
   else if (shading_mode == "normal_mapping") s.fabric.mode = shading::LOOM_MODE_NORMAL_MAP;
   else s.fabric.mode = rotation == "exact" ? shading::LOOM_MODE_ROTATE_EXACT : shading::LOOM_MODE_ROTATE_PAPER;
 
-  Params cam = render.child("camera");
+  const ParamReader camr = r.section("camera");
+  const Params& cam = camr.params();
   if (cam.valid()) {
     const float inf = 1e30f;
     if (cam.has("position")) {
@@ -233,10 +260,11 @@ RenderSettings parse_render_settings(const Params& render, const std::string& ba
       s.camera.up = read_vec3(cam, "up", {}, -inf, inf);
       if (glm::length(s.camera.up) < 1e-6f) cam.child("up").fail("up must be a non-zero vector.");
     }
-    s.camera.fov_deg = float(cam.get_in_range("fov", s.camera.fov_deg, 1.0, 170.0));
+    s.camera.fov_deg = float(camr.number("fov"));
     cam.check_unused();
   }
-  Params light = render.child("light");
+  const ParamReader lightr = r.section("light");
+  const Params& light = lightr.params();
   if (light.valid()) {
     if (light.has("direction")) {
       s.light.has_direction = true;
@@ -245,13 +273,15 @@ RenderSettings parse_render_settings(const Params& render, const std::string& ba
         light.child("direction").fail("direction (towards the light) must be a non-zero vector.");
       s.light.direction = glm::normalize(s.light.direction);
     }
-    s.light.color = read_vec3(light, "color", s.light.color, 0.0, 1e6);
-    s.light.intensity = float(light.get_nonnegative("intensity", s.light.intensity));
-    s.light.ambient = float(light.get_nonnegative("ambient", s.light.ambient));
+    const ParamDecl& color = *lightr.spec().find("color");
+    s.light.color = read_vec3(light, "color", s.light.color, color.range.min, color.range.max);
+    s.light.intensity = float(lightr.number("intensity"));
+    s.light.ambient = float(lightr.number("ambient"));
     light.check_unused();
   }
-  s.background = read_vec3(render, "background", s.background, 0.0, 1.0);
-  s.exposure = float(render.get_positive("exposure", s.exposure));
+  const ParamDecl& bg = *r.spec().find("background");
+  s.background = read_vec3(r.params(), "background", s.background, bg.range.min, bg.range.max);
+  s.exposure = float(r.number("exposure"));
   return s;
 }
 
