@@ -335,18 +335,16 @@ bool ParamReader::has(const std::string& key) const {
 }
 
 void ParamReader::check_range(const ParamDecl& d, const Params& c, double v) const {
-  if (d.range.contains(v) || (!d.range.bounded() && std::isfinite(v))) return;
+  if (d.range.contains(v)) return;
   const ParamRange& r = d.range;
+  if (!r.bounded()) c.fail("must be a finite number (got " + num_text(v) + ").");
   const bool int_type = d.type == ParamType::Int;
   if (!int_type && r.min == 0 && !std::isfinite(r.max) && r.min_open)
     c.fail("must be a finite number > 0 (got " + num_text(v) + "). Fix: give a positive value.");
   if (!int_type && r.min == 0 && !std::isfinite(r.max) && !r.min_open)
     c.fail("must be a finite number >= 0 (got " + num_text(v) + "). Fix: give a value >= 0.");
-  std::string msg = std::string("must be ") + (int_type ? "an integer " : "") +
-                    (std::isfinite(r.min) && std::isfinite(r.max) ? "in " + r.text() : r.text()) + " (got " +
-                    num_text(v) + ").";
-  if (!d.help.empty()) msg += " (" + d.name + ": " + d.help + ")";
-  c.fail(msg);
+  c.fail(std::string("must be ") + (int_type ? "an integer " : "a finite number ") +
+         (std::isfinite(r.min) && std::isfinite(r.max) ? "in " + r.text() : r.text()) + " (got " + num_text(v) + ").");
 }
 
 double ParamReader::number(const std::string& key) const {

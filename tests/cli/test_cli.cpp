@@ -174,6 +174,23 @@ TEST(Cli, PluginsListsModulesOnThePath) {
   EXPECT_EQ(r.code, 2);
 }
 
+// `loom plugins --params NAME`: the declared keys (loom/param_spec.hpp) as a table.
+TEST(Cli, PluginsParamsPrintsTheDeclaredKeys) {
+  Result r = run("plugins --params gnatv", false);
+  EXPECT_EQ(r.code, 0) << r.out;
+  for (const char* s : {"gnatv (material; backends cpu", "key", "default", "range", "units", "material_file",
+                        "stress_scale", "monotone_cubic | bspline", "kg/m^2", "framework"})
+    EXPECT_NE(r.out.find(s), std::string::npos) << s << "\n" << r.out;
+  r = run("plugins --params baraff_witkin --markdown", false);
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("| `max_halvings` | int | `3` | [1, 20] |"), std::string::npos) << r.out;
+  r = run("plugins --params gnatvv", false);
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("did you mean 'gnatv'"), std::string::npos) << r.out;
+  r = run("plugins --markdown", false);
+  EXPECT_EQ(r.code, 2) << r.out;
+}
+
 // Issue 20's fuzz findings, each with the exit code and message it must give.
 TEST(Cli, HardenedInputsAreBadInputWithAClearMessage) {
   const auto dir = scratch("hardened");

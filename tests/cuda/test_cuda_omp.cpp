@@ -7,8 +7,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <memory>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -465,4 +467,34 @@ TEST(CudaPins, MovingPinsAreRefusedWithTheFix) {
       EXPECT_NE(std::string(e.what()).find("backend: cpu"), std::string::npos) << e.what();
     }
   }
+}
+
+// The parameter specs: cusparse_pcg's table in docs/plugins/cuda.md is the one its spec
+// generates (`loom plugins --params cusparse_pcg --markdown` on a CUDA build), and the device
+// integrators read the cpu plugins' keys through the cpu plugins' specs.
+TEST(CudaParams, DocsShowTheCusparsePcgTable) {
+  std::ifstream in(std::string(LOOM_SOURCE_DIR) + "/docs/plugins/cuda.md");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string text = ss.str();
+  const std::string open = "<!-- loom-params: cusparse_pcg -->\n";
+  const auto b = text.find(open);
+  ASSERT_NE(b, std::string::npos);
+  const auto e = text.find("<!-- /loom-params -->", b);
+  ASSERT_NE(e, std::string::npos);
+  EXPECT_EQ(text.substr(b + open.size(), e - b - open.size()), lc::cusparse_pcg_spec().table(true))
+      << "Fix: replace the table in docs/plugins/cuda.md with the expected text above";
+}
+
+TEST(CudaParams, DeviceIntegratorsUseTheCpuSpecs) {
+  // Keys of the cpu plugin are accepted and checked by the same ranges; cuda-only keys too.
+  EXPECT_NO_THROW(lc::make_cuda_baraff_witkin(
+      Params::from_string("{kang_cho_damping: 0.1, rayleigh: {alpha: 0.5}, warm_start: false, precision: float, "
+                          "host_sync_every: 2}")));
+  EXPECT_THROW(lc::make_cuda_baraff_witkin(Params::from_string("{max_halvings: 0}")), InputError);
+  EXPECT_THROW(lc::make_cuda_ho(Params::from_string("{variant: velocty}")), InputError);
+  EXPECT_THROW(lc::make_cuda_rk4(Params::from_string("{host_sync_every: 0}")), InputError);
+  EXPECT_TRUE(loom::baraff_witkin_spec().find("precision") != nullptr);
+  EXPECT_TRUE(loom::harmonic_oscillation_spec().find("host_sync_every") != nullptr);
+  EXPECT_TRUE(loom::rk4_spec().find("precision") != nullptr);
 }

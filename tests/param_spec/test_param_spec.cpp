@@ -1,4 +1,6 @@
-// The declarative parameter specs (loom/param_spec.hpp): reading through a spec, validation.
+// The declarative parameter specs (loom/param_spec.hpp): reading through a spec, validation,
+// and, over every plugin module of the build, that the keys a plugin reads are the keys its
+// spec declares and that docs/ shows the table the spec generates.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -167,4 +169,174 @@ TEST(ParamSpec, TableListsEveryKeyWithDefaultRangeUnitsAndHelp) {
   const std::string md = example_spec().table(true);
   EXPECT_EQ(md.rfind("| key | type | default | range | units | backends | help |\n", 0), 0u) << md;
   EXPECT_NE(md.find("| `rayleigh.alpha` | number | `0` | >= 0 | 1/s | all | mass damping |"), std::string::npos) << md;
+}
+
+// ---- every plugin of the build ----
+
+namespace {
+
+struct Loaded {
+  loom::Registry reg;
+  std::unique_ptr<loom::PluginLoader> loader;
+  std::vector<std::string> errors;
+  Loaded() {
+    loader = std::make_unique<loom::PluginLoader>(reg, std::vector<std::string>{LOOM_PLUGIN_DIR});
+    loader->load_all(errors);
+  }
+};
+
+Loaded& plugins() {
+  static Loaded l;
+  return l;
+}
+
+// A YAML value for a declared key: its default, or a value inside its range.
+std::string value_for(const loom::ParamDecl& d) {
+  using loom::ParamType;
+  std::ostringstream os;
+  os.precision(17);
+  auto number = [&]() {
+    if (d.has_default) return d.default_number;
+    if (std::isfinite(d.range.min)) return d.range.min + (d.range.min_open ? 1.0 : 0.0);
+    return 1.0;
+  };
+  switch (d.type) {
+    case ParamType::Number: os << number(); break;
+    case ParamType::Int: os << static_cast<long long>(number()); break;
+    case ParamType::Bool: os << (d.default_bool ? "true" : "false"); break;
+    case ParamType::String:
+    case ParamType::Enum: os << "'" << d.default_string << "'"; break;
+    case ParamType::Vec3: os << "[" << d.default_vec[0] << ", " << d.default_vec[1] << ", " << d.default_vec[2] << "]"; break;
+    case ParamType::List: os << "[]"; break;
+    case ParamType::Map:
+      if (d.number_or_map) os << number();
+      else os << "{}";
+      break;
+  }
+  return os.str();
+}
+
+// Keys that another key must enable (the plugin says so when it is missing).
+const std::map<std::string, std::string> kCompanions = {
+    {"eigen_pcg.sa_amg", "preconditioner: sa_amg\n"},
+};
+
+std::string required_keys(const loom::PluginInfo& info) {
+  if (info.name == "gnatv") return "material_file: " + std::string(LOOM_SOURCE_DIR) + "/materials/wool.yaml\n";
+  return "";
+}
+
+// Build the plugin from `yaml` through the registry (which attaches its spec and calls
+// check_unused). Returns "" or the error; a std::logic_error (an undeclared key read) fails.
+std::string construct(const loom::PluginInfo& info, const std::string& yaml) {
+  const loom::Registry& reg = plugins().reg;
+  const Params p = Params::from_string(yaml, "scene.yaml");
+  static const loom::Mesh mesh = loom::make_grid(3, 3, 1.0, 1.0);
+  try {
+    switch (info.kind) {
+      case loom::PluginKind::Material: reg.make_material(info.name, info.backend, p, mesh); break;
+      case loom::PluginKind::Integrator: reg.make_integrator(info.name, info.backend, p); break;
+      case loom::PluginKind::Solver: reg.make_solver(info.name, info.backend, p); break;
+      case loom::PluginKind::Renderer: reg.make_renderer(info.name, p, LOOM_SOURCE_DIR); break;
+    }
+  } catch (const InputError& e) {
+    return e.what();
+  } catch (const std::logic_error& e) {
+    ADD_FAILURE() << info.name << " with {" << yaml << "}: " << e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST(PluginSpecs, EveryPluginOfTheBuildDeclaresItsKeys) {
+  auto& l = plugins();
+  ASSERT_FALSE(l.reg.list().empty());
+  for (const auto& info : l.reg.list()) {
+    EXPECT_NE(info.params, nullptr) << info.name << " (" << info.backend << ") declares no parameter spec";
+    EXPECT_NE(l.reg.params(info.kind, info.name, info.backend), nullptr);
+  }
+}
+
+// Every declared key is read (given alone at its default, or at a value in its range, the plugin
+// accepts it: a declared key the plugin ignored would be an unknown key), and no read key is
+// undeclared (the registry's spec would throw std::logic_error in construct()).
+TEST(PluginSpecs, EveryDeclaredKeyIsReadAndNoOtherKey) {
+  auto& l = plugins();
+  for (const auto& info : l.reg.list()) {
+    if (!info.params) continue;
+    const std::string base = required_keys(info);
+    EXPECT_EQ(construct(info, base.empty() ? "{}" : base), "") << info.name << " with its defaults";
+    for (const auto& d : info.params->decls()) {
+      if (base.rfind(d.name + ":", 0) == 0) continue;  // given in base already
+      const std::string id = info.name + "." + d.name;
+      const std::string comp = kCompanions.count(id) ? kCompanions.at(id) : "";
+      const std::string yaml = base + comp + d.name + ": " + value_for(d) + "\n";
+      const std::string err = construct(info, yaml);
+      if (d.honoured_by(info.backend)) {
+        EXPECT_EQ(err, "") << id << ": " << yaml;
+      } else {
+        EXPECT_NE(err.find("honoured only by"), std::string::npos) << id << ": " << err;
+      }
+      if (d.fields && !d.number_or_map && d.honoured_by(info.backend))
+        for (const auto& f : d.fields->decls()) {
+          const std::string y = base + comp + d.name + ": {" + f.name + ": " + value_for(f) + "}\n";
+          EXPECT_EQ(construct(info, y), "") << id << "." << f.name << ": " << y;
+        }
+    }
+    // and a key no spec declares is refused with a suggestion
+    const std::string err = construct(info, base + "definitely_not_a_key: 1\n");
+    EXPECT_NE(err.find("unknown key 'definitely_not_a_key'"), std::string::npos) << info.name << ": " << err;
+  }
+}
+
+TEST(PluginSpecs, TypoGetsDidYouMean) {
+  auto& l = plugins();
+  if (!l.reg.has(loom::PluginKind::Solver, "eigen_pcg")) GTEST_SKIP() << "eigen_pcg not in this build";
+  loom::PluginInfo info;
+  for (const auto& i : l.reg.list())
+    if (i.name == "eigen_pcg") info = i;
+  const std::string err = construct(info, "tolerence: 1e-6\n");
+  EXPECT_NE(err.find("did you mean 'tolerance'"), std::string::npos) << err;
+}
+
+// docs/plugins/*.md and docs/RENDERING.md carry each plugin's table between
+//   <!-- loom-params: NAME -->  and  <!-- /loom-params -->
+// generated by `loom plugins --params NAME --markdown`.
+TEST(PluginSpecs, DocsShowTheGeneratedTables) {
+  auto& l = plugins();
+  std::map<std::string, std::string> blocks;  // name -> table in the docs
+  std::map<std::string, std::string> where;
+  const std::regex open(R"(<!-- loom-params: ([a-z0-9_]+) -->)");
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(fs::path(LOOM_SOURCE_DIR) / "docs" / "plugins"))
+    if (e.path().extension() == ".md") files.push_back(e.path());
+  files.push_back(fs::path(LOOM_SOURCE_DIR) / "docs" / "RENDERING.md");
+  for (const auto& f : files) {
+    std::ifstream in(f);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    const std::string text = ss.str();
+    for (auto it = std::sregex_iterator(text.begin(), text.end(), open); it != std::sregex_iterator(); ++it) {
+      const std::string name = (*it)[1];
+      const std::size_t begin = it->position(0) + it->length(0) + 1;  // after the marker's newline
+      const std::size_t end = text.find("<!-- /loom-params -->", begin);
+      ASSERT_NE(end, std::string::npos) << f << ": the block of " << name << " is not closed";
+      EXPECT_EQ(blocks.count(name), 0u) << name << " has two blocks (" << where[name] << ", " << f.string() << ")";
+      blocks[name] = text.substr(begin, end - begin);
+      where[name] = f.filename().string();
+    }
+  }
+  std::set<std::string> names;
+  for (const auto& info : l.reg.list()) names.insert(info.name);
+  for (const auto& name : names) {
+    ASSERT_EQ(blocks.count(name), 1u) << "no <!-- loom-params: " << name << " --> block in docs/plugins/*.md. Fix: add "
+                                      << "one with the output of `loom plugins --params " << name << " --markdown`";
+    EXPECT_EQ(blocks[name], loom::params_table(l.reg, name, true))
+        << where[name] << ": the table of " << name << " differs from the spec. Fix: replace it with the output of "
+        << "`loom plugins --params " << name << " --markdown`";
+  }
+  // Blocks of plugins this build lacks (e.g. cusparse_pcg without nvcc) are not checked here.
+  for (const auto& [name, text] : blocks)
+    if (!names.count(name)) std::cout << "note: " << name << " (" << where[name] << ") is not in this build\n";
 }

@@ -29,9 +29,10 @@ const ParamSpec& harmonic_oscillation_spec() {
   static const ParamSpec spec = [] {
     ParamSpec s("harmonic_oscillation", "Kang & Cho 2011 harmonic-oscillation spring integration, corrected");
     s.choice("variant", "velocity", {"velocity", "analytic_position", "kang_cho_2011"}).help(
-        "velocity: corrected velocity update; analytic_position: closed-form position; kang_cho_2011: as published");
+        "velocity: exact axial velocity change per spring; analytic_position: also the exact displacement (HO-A); "
+        "kang_cho_2011: the published formula (half the stiffness)");
     s.choice("storage", "auto", {"auto", "direct"}).backends({"cpu"}).help(
-        "auto: shared per-spring constants in a table when springs repeat; direct: per-spring constants");
+        "auto: the per-spring constants (l0, k, c, W) deduplicated into tables; direct: stored per spring");
     declare_device_keys(s);
     return s;
   }();
