@@ -22,6 +22,16 @@ YAML
 # The installed loom finds the toy plugins through LOOM_PLUGIN_PATH, and lists them.
 LOOM_PLUGIN_PATH="$work/toy-build/plugins" "$prefix/bin/loom" plugins | tee "$work/plugins.txt"
 grep -q "toy_springless" "$work/plugins.txt"
+# Its declared keys: the framework's (type) and its own (mass, with default, range and units).
+LOOM_PLUGIN_PATH="$work/toy-build/plugins" "$prefix/bin/loom" plugins --params toy_springless | tee "$work/params.txt"
+grep -q "^mass  *number  *1  *> 0  *kg" "$work/params.txt"
+grep -q "^type " "$work/params.txt"
+# A typo in its key gets the declared key as a suggestion.
+sed 's/mass: 2.0/mas: 2.0/' "$work/scene.yaml" > "$work/typo.yaml"
+if LOOM_PLUGIN_PATH="$work/toy-build/plugins" "$prefix/bin/loom" validate "$work/typo.yaml" 2> "$work/typo.err"; then
+  echo "a typo in the toy material's key was accepted"; exit 1
+fi
+grep -q "did you mean 'mass'" "$work/typo.err"
 LOOM_PLUGIN_PATH="$work/toy-build/plugins" "$prefix/bin/loom" run "$work/scene.yaml" --out "$work/out" --quiet
 test -f "$work/out/frame_00003.obj"
 # free fall of the 3 free vertices after 6 forward-Euler steps of 0.01 s: y = -9.81 h^2 n(n-1)/2

@@ -20,8 +20,14 @@ class ToyEuler final : public loom::Integrator {
   std::vector<double> f_;
 };
 
+static const loom::ParamSpec& toy_spec() {
+  static const loom::ParamSpec spec("toy_euler", "forward Euler: no keys of its own (dt, substeps: the framework's)");
+  return spec;
+}
+
 static void register_toy(loom::Registry& r) {
-  r.add_integrator({loom::PluginKind::Integrator, "toy_euler", "cpu", "0.1", "out-of-tree example: forward Euler"},
+  r.add_integrator({loom::PluginKind::Integrator, "toy_euler", "cpu", "0.1", "out-of-tree example: forward Euler", "",
+                    &toy_spec()},
                    [](const loom::Params&) { return std::make_unique<ToyEuler>(); });
 }
 LOOM_PLUGIN(register_toy)

@@ -18,10 +18,22 @@ class ToySpringless final : public loom::Material {
   double mass_;
 };
 
+// The keys the plugin reads, declared once: `loom plugins --params toy_springless` prints them,
+// the registry refuses reads of undeclared keys and suggests declared ones for a typo.
+static const loom::ParamSpec& toy_spec() {
+  static const loom::ParamSpec spec = [] {
+    loom::ParamSpec s("toy_springless", "out-of-tree example: no forces");
+    s.number("mass", 1.0).range(loom::ParamRange::positive()).units("kg").help("mass of every vertex");
+    return s;
+  }();
+  return spec;
+}
+
 static void register_toy(loom::Registry& r) {
-  r.add_material({loom::PluginKind::Material, "toy_springless", "cpu", "0.1", "out-of-tree example: no forces"},
+  r.add_material({loom::PluginKind::Material, "toy_springless", "cpu", "0.1", "out-of-tree example: no forces", "",
+                  &toy_spec()},
                  [](const loom::Params& p, const loom::Mesh&) {
-                   return std::make_unique<ToySpringless>(p.get_positive("mass", 1.0));
+                   return std::make_unique<ToySpringless>(loom::ParamReader(p, toy_spec()).number("mass"));
                  });
 }
 LOOM_PLUGIN(register_toy)
