@@ -343,8 +343,10 @@ void ParamReader::check_range(const ParamDecl& d, const Params& c, double v) con
     c.fail("must be a finite number > 0 (got " + num_text(v) + "). Fix: give a positive value.");
   if (!int_type && r.min == 0 && !std::isfinite(r.max) && !r.min_open)
     c.fail("must be a finite number >= 0 (got " + num_text(v) + "). Fix: give a value >= 0.");
-  c.fail(std::string("must be ") + (int_type ? "an integer " : "a finite number ") +
-         (std::isfinite(r.min) && std::isfinite(r.max) ? "in " + r.text() : r.text()) + " (got " + num_text(v) + ").");
+  const bool both = std::isfinite(r.min) && std::isfinite(r.max);
+  // Numbers in a closed range keep Params::get_in_range's wording.
+  c.fail(std::string("must be ") + (int_type ? "an integer " : both ? "" : "a finite number ") +
+         (both ? "in " + r.text() : r.text()) + " (got " + num_text(v) + ").");
 }
 
 double ParamReader::number(const std::string& key) const {
