@@ -589,7 +589,7 @@ std::unique_ptr<Integrator> make_cuda_baraff_witkin(const BwOptionsD& o, Precisi
 }
 std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p) {
   // The keys both backends honour are read by the cpu plugin's parser (one spec, one struct).
-  const BaraffWitkinOptions c = parse_baraff_witkin_options(p);
+  const BaraffWitkinOptions c = parse_baraff_witkin_options(p, "cuda");
   BwOptionsD o;
   o.kang_cho_damping = c.kang_cho_damping;
   o.rayleigh_alpha = c.rayleigh_alpha;

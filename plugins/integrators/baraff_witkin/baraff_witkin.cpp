@@ -44,7 +44,7 @@ const ParamSpec& baraff_witkin_spec() {
   return spec;
 }
 
-BaraffWitkinOptions parse_baraff_witkin_options(const Params& p) {
+BaraffWitkinOptions parse_baraff_witkin_options(const Params& p, const std::string& backend) {
   BaraffWitkinOptions o;
   if (!p.valid()) return o;
   const ParamReader r(p, baraff_witkin_spec());
@@ -60,7 +60,9 @@ BaraffWitkinOptions parse_baraff_witkin_options(const Params& p) {
   o.on_failure = pol == "stop" ? BaraffWitkinOptions::OnFailure::Stop : BaraffWitkinOptions::OnFailure::HalveStep;
   o.max_halvings = r.int32("max_halvings");
   o.warm_start = r.flag("warm_start");
-  o.implicit_self_contact = r.flag("implicit_self_contact");
+  // cpu only: a device backend leaves the key unread, so check_unused names the backend that
+  // honours it instead of accepting it silently.
+  if (backend == "cpu") o.implicit_self_contact = r.flag("implicit_self_contact");
   return o;
 }
 

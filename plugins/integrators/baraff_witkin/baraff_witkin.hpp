@@ -38,7 +38,7 @@ struct BaraffWitkinOptions {
 /// (cpu); precision and host_sync_every for the cuda backend.
 const ParamSpec& baraff_witkin_spec();
 /// Reads the keys the cpu and cuda variants share, through baraff_witkin_spec().
-BaraffWitkinOptions parse_baraff_witkin_options(const Params& p);
+BaraffWitkinOptions parse_baraff_witkin_options(const Params& p, const std::string& backend = "cpu");
 
 class BaraffWitkin final : public Integrator {
  public:
