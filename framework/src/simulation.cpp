@@ -632,6 +632,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     if (output_.velocities) vel_pc2.emplace(vel_pc2_path, points, 0.0f, static_cast<float>(output_.every));
   }
   std::optional<VtkSeriesWriter> vtk;
+  std::vector<double> gap_work;  // per-vertex collider gap for the ParaView frames
   if (write && output_.vtk) {
     vtk.emplace(output_.dir, scene_->mesh);
     if (resuming) vtk->adopt_existing(first_frame);
@@ -656,9 +657,22 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
         write_file_atomic((fs::path(output_.dir) / name).string(),
                           obj_text(scene_->mesh, scene_->state.x, "t = " + fmt(scene_->state.time) + " s", obj_options));
       }
-      if (vtk)
+      if (vtk) {
+        // Per vertex, the signed distance to the nearest collider's offset surface (contact field).
+        const auto& cs = scene_->colliders.colliders();
+        if (!cs.empty()) {
+          const std::size_t n = scene_->state.x.size() / 3;
+          gap_work.assign(n, std::numeric_limits<double>::infinity());
+          for (const Collider& c : cs) {
+            const Collider::Frame fr = c.frame_at(scene_->state.time);
+            for (std::size_t i = 0; i < n; ++i)
+              gap_work[i] = std::min(gap_work[i], c.query(fr, &scene_->state.x[3 * i]).distance);
+          }
+        }
         vtk->write_frame(frame, scene_->state.time, scene_->state.x,
-                         output_.velocities ? std::span<const double>(scene_->state.v) : std::span<const double>());
+                         output_.velocities ? std::span<const double>(scene_->state.v) : std::span<const double>(),
+                         gap_work);
+      }
       if (pc2) pc2->append(scene_->state.x);
       if (vel_pc2) vel_pc2->append(scene_->state.v);
     }

@@ -67,7 +67,8 @@ VtkSeriesWriter::VtkSeriesWriter(const std::string& dir, const Mesh& mesh) : dir
   strain_.resize(static_cast<std::size_t>(mesh.num_vertices()));
 }
 
-std::string VtkSeriesWriter::vtu_text(double time, std::span<const double> x, std::span<const double> v) {
+std::string VtkSeriesWriter::vtu_text(double time, std::span<const double> x, std::span<const double> v,
+                                      std::span<const double> gap) {
   const std::size_t n = static_cast<std::size_t>(mesh_.num_vertices());
   const std::size_t m = static_cast<std::size_t>(mesh_.num_triangles());
   std::fill(strain_.begin(), strain_.end(), 0.0);
@@ -96,6 +97,12 @@ std::string VtkSeriesWriter::vtu_text(double time, std::span<const double> x, st
   s += ">\n";
   put_array(s, "strain", 1, strain_);
   if (!v.empty()) put_array(s, "velocity", 3, v);
+  if (!gap.empty()) {
+    put_array(s, "collider_gap", 1, gap);
+    contact_.resize(gap.size());
+    for (std::size_t i = 0; i < gap.size(); ++i) contact_[i] = gap[i] <= kContactGap ? 1.0 : 0.0;
+    put_array(s, "contact", 1, contact_);
+  }
   s += "      </PointData>\n      <Points>\n";
   put_array(s, "Points", 3, x);
   s += "      </Points>\n      <Cells>\n        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
@@ -155,8 +162,9 @@ int VtkSeriesWriter::adopt_existing(int last_frame) {
   return static_cast<int>(entries_.size());
 }
 
-void VtkSeriesWriter::write_frame(int frame, double time, std::span<const double> x, std::span<const double> v) {
-  write_file_atomic((fs::path(dir_) / vtu_frame_name(frame)).string(), vtu_text(time, x, v));
+void VtkSeriesWriter::write_frame(int frame, double time, std::span<const double> x, std::span<const double> v,
+                                  std::span<const double> gap) {
+  write_file_atomic((fs::path(dir_) / vtu_frame_name(frame)).string(), vtu_text(time, x, v, gap));
   entries_.push_back({frame, time});
   write_file_atomic((fs::path(dir_) / "run.pvd").string(), pvd_text());
 }

@@ -217,6 +217,46 @@ TEST(ParaView, SeriesReadsBackWithAnIndependentParser) {
   }
 }
 
+// The contact field: with colliders, each frame carries collider_gap (signed distance to the
+// nearest collider's offset surface) and contact (1 where the gap is at most 1 um). Expected
+// values recomputed here from the frame's positions and the plane's analytic distance.
+TEST(ParaView, ContactFieldIsTheGapToTheColliders) {
+  const auto dir = scratch("vtk_contact");
+  const std::string out = (dir / "out").string();
+  // A horizontal plane whose offset surface (point y - 0.001, thickness 0.0005) is 0.5 mm
+  // below the bottom row (y = 0): the falling rows reach it within the run.
+  const Result r = run("run " +
+                       scene(dir, 4,
+                             "colliders:\n  - {type: plane, point: [0, -0.001, 0], normal: [0, 1, 0], thickness: 0.0005}\n"
+                             "output: {vtk: true, lossless: true}\n") +
+                       " --quiet --out " + out);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const double surface = -0.001 + 0.0005;
+  int touching_last = 0;
+  for (int k = 0; k <= 4; ++k) {
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%05d.vtu", k);
+    const Vtu v = read_vtu(fs::path(out) / name);
+    const auto& x = v.arrays.at("Points");
+    const auto& gap = v.arrays.at("collider_gap");
+    const auto& contact = v.arrays.at("contact");
+    ASSERT_EQ(gap.size(), 30u);
+    ASSERT_EQ(contact.size(), 30u);
+    for (int i = 0; i < 30; ++i) {
+      EXPECT_NEAR(gap[i], x[3 * i + 1] - surface, 1e-12) << "frame " << k << " vertex " << i;
+      EXPECT_EQ(contact[i], gap[i] <= 1e-6 ? 1.0 : 0.0) << "frame " << k << " vertex " << i;
+      if (k == 0) EXPECT_EQ(contact[i], 0.0) << i;
+      if (k == 4 && contact[i] == 1.0) ++touching_last;
+    }
+  }
+  EXPECT_GE(touching_last, 6);  // at least the bottom row has reached the plane
+  // Without colliders there is no contact field.
+  const auto dir2 = scratch("vtk_nocontact");
+  const Result r2 = run("run " + scene(dir2, 1, "output: {vtk: true}\n") + " --quiet --out " + (dir2 / "o").string());
+  ASSERT_EQ(r2.code, 0) << r2.out;
+  EXPECT_EQ(read_vtu(dir2 / "o" / "frame_00001.vtu").arrays.count("collider_gap"), 0u);
+}
+
 TEST(ParaView, VelocitiesNeedAFormatThatCarriesThem) {
   const auto dir = scratch("vel_alone");
   const Result r = run("run " + scene(dir, 2, "output: {velocities: true}\n") + " --quiet --out " + (dir / "o").string());

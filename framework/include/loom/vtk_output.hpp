@@ -29,11 +29,20 @@ class VtkSeriesWriter {
   int adopt_existing(int last_frame);
 
   /// Write frame_NNNNN.vtu (atomically) and rewrite run.pvd (atomically) with it added.
-  /// v may be empty (no velocity array).
-  void write_frame(int frame, double time, std::span<const double> x, std::span<const double> v);
+  /// v may be empty (no velocity array). gap: per vertex, the signed distance to the nearest
+  /// collider's offset surface (m), written as `collider_gap` with a `contact` flag (1 where
+  /// gap <= kContactGap); empty when the scene has no colliders.
+  void write_frame(int frame, double time, std::span<const double> x, std::span<const double> v,
+                   std::span<const double> gap = {});
 
   /// The .vtu text of one frame (also used by tests).
-  std::string vtu_text(double time, std::span<const double> x, std::span<const double> v);
+  std::string vtu_text(double time, std::span<const double> x, std::span<const double> v,
+                       std::span<const double> gap = {});
+
+  /// A vertex within this distance of a collider's offset surface (or inside it) counts as in
+  /// contact in the `contact` array: contact resolution leaves resting vertices on the surface
+  /// to rounding, far below a micrometre.
+  static constexpr double kContactGap = 1e-6;
 
  private:
   std::string pvd_text() const;
@@ -43,6 +52,7 @@ class VtkSeriesWriter {
   std::vector<std::array<Index, 2>> edges_;
   std::vector<double> rest_length_;
   std::vector<double> strain_;  // work array, n
+  std::vector<double> contact_;  // work array, n
   struct Entry {
     int frame;
     double time;
