@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "cuda_integrators.hpp"
+#include "cuda_test_state.hpp"
 #include "device_model.hpp"
 #include "device_pcg.hpp"
 #include "gnatv_material.hpp"
@@ -166,31 +167,11 @@ std::unique_ptr<Scene> make_scene(Membrane m, Index nx, Index ny, double b, bool
           Params::from_string("stencil: mesh_edges\nstiffness: 2000\ndamping: 0.3\ndensity: 0.1\n", "<test>"), sc->mesh);
     sc->material = std::make_unique<BentMaterial>(std::move(membrane), sc->mesh, read_bending_options(bend));
   }
-  State& st = sc->state;
-  const Index n = sc->mesh.num_vertices();
-  st.resize(n);
-  st.x = sc->mesh.positions;
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
-  st.pin(0);
-  st.pin(nx - 1);
-  std::mt19937 rng(13);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (Index i = 0; i < n; ++i) {
-    if (st.pinned[i]) continue;
-    for (int a = 0; a < 3; ++a) {
-      st.x[3 * i + a] += pert * u(rng);
-      st.v[3 * i + a] = vel * u(rng);
-    }
-  }
-  sc->gravity = {0.0, -9.81, 0.0};
+  loom_cuda_test::init_perturbed_state(*sc, nx, 13, pert, vel);
   return sc;
 }
 
-void run(Integrator& integ, Scene& sc, double h, int steps) {
-  integ.prepare(sc, h);
-  for (int k = 0; k < steps; ++k) integ.step(sc, h);
-}
+using loom_cuda_test::run;
 
 }  // namespace
 
