@@ -111,6 +111,18 @@ void check_frame_size(const fs::path& f, const std::vector<double>& x, const Mes
                      std::to_string(mesh.positions.size() / 3) + ". Fix: render the frames of one run only.");
 }
 
+// The renderer module's optional obstacle entry point (renderer.hpp), or null: the cloth only.
+RendererObstaclesFn obstacles_entry(const Registry& registry, const std::string& type) {
+  RendererObstaclesFn f = nullptr;
+  for (const auto& info : registry.list())
+    if (info.kind == PluginKind::Renderer && info.name == type && !info.module_path.empty())
+      if (void* h = ::dlopen(info.module_path.c_str(), RTLD_NOW | RTLD_NOLOAD)) {
+        f = reinterpret_cast<RendererObstaclesFn>(::dlsym(h, kRendererObstaclesSymbol));
+        ::dlclose(h);
+      }
+  return f;
+}
+
 }  // namespace
 
 int render_command(const RenderArgs& args) {
@@ -159,15 +171,7 @@ int render_command(const RenderArgs& args) {
       in.root, render, colliders, registry, type, renderer.get());
   const double* focus = framing.center;
   const double plane_size = framing.plane_size;
-  // The module's optional obstacle entry point (renderer.hpp); without it the cloth only.
-  RendererObstaclesFn set_obstacles = nullptr;
-  if (!colliders.empty())
-    for (const auto& info : registry.list())
-      if (info.kind == PluginKind::Renderer && info.name == type && !info.module_path.empty())
-        if (void* h = ::dlopen(info.module_path.c_str(), RTLD_NOW | RTLD_NOLOAD)) {
-          set_obstacles = reinterpret_cast<RendererObstaclesFn>(::dlsym(h, kRendererObstaclesSymbol));
-          ::dlclose(h);
-        }
+  const RendererObstaclesFn set_obstacles = colliders.empty() ? nullptr : obstacles_entry(registry, type);
   std::vector<float> obstacle_pos, obstacle_nrm;
   std::vector<double> x;
   int k = 0;
@@ -241,10 +245,43 @@ int view_command(const RenderArgs& args) {
   va.num_frames = int(in.frames.size());
   for (const auto& f : in.frames) va.frame_names.push_back(f.filename().string());
   va.fps = fps;
+  // Framing as in `loom render` (render_framing.cpp): the camera fits every frame (render.fit),
+  // a ground with the cloth's shadow, and the colliders drawn at each frame's time.
+  ColliderSet colliders;
+  if (Params cp = in.root.child("colliders"); cp.valid()) colliders = ColliderSet::parse(cp, in.base_dir);
+  const RendererObstaclesFn set_obstacles = colliders.empty() ? nullptr : obstacles_entry(registry, in.type);
+  Renderer* view_renderer = nullptr;
+  Framing framing;
+  const bool fit_sequence =
+      !in.render.valid() || in.render.get_choice("fit", std::string("sequence"), {"sequence", "first_frame"}) == "sequence";
+  va.prepare = [&](Renderer* r, float lo[3], float hi[3]) {
+    view_renderer = r;
+    framing = frame_sequence(
+        in.frames, [](const fs::path& f, std::vector<double>& x, double* t) { read_frame_positions(f.string(), x, t); },
+        in.root, in.render, colliders, registry, in.type, r);
+    for (int c = 0; c < 3; ++c) {
+      lo[c] = float(framing.lo[c]);
+      hi[c] = float(framing.hi[c]);
+    }
+    if (!fit_sequence)  // render.fit: first_frame: the first frame's box
+      for (Index i = 0; i < mesh.num_vertices(); ++i)
+        for (int c = 0; c < 3; ++c) {
+          lo[c] = std::min(i ? lo[c] : 1e30f, float(mesh.positions[3 * i + c]));
+          hi[c] = std::max(i ? hi[c] : -1e30f, float(mesh.positions[3 * i + c]));
+        }
+  };
+  std::vector<float> obstacle_pos, obstacle_nrm;
   va.load_frame = [&](int k, std::vector<double>& x) {
     const fs::path& f = in.frames.at(std::size_t(k));
-    read_frame_positions(f.string(), x);
+    double t = 0;
+    read_frame_positions(f.string(), x, &t);
     check_frame_size(f, x, mesh);
+    if (set_obstacles && view_renderer) {
+      obstacle_pos.clear();
+      obstacle_nrm.clear();
+      collider_triangles(colliders, t, framing.center, framing.plane_size, obstacle_pos, obstacle_nrm);
+      set_obstacles(view_renderer, obstacle_pos.data(), obstacle_nrm.data(), obstacle_pos.size());
+    }
   };
   if (!args.quiet)
     std::printf("loom: viewing %zu frames of %s (drag: rotate, scroll: zoom, space: play/pause, "

@@ -51,6 +51,12 @@ struct RendererViewArgs {
   std::vector<std::string> frame_names;                    ///< for the window title
   std::function<void(int, std::vector<double>&)> load_frame;  ///< positions (3n) of frame k
   double fps = 30.0;               ///< playback rate
+  /// Optional (empty for older callers): called once after begin() with the viewer's renderer.
+  /// It frames the run as `loom render` does (the camera fitted to every frame of the sequence,
+  /// the ground and the colliders' entry points above) and returns the box it fitted in lo/hi;
+  /// the viewer orbits about that box instead of the first frame's. load_frame then also places
+  /// the colliders at the frame's time. Appended last, so older viewer modules stay compatible.
+  std::function<void(Renderer*, float lo[3], float hi[3])> prepare;
 };
 using RendererViewFn = int (*)(const RendererViewArgs&);
 inline constexpr const char* kRendererViewSymbol = "loom_renderer_view";

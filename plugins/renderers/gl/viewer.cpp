@@ -123,16 +123,24 @@ LOOM_PLUGIN_EXPORT int loom_renderer_view(const loom::RendererViewArgs& args) {
     GlRenderer renderer(settings, true);
     renderer.begin(*args.mesh);
     state.renderer = &renderer;
+    // The whole sequence's box (loom render's framing), else the first frame's.
+    float box_lo[3] = {1e30f, 1e30f, 1e30f}, box_hi[3] = {-1e30f, -1e30f, -1e30f};
+    if (args.prepare) {
+      args.prepare(&renderer, box_lo, box_hi);
+    } else {
+      for (loom::Index i = 0; i < args.mesh->num_vertices(); ++i)
+        for (int k = 0; k < 3; ++k) {
+          box_lo[k] = std::min(box_lo[k], float(args.mesh->positions[3 * i + k]));
+          box_hi[k] = std::max(box_hi[k], float(args.mesh->positions[3 * i + k]));
+        }
+    }
+    state.lo = glm::vec3(box_lo[0], box_lo[1], box_lo[2]);
+    state.hi = glm::vec3(box_hi[0], box_hi[1], box_hi[2]);
     const Camera& c0 = renderer.camera();
     state.target = c0.target;
     state.up = glm::length(c0.up) > 0.0f ? glm::normalize(c0.up) : glm::vec3(0, 1, 0);
     state.offset = c0.eye - c0.target;
     state.fov = c0.fov_deg;
-    for (loom::Index i = 0; i < args.mesh->num_vertices(); ++i)
-      for (int k = 0; k < 3; ++k) {
-        state.lo[k] = std::min(i ? state.lo[k] : 1e30f, float(args.mesh->positions[3 * i + k]));
-        state.hi[k] = std::max(i ? state.hi[k] : -1e30f, float(args.mesh->positions[3 * i + k]));
-      }
     glfwSetWindowUserPointer(window, &state);
     glfwSetKeyCallback(window, on_key);
     glfwSetMouseButtonCallback(window, on_mouse_button);
