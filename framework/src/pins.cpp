@@ -26,8 +26,11 @@ std::string num(double v) {
 const std::vector<std::string> kPinGroups = {"top_corners", "top_edge", "left_corners", "left_edge",
                                              "bottom_corners", "bottom_edge", "right_edge", "corners"};
 
-// Vertices of a named group. Grids use their structure; other meshes use the bounding box
-// in the plane of the two largest extents ("top" = largest y).
+// Vertices of a named group. Grids use their structure; other meshes use the bounding box,
+// with the grid's conventions for which side is which: "top" is the largest y and "left" the
+// smallest x, except on a mesh lying flat (its extent along y below 1% of its largest
+// extent), where "top" is the smallest z as on a `plane: xz` grid (rows run along -z), and on
+// a mesh standing in the yz plane (x extent below 1%), where "left" is the smallest z.
 std::vector<Index> named_group(const Mesh& mesh, const std::string& group, const Params& where) {
   std::vector<Index> out;
   const Index n = mesh.num_vertices();
@@ -52,7 +55,15 @@ std::vector<Index> named_group(const Mesh& mesh, const std::string& group, const
       }
     const double ext = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
     const double tol = 1e-6 * ext;
-    auto select = [&](int axis, bool high) {
+    // The up axis and the sense of "top"; the left-right axis and the sense of "right".
+    const bool flat_xz = hi[1] - lo[1] < 0.01 * ext;
+    const bool flat_yz = !flat_xz && hi[0] - lo[0] < 0.01 * ext;
+    const int up = flat_xz ? 2 : 1, across = flat_yz ? 2 : 0;
+    const bool top_high = !flat_xz;  // flat in xz: top = smallest z
+    // select(axis, high) with axis 1 = up, 0 = across in the mesh's own frame.
+    auto select = [&](int which, bool high) {
+      const int axis = which == 1 ? up : across;
+      if (which == 1 && !top_high) high = !high;
       std::vector<Index> s;
       for (Index i = 0; i < n; ++i) {
         const double c = mesh.positions[3 * i + axis];
@@ -60,8 +71,9 @@ std::vector<Index> named_group(const Mesh& mesh, const std::string& group, const
       }
       return s;
     };
-    auto extremes = [&](const std::vector<Index>& s, int axis) {
+    auto extremes = [&](const std::vector<Index>& s, int which) {
       if (s.empty()) return std::vector<Index>{};
+      const int axis = which == 1 ? up : across;
       Index a = s[0], b = s[0];
       for (Index i : s) {
         if (mesh.positions[3 * i + axis] < mesh.positions[3 * a + axis]) a = i;

@@ -9,6 +9,9 @@
 #include <string>
 #include <vector>
 
+#include <algorithm>
+
+#include "loom/pins.hpp"
 #include "loom/registry.hpp"
 #include "loom/simulation.hpp"
 
@@ -229,4 +232,26 @@ TEST(MovingPins, RotatingClampTurnsAStripByThePrescribedAngle) {
   EXPECT_NEAR(angle, turn, 1e-4);
   EXPECT_NEAR(std::hypot(tip[0] - c[0], tip[1] - c[1]), 1.2, 1e-3);
   EXPECT_NEAR(tip[2], 0.0, 1e-12);
+}
+
+// Named groups on a mesh without grid structure (an OBJ) follow the grid's conventions: the
+// same grid with its structure dropped selects the same vertices as the grid itself, standing
+// (xy) and lying flat (xz, where "top" is the smallest z). A flat OBJ once pinned every vertex
+// with top_edge (its y extent is zero).
+TEST(PinSelection, NamedGroupsOnMeshesWithoutGridFollowTheGridConventions) {
+  const std::vector<std::string> groups = {"top_corners", "top_edge",  "left_corners", "left_edge",
+                                           "bottom_corners", "bottom_edge", "right_edge", "corners"};
+  for (GridPlane plane : {GridPlane::XY, GridPlane::XZ}) {
+    const Mesh grid = make_grid(7, 5, 1.2, 0.8, plane);
+    Mesh obj = grid;
+    obj.grid.reset();
+    for (const auto& g : groups) {
+      const Params p = Params::from_string(g, "t.yaml");
+      std::vector<Index> want = select_vertices(grid, p), got = select_vertices(obj, p);
+      std::sort(want.begin(), want.end());
+      std::sort(got.begin(), got.end());
+      EXPECT_EQ(got, want) << g << (plane == GridPlane::XY ? " on xy" : " on xz");
+      EXPECT_LT(got.size(), std::size_t(7 * 5)) << g;
+    }
+  }
 }
