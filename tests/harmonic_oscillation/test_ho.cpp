@@ -2,7 +2,9 @@
 // pins, refusal of materials without springs.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <random>
 #include <string>
 #include <vector>
@@ -525,4 +527,149 @@ TEST(HoStorage, GroupedAndPlainSweepsAgree) {
     }
     EXPECT_LE(err, 1e-13 * scale) << to_string(var);
   }
+}
+
+// ---- Vertex order (reorder key): RCM order, user-visible results unchanged ----
+
+namespace {
+
+// A 2D grid mesh (nx x nx, spacing 0.02) whose vertices are numbered in a random order: user
+// vertex pi[g] holds grid vertex g. Structural, shear and bend springs, some damped.
+struct ShuffledGrid {
+  int nx;
+  std::vector<Index> pi;
+  std::vector<double> x, v, m;
+  SpringSet s;
+  std::vector<Index> pins;
+  ShuffledGrid(int nx_, unsigned seed, bool shuffle = true) : nx(nx_) {
+    const int n = nx * nx;
+    pi.resize(n);
+    std::iota(pi.begin(), pi.end(), 0);
+    if (shuffle) std::shuffle(pi.begin(), pi.end(), std::mt19937(seed));
+    x.resize(3 * n);
+    v.resize(3 * n);
+    m.resize(n);
+    for (int r = 0; r < nx; ++r)
+      for (int c = 0; c < nx; ++c) {
+        const Index u = pi[r * nx + c];
+        const double p[3] = {0.02 * c, 0.001 * std::sin(0.7 * c + r), 0.02 * r};
+        const double w[3] = {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.005 * std::sin(5.0 * c)};
+        for (int e = 0; e < 3; ++e) {
+          x[3 * u + e] = p[e];
+          v[3 * u + e] = w[e];
+        }
+        m[u] = 1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5));
+      }
+    for (int r = 0; r < nx; ++r)
+      for (int c = 0; c < nx; ++c) {
+        const int a = r * nx + c;
+        auto add = [&](int b, double l0, double k, double damp, SpringClass cl) { s.add(pi[a], pi[b], l0, k, damp, cl); };
+        if (c + 1 < nx) add(a + 1, 0.02, 2000, 0.02, SpringClass::Structural);
+        if (r + 1 < nx) add(a + nx, 0.02, 2000, 0.0, SpringClass::Structural);
+        if (c + 1 < nx && r + 1 < nx) add(a + nx + 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+        if (c > 0 && r + 1 < nx) add(a + nx - 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+        if (c + 2 < nx) add(a + 2, 0.04, 50, 0.0, SpringClass::Bend);
+      }
+    pins = {pi[nx * (nx - 1)], pi[nx * nx - 1]};
+  }
+};
+
+}  // namespace
+
+TEST(VertexOrder, RcmIsAPermutationThatShrinksTheSpan) {
+  const ShuffledGrid g(60, 11);
+  const Index n = static_cast<Index>(g.m.size());
+  const VertexOrder o = rcm_order(n, g.s.i, g.s.j);
+  ASSERT_EQ(o.perm.size(), static_cast<std::size_t>(n));
+  std::vector<int> seen(n, 0);
+  for (Index k = 0; k < n; ++k) {
+    ++seen[o.perm[k]];
+    EXPECT_EQ(o.inv[o.perm[k]], k);
+  }
+  for (int c : seen) ASSERT_EQ(c, 1);
+  // every spring of the RCM order joins vertices at most one BFS level apart: its span is at
+  // most about two grid diagonals (the widest level of a 60 x 60 grid has <= 120 vertices)
+  Index maxspan = 0;
+  for (Index q = 0; q < g.s.size(); ++q) maxspan = std::max(maxspan, std::abs(o.inv[g.s.i[q]] - o.inv[g.s.j[q]]));
+  EXPECT_LE(maxspan, 4 * 60);
+  const double user = mean_spring_span(g.s.i, g.s.j), rcm = mean_spring_span(g.s.i, g.s.j, &o);
+  EXPECT_GT(user, 1000.0);   // a random numbering: about n/3
+  EXPECT_LT(rcm, 120.0);
+  // a path given in a shuffled order becomes 0-1-2-... (span 1), and disconnected pieces and
+  // isolated vertices are all placed
+  std::vector<Index> perm(10);
+  std::iota(perm.begin(), perm.end(), 0);
+  std::shuffle(perm.begin(), perm.end(), std::mt19937(5));
+  std::vector<Index> pi_, pj_;
+  for (int q = 0; q + 1 < 7; ++q) {   // path over perm[0..6]; perm[7], perm[8] joined; perm[9] alone
+    pi_.push_back(perm[q]);
+    pj_.push_back(perm[q + 1]);
+  }
+  pi_.push_back(perm[7]);
+  pj_.push_back(perm[8]);
+  const VertexOrder p = rcm_order(10, pi_, pj_);
+  ASSERT_EQ(p.perm.size(), 10u);
+  for (std::size_t q = 0; q < pi_.size(); ++q) EXPECT_EQ(std::abs(p.inv[pi_[q]] - p.inv[pj_[q]]), 1);
+  // gather and scatter are inverse
+  std::vector<double> a(30), b(30), c(30);
+  for (int q = 0; q < 30; ++q) a[q] = q * 1.5;
+  gather_vertices<3>(p, a.data(), b.data());
+  for (int k = 0; k < 10; ++k) EXPECT_EQ(b[3 * k + 1], a[3 * p.perm[k] + 1]);
+  scatter_vertices<3>(p, b.data(), c.data());
+  EXPECT_EQ(a, c);
+}
+
+// A run in the RCM order equals the run in the user's order to rounding, and is reported in
+// the user's numbering (positions, velocities; pinned vertices bit for bit), for every variant.
+TEST(HoReorder, ReorderedRunEqualsUserOrderRun) {
+  const ShuffledGrid g(40, 7);
+  for (HoVariant var : {HoVariant::Velocity, HoVariant::AnalyticPosition, HoVariant::KangCho2011}) {
+    SpringSet s = g.s;
+    if (var == HoVariant::KangCho2011)
+      for (double& c : s.damping) c = 0;
+    std::vector<double> res[2];
+    for (int ro : {0, 1}) {
+      auto scene = make_scene(g.x, g.v, g.m, g.pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(s, g.m));
+      HoIntegrator ho(var, true, true, ro ? HoReorder::Rcm : HoReorder::None);
+      ho.prepare(*scene, 1e-4);
+      EXPECT_EQ(ho.reordered(), ro == 1);
+      for (int st = 0; st < 60; ++st) ho.step(*scene, 1e-4);
+      for (Index p : g.pins)
+        for (int e = 0; e < 3; ++e) EXPECT_EQ(scene->state.x[3 * p + e], g.x[3 * p + e]);
+      res[ro] = scene->state.x;
+      res[ro].insert(res[ro].end(), scene->state.v.begin(), scene->state.v.end());
+    }
+    // the runs differ only in the order of the additions into each vertex
+    double scale_x = 0, scale_v = 0, moved = 0;
+    const std::size_t m3 = g.x.size();
+    for (std::size_t q = 0; q < m3; ++q) {
+      scale_x = std::max(scale_x, std::abs(res[0][q]));
+      scale_v = std::max(scale_v, std::abs(res[0][m3 + q]));
+      moved = std::max(moved, std::abs(res[0][q] - g.x[q]));
+    }
+    EXPECT_GT(moved, 1e-6) << to_string(var);   // the cloth moved (the comparison means something)
+    for (std::size_t q = 0; q < m3; ++q) {
+      ASSERT_NEAR(res[1][q], res[0][q], 1e-13 * scale_x) << to_string(var) << " x " << q;
+      ASSERT_NEAR(res[1][m3 + q], res[0][m3 + q], 1e-11 * scale_v) << to_string(var) << " v " << q;
+    }
+  }
+}
+
+// reorder: auto reorders a large shuffled mesh and keeps a grid numbered row by row; the key is
+// declared and checked.
+TEST(HoReorder, AutoRuleAndParameter) {
+  for (bool shuffle : {true, false}) {
+    const ShuffledGrid g(130, 3, shuffle);   // 16900 vertices >= kHoReorderMinVertices
+    auto scene = make_scene(g.x, g.v, g.m, g.pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(g.s, g.m));
+    HoIntegrator ho(HoVariant::Velocity);
+    ho.prepare(*scene, 1e-4);
+    EXPECT_EQ(ho.reordered(), shuffle);
+  }
+  EXPECT_FALSE(ho_reorder_pays(kHoReorderMinVertices - 1, 1000.0, 1.0));
+  EXPECT_TRUE(ho_reorder_pays(kHoReorderMinVertices, 4.0, 1.0));
+  EXPECT_FALSE(ho_reorder_pays(kHoReorderMinVertices, 3.9, 1.0));
+  EXPECT_EQ(HoIntegrator(Params::from_string("reorder: rcm\n")).reorder_mode(), HoReorder::Rcm);
+  EXPECT_EQ(HoIntegrator(Params::from_string("reorder: none\n")).reorder_mode(), HoReorder::None);
+  EXPECT_EQ(HoIntegrator(Params::from_string("variant: velocity\n")).reorder_mode(), HoReorder::Auto);
+  EXPECT_THROW(HoIntegrator(Params::from_string("reorder: metis\n")), InputError);
 }

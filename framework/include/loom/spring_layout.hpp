@@ -36,6 +36,7 @@
 //     thread that then runs that part's interior springs), and every init completes before
 //     any cross spring runs: use it to zero an accumulator (f = 0) in the same pass.
 //     The ranges cover 0..n-1 exactly once.
+//   * the parallel skeleton is traverse_parts (loom/traversal.hpp), shared by every plugin.
 //   * call it from outside an OpenMP parallel region: it opens one (the team is
 //     omp_get_max_threads(), or whatever the caller set), unless the layout has fewer than
 //     kParallelMin springs: small ones run on the calling thread. Nested inside a parallel
@@ -64,6 +65,7 @@
 
 #include "loom/common.hpp"
 #include "loom/springs.hpp"
+#include "loom/traversal.hpp"
 
 namespace loom {
 
@@ -137,62 +139,29 @@ class SpringLayout {
   /// share no vertex. Each part's interior springs come as one range, the serial cross
   /// springs as one range, a parallel colour as chunks of kChunk; the ranges do not depend
   /// on the thread count.
-  static constexpr Index kChunk = 1024;
+  static constexpr Index kChunk = kTraversalChunk;
   template <class Init, class Range>
   void for_each_range(Init&& init, Range&& range) const {
-    const int P = parts();
-    if (P <= 0) return;
-    const bool serial_cross = cross_serial();
-    const int C = num_colours();
-#pragma omp parallel if (num_springs() >= kParallelMin)
-    {
-#pragma omp for schedule(static)
-      for (int p = 0; p < P; ++p) {
-        init(vertex_begin_[p], vertex_begin_[p + 1]);
-        range(spring_begin_[p], spring_begin_[p + 1]);
-      }
-      if (C > 0) {
-        if (serial_cross) {
-#pragma omp single
-          range(colour_begin_[0], colour_begin_[C]);
-        } else {
-          for (int c = 0; c < C; ++c) {
-            const Index b = colour_begin_[c], e = colour_begin_[c + 1];
-            const Index chunks = (e - b + kChunk - 1) / kChunk;
-#pragma omp for schedule(static)
-            for (Index q = 0; q < chunks; ++q) range(b + q * kChunk, std::min(e, b + (q + 1) * kChunk));
-          }
-        }
-      }
-    }
+    if (parts() <= 0) return;
+    traverse_parts(
+        *this, num_springs() >= kParallelMin,
+        [&](int p) {
+          init(vertex_begin_[p], vertex_begin_[p + 1]);
+          range(spring_begin_[p], spring_begin_[p + 1]);
+        },
+        range);
   }
 
   template <class Init, class Body>
   void for_each(Init&& init, Body&& body) const {
-    const int P = parts();
-    if (P <= 0) return;
-    const bool serial_cross = cross_serial();
-    const int C = num_colours();
-#pragma omp parallel if (num_springs() >= kParallelMin)
-    {
-#pragma omp for schedule(static)
-      for (int p = 0; p < P; ++p) {
-        init(vertex_begin_[p], vertex_begin_[p + 1]);
-        run(spring_begin_[p], spring_begin_[p + 1], body);
-      }
-      // implicit barrier: every init and interior spring is done
-      if (C > 0) {
-        if (serial_cross) {
-#pragma omp single
-          run(colour_begin_[0], colour_begin_[C], body);
-        } else {
-          for (int c = 0; c < C; ++c) {
-#pragma omp for schedule(static)
-            for (Index k = colour_begin_[c]; k < colour_begin_[c + 1]; ++k) body(order_[k]);
-          }
-        }
-      }
-    }
+    if (parts() <= 0) return;
+    traverse_parts(
+        *this, num_springs() >= kParallelMin,
+        [&](int p) {
+          init(vertex_begin_[p], vertex_begin_[p + 1]);
+          run(spring_begin_[p], spring_begin_[p + 1], body);
+        },
+        [&](Index k0, Index k1) { run(k0, k1, body); });
   }
 
  private:
