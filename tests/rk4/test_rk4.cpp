@@ -2,6 +2,9 @@
 // against the exact isolated spring.
 #include <gtest/gtest.h>
 
+#include <omp.h>
+
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -35,7 +38,10 @@ TEST(Rk4, FreeFallIsExact) {
   EXPECT_EQ(scene->state.step, N);
 }
 
+// Four force evaluations per step through the material (a material that is no spring network:
+// the generic path), pins exact on both paths (the fused spring path for a spring material).
 TEST(Rk4, FourForceEvaluationsPerStepAndPinsExact) {
+ for (bool expose : {false, true}) {
   const int nx = 5;
   std::vector<double> x, v, m;
   for (int r = 0; r < nx; ++r)
@@ -51,7 +57,7 @@ TEST(Rk4, FourForceEvaluationsPerStepAndPinsExact) {
       if (c + 1 < nx) s.add(a, a + 1, 0.1, 2000, 0.05, SpringClass::Structural);
       if (r + 1 < nx) s.add(a, a + nx, 0.1, 2000, 0.05, SpringClass::Structural);
     }
-  auto mat = std::make_unique<TestSpringMaterial>(s, m);
+  auto mat = std::make_unique<TestSpringMaterial>(s, m, expose);
   const TestSpringMaterial* raw = mat.get();
   auto scene = make_scene(x, v, m, {0, nx - 1, nx * nx - 1}, {0, -9.81, 0}, std::move(mat));
   // vertex nx*nx-1 is a moving pin: prescribed velocity
@@ -62,7 +68,8 @@ TEST(Rk4, FourForceEvaluationsPerStepAndPinsExact) {
   rk.prepare(*scene, h);
   const int N = 100;
   for (int st = 0; st < N; ++st) rk.step(*scene, h);
-  EXPECT_EQ(raw->evaluations, 4 * N);
+  EXPECT_EQ(rk.fused(), expose);
+  EXPECT_EQ(raw->evaluations, expose ? 0 : 4 * N);
   EXPECT_EQ(rk.last_step().force_evaluations, 4);
   for (Index p : {0, nx - 1})
     for (int e = 0; e < 3; ++e) {
@@ -75,6 +82,7 @@ TEST(Rk4, FourForceEvaluationsPerStepAndPinsExact) {
     EXPECT_NEAR(scene->state.x[3 * mp + e], x[3 * mp + e] + N * h * pv[e], 1e-14);
   }
   EXPECT_LT(scene->state.x[3 * (nx * nx - 2) + 1], -1e-5);   // a free vertex fell
+ }
 }
 
 // Order 4 on an isolated spring (undamped and damped, equal and 1:5 masses).
@@ -111,5 +119,51 @@ TEST(Rk4, FourthOrderOnIsolatedSpring) {
         EXPECT_LT(p, 4.3) << "zeta " << zeta << " mj " << mj;
       }
     }
+  }
+}
+
+// The fused spring path (forces and stage updates in one pass, loom/explicit_springs.hpp) equals
+// the generic path (material forces, then the stage loops) to rounding, with dampers, fixed and
+// moving pins; and it gives the same bits on 1 and 2 threads.
+TEST(Rk4, FusedSpringPathMatchesGenericPath) {
+  const int nx = 52;   // 52 x 52 vertices, ~10k springs: above kParallelMinSprings
+  std::vector<double> x, v, m;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      x.insert(x.end(), {0.02 * c, 0.001 * std::sin(0.7 * c + r), 0.02 * r});
+      v.insert(v.end(), {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.0});
+      m.push_back(1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5)));
+    }
+  SpringSet s;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      const int a = r * nx + c;
+      if (c + 1 < nx) s.add(a + 1, a, 0.02, 2000, 0.02, SpringClass::Structural);   // either endpoint first
+      if (r + 1 < nx) s.add(a, a + nx, 0.02, 2000, 0.0, SpringClass::Structural);
+      if (c + 1 < nx && r + 1 < nx) s.add(a, a + nx + 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+      if (c > 0 && r + 1 < nx) s.add(a, a + nx - 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+    }
+  ASSERT_GE(s.size(), kParallelMinSprings);
+  std::vector<double> res[3];
+  for (int run = 0; run < 3; ++run) {   // 0: generic, 1: fused 1 thread, 2: fused 2 threads
+    omp_set_num_threads(run == 2 ? 2 : 1);
+    auto scene = make_scene(x, v, m, {nx * (nx - 1), nx * nx - 1}, {0, -9.81, 0},
+                            std::make_unique<TestSpringMaterial>(s, m, run > 0));
+    for (int e = 0; e < 3; ++e) scene->state.v[3 * (nx * nx - 1) + e] = 0.1 * (e + 1);   // a moving pin
+    Rk4Integrator rk;
+    rk.prepare(*scene, 1e-4);
+    EXPECT_EQ(rk.fused(), run > 0);
+    for (int st = 0; st < 40; ++st) rk.step(*scene, 1e-4);
+    res[run] = scene->state.x;
+    res[run].insert(res[run].end(), scene->state.v.begin(), scene->state.v.end());
+  }
+  omp_set_num_threads(2);
+  double scale = 0, moved = 0;
+  for (std::size_t q = 0; q < res[0].size(); ++q) scale = std::max(scale, std::abs(res[0][q]));
+  for (std::size_t q = 0; q < x.size(); ++q) moved = std::max(moved, std::abs(res[0][q] - x[q]));
+  EXPECT_GT(moved, 1e-5);
+  for (std::size_t q = 0; q < res[0].size(); ++q) {
+    ASSERT_NEAR(res[1][q], res[0][q], 1e-12 * scale) << q;
+    ASSERT_EQ(res[2][q], res[1][q]) << q;
   }
 }

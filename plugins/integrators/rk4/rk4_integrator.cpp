@@ -1,6 +1,7 @@
 #include "rk4_integrator.hpp"
 
 #include <span>
+#include <stdexcept>
 
 namespace loom {
 
@@ -25,6 +26,10 @@ void Rk4Integrator::prepare(Scene& scene, double) {
   accv_.assign(m, 0.0);
   stats_ = {};
   stats_.force_evaluations = 4;
+  const SpringSet* set = scene.material->springs();
+  const Index n = scene.state.size();
+  if (set && (set != sweep_source_ || sweep_.n != n || sweep_.size() != set->size())) sweep_.build(n, *set);
+  sweep_source_ = set;
 }
 
 void Rk4Integrator::step(Scene& scene, double h) {
@@ -38,6 +43,16 @@ void Rk4Integrator::step(Scene& scene, double h) {
   // stage sees the prescribed pins; at the end they get exactly p(t + h), v(t + h).
   const PinSet& pins = scene.pins;
   const double t0 = s.time;
+  if (sweep_source_) {
+    if (mat.springs() != sweep_source_) throw std::logic_error("rk4: material changed after prepare()");
+    rk4_step_springs<double>(sweep_, s.x.data(), s.v.data(), s.inv_mass.data(), g, h, xs_.data(), vs_.data(),
+                             f_.data(), accx_.data(), accv_.data(), [&](int stage) {
+                               if (pins.moving()) pins.place(t0 + (stage == 4 ? h : 0.5 * h), xs_.data(), vs_.data());
+                             });
+    pins.apply(s, t0 + h);
+    finish_step(s, h);
+    return;
+  }
   int stage = 0;
   rk4_step_arrays<double>(s.size(), s.x.data(), s.v.data(), s.inv_mass.data(), g, h, xs_.data(), vs_.data(),
                           f_.data(), accx_.data(), accv_.data(),

@@ -26,6 +26,9 @@ void SymplecticEuler::prepare(Scene& scene, double h) {
   if (s.x.size() != 3 * n || s.v.size() != 3 * n || s.inv_mass.size() != n)
     throw std::logic_error("symplectic_euler: state arrays have inconsistent sizes");
   f_.assign(3 * n, 0.0);
+  const SpringSet* set = scene.material->springs();
+  if (set && (set != sweep_source_ || sweep_.n != s.size() || sweep_.size() != set->size())) sweep_.build(s.size(), *set);
+  sweep_source_ = set;
 }
 
 void SymplecticEuler::step(Scene& scene, double h) {
@@ -33,6 +36,24 @@ void SymplecticEuler::step(Scene& scene, double h) {
   const Index n = s.size();
   if (f_.size() != 3 * static_cast<std::size_t>(n))
     throw std::logic_error("symplectic_euler: step() before prepare(), or the vertex count changed");
+  if (sweep_source_) {
+    // Fused: forces and the vertex update in one pass (f_ is zero between steps).
+    if (scene.material->springs() != sweep_source_) throw std::logic_error("symplectic_euler: material changed after prepare()");
+    const double g[3] = {scene.gravity[0], scene.gravity[1], scene.gravity[2]};
+    se_step_springs(sweep_, s.x.data(), s.v.data(), s.inv_mass.data(), f_.data(), h, g);
+  } else {
+    generic_step(scene, h);
+  }
+  // Moving pins: exactly the prescribed positions and velocities at the end of the step.
+  scene.pins.apply(s, s.time + h);
+  stats_ = StepStats{};
+  stats_.force_evaluations = 1;
+  finish_step(s, h);
+}
+
+void SymplecticEuler::generic_step(Scene& scene, double h) {
+  State& s = scene.state;
+  const Index n = s.size();
   scene.material->compute_forces(s.x, s.v, f_);
   double* x = s.x.data();
   double* v = s.v.data();
@@ -58,11 +79,6 @@ void SymplecticEuler::step(Scene& scene, double h) {
         if (vi[c] != 0.0) xi[c] += h * vi[c];
     }
   }
-  // Moving pins: exactly the prescribed positions and velocities at the end of the step.
-  scene.pins.apply(s, s.time + h);
-  stats_ = StepStats{};
-  stats_.force_evaluations = 1;
-  finish_step(s, h);
 }
 
 }  // namespace loom::symplectic_euler

@@ -1,10 +1,13 @@
 // symplectic_euler: v += h (w f(x, v) + g) for free vertices, then x += h v (all vertices;
-// pinned ones move with their prescribed velocity). One force evaluation per step.
+// pinned ones move with their prescribed velocity). One force evaluation per step. A spring
+// material (Material::springs() not null) takes the fused path: one pass over the springs that
+// updates each vertex as soon as its force is complete (loom/explicit_springs.hpp).
 #pragma once
 
 #include <string>
 #include <vector>
 
+#include "loom/explicit_springs.hpp"
 #include "loom/integrator.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
@@ -21,9 +24,14 @@ class SymplecticEuler final : public Integrator {
   void prepare(Scene& scene, double h) override;
   void step(Scene& scene, double h) override;
   StepStats last_step() const override { return stats_; }
+  /// Whether the step runs the fused spring path.
+  bool fused() const { return sweep_source_ != nullptr; }
 
  private:
+  void generic_step(Scene& scene, double h);
   std::vector<double> f_;
+  SpringSweep<double> sweep_;
+  const SpringSet* sweep_source_ = nullptr;
   StepStats stats_;
 };
 

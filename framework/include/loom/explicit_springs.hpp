@@ -1,0 +1,186 @@
+// SpringSweep: the force pass of a spring network fused with the per-vertex update of an
+// explicit step (header-only). Used by symplectic_euler and rk4 when the material is a spring
+// network (Material::springs() is not null: the material's forces are exactly its springs').
+//
+// Layout (built once): the springs in SpringLayout traversal order (loom/spring_layout.hpp),
+// lower endpoint first, as structure of arrays: 32-bit endpoints i, j and the per-spring
+// constants k, l0 (and c when some spring is damped), in the scalar T (double, or float for
+// the benchmarks' float rows).
+//
+// forces(x, v, f, fin): ONE parallel region (traverse_parts, loom/traversal.hpp). Each part
+// sweeps its interior springs in order of lower endpoint; a vertex q is complete as soon as
+// the sweep has passed every spring with lower endpoint q (its other springs have a smaller
+// lower endpoint), unless a cross spring touches it. So the sweep calls fin(q, f + 3q) right
+// away, while q's data is in cache, and clears f[q]; the vertices touched by cross springs get
+// fin after the cross springs. fin may write x[q] and v[q] (the sweep never reads them again in
+// this pass). f must be zero on entry and is zero again on return. Per-vertex sums are
+// deterministic for a fixed layout (any thread count gives the same bits).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "loom/common.hpp"
+#include "loom/kernels/spring.hpp"
+#include "loom/spring_layout.hpp"
+#include "loom/springs.hpp"
+#include "loom/traversal.hpp"
+
+namespace loom {
+
+template <class T>
+struct SpringSweep {
+  SpringLayout layout;
+  std::vector<Index> i, j;       ///< traversal order, i < j
+  std::vector<T> k, l0, c;       ///< c empty when no spring is damped
+  std::vector<std::uint8_t> is_deferred;   ///< per vertex: touched by a cross spring
+  std::vector<Index> deferred;
+  Index n = 0;
+
+  Index size() const { return static_cast<Index>(i.size()); }
+  bool damped() const { return !c.empty(); }
+  /// Whether forces() opens a parallel region (the rule of common.hpp, in springs).
+  bool parallel() const { return size() >= kParallelMinSprings && traversal_threads() > 1; }
+
+  /// Build from a spring set over nv vertices (any order, either endpoint first).
+  void build(Index nv, const SpringSet& set) {
+    n = nv;
+    SpringSet s = set;
+    layout = SpringLayout(nv, s);
+    layout.reorder(s);
+    const Index S = s.size();
+    i.resize(S);
+    j.resize(S);
+    k.resize(S);
+    l0.resize(S);
+    bool any_damped = false;
+    for (Index q = 0; q < S; ++q) any_damped = any_damped || s.damping[q] != 0.0;
+    c.assign(any_damped ? S : 0, T(0));
+    for (Index q = 0; q < S; ++q) {
+      i[q] = std::min(s.i[q], s.j[q]);   // a spring is symmetric in its endpoints
+      j[q] = std::max(s.i[q], s.j[q]);
+      k[q] = static_cast<T>(s.stiffness[q]);
+      l0[q] = static_cast<T>(s.rest_length[q]);
+      if (any_damped) c[q] = static_cast<T>(s.damping[q]);
+    }
+    is_deferred.assign(static_cast<std::size_t>(nv), 0);
+    for (Index q = layout.colour_begin(0); q < S; ++q) is_deferred[i[q]] = is_deferred[j[q]] = 1;
+    deferred.clear();
+    for (Index v = 0; v < nv; ++v)
+      if (is_deferred[v]) deferred.push_back(v);
+  }
+
+  /// The same springs in another scalar.
+  template <class U>
+  void convert_from(const SpringSweep<U>& o) {
+    layout = o.layout;
+    i = o.i;
+    j = o.j;
+    k.assign(o.k.begin(), o.k.end());
+    l0.assign(o.l0.begin(), o.l0.end());
+    c.assign(o.c.begin(), o.c.end());
+    is_deferred = o.is_deferred;
+    deferred = o.deferred;
+    n = o.n;
+  }
+
+  /// Spring forces at (x, v) accumulated into f, with fin(q, f + 3q) per completed vertex
+  /// (see the top of this file). v is read only when some spring is damped.
+  template <class Fin>
+  void forces(const T* x, const T* v, T* f, Fin&& fin) const {
+    if (damped())
+      run<true>(x, v, f, fin);
+    else
+      run<false>(x, v, f, fin);
+  }
+
+ private:
+  template <bool Damped, class Fin>
+  void run(const T* x, const T* v, T* f, Fin& fin) const {
+    const Index* I = i.data();
+    const Index* J = j.data();
+    const T* K = k.data();
+    const T* L0 = l0.data();
+    const T* C = c.data();
+    const std::uint8_t* def = is_deferred.data();
+    auto finish = [&](Index q) {
+      T* fq = f + 3 * static_cast<std::size_t>(q);
+      fin(q, fq);
+      fq[0] = fq[1] = fq[2] = T(0);
+    };
+    auto spring = [&](Index q, T fi[3]) {
+      const std::size_t a = 3 * static_cast<std::size_t>(I[q]), b = 3 * static_cast<std::size_t>(J[q]);
+      if constexpr (Damped)
+        kernels::spring_force_damped(x + a, x + b, v + a, v + b, K[q], L0[q], C[q], fi);
+      else
+        kernels::spring_force(x + a, x + b, K[q], L0[q], fi);
+    };
+    auto sweep = [&](int p) {
+      const Index ve = layout.part_vertex_end(p);
+      const Index se = layout.part_spring_end(p);
+      Index q = layout.part_vertex_begin(p);
+      Index s = layout.part_spring_begin(p);
+      while (s < se) {
+        const Index a = I[s];
+        for (; q < a; ++q)   // every spring of a vertex below a is applied
+          if (!def[q]) finish(q);
+        // the run of springs with lower endpoint a: its force on a summed in registers
+        T fa[3] = {T(0), T(0), T(0)};
+        do {
+          T fi[3];
+          spring(s, fi);
+          T* fb = f + 3 * static_cast<std::size_t>(J[s]);
+          for (int e = 0; e < 3; ++e) {
+            fa[e] += fi[e];
+            fb[e] -= fi[e];
+          }
+          ++s;
+        } while (s < se && I[s] == a);
+        T* fp = f + 3 * static_cast<std::size_t>(a);
+        for (int e = 0; e < 3; ++e) fp[e] += fa[e];
+      }
+      for (; q < ve; ++q)
+        if (!def[q]) finish(q);
+    };
+    auto cross = [&](Index k0, Index k1) {
+      for (Index q = k0; q < k1; ++q) {
+        T fi[3];
+        spring(q, fi);
+        T* fa = f + 3 * static_cast<std::size_t>(I[q]);
+        T* fb = f + 3 * static_cast<std::size_t>(J[q]);
+        for (int e = 0; e < 3; ++e) {
+          fa[e] += fi[e];
+          fb[e] -= fi[e];
+        }
+      }
+    };
+    traverse_parts(layout, parallel(), sweep, cross, static_cast<Index>(deferred.size()),
+                   [&](Index r) { finish(deferred[r]); });
+  }
+};
+
+/// One symplectic Euler step of a spring network on raw arrays (3n x, v, f; n inverse masses
+/// w): v += h (w f + g), x += h v for free vertices; pinned ones (w = 0) move with their
+/// velocity, and a fixed pin (v = 0) is not touched at all. f: zero on entry and on return.
+template <class T>
+void se_step_springs(const SpringSweep<T>& sw, T* x, T* v, const T* w, T* f, T h, const T g[3]) {
+  const T g0 = g[0], g1 = g[1], g2 = g[2];
+  sw.forces(x, v, f, [=](Index q, const T* fq) {
+    const T wi = w[q];
+    T* xi = x + 3 * static_cast<std::size_t>(q);
+    T* vi = v + 3 * static_cast<std::size_t>(q);
+    if (wi != T(0)) {
+      vi[0] += h * (wi * fq[0] + g0);
+      vi[1] += h * (wi * fq[1] + g1);
+      vi[2] += h * (wi * fq[2] + g2);
+      xi[0] += h * vi[0];
+      xi[1] += h * vi[1];
+      xi[2] += h * vi[2];
+    } else {
+      for (int e = 0; e < 3; ++e)
+        if (vi[e] != T(0)) xi[e] += h * vi[e];
+    }
+  });
+}
+
+}  // namespace loom
