@@ -1,11 +1,15 @@
-// HO and RK4 steps on the Kang & Cho 2011 Table 1 grids (kang_cho_table1 stencil), double and
-// float, 1 and 2 threads, beside the paper's GTX 590 frame rates (one step per frame).
+// HO, symplectic Euler and RK4 steps on the Kang & Cho 2011 Table 1 grids (kang_cho_table1
+// stencil), double and float, 1 and 2 threads, beside the paper's GTX 590 frame rates (one step
+// per frame). SE and RK4 run the fused spring path (loom/explicit_springs.hpp) that the plugins
+// take for spring materials. *_shuffled: the same cloth with its vertices numbered in a random
+// order, HO with reorder none (gathers all over memory) and rcm (loom/vertex_order.hpp).
 //
 // Counters: fps (steps per second), paper_fps, ratio = fps / paper_fps, bytes (modelled bytes a
 // step moves to and from memory), GB/s = bytes x fps, bw_frac = GB/s / triad bandwidth of this
 // machine with the same thread count (measured at start-up, best of 5, 3 x 128 MB arrays).
 //
-//   build-ho/bin/bench_integrators --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
+//   OMP_PROC_BIND=close OMP_PLACES=cores build/bin/table1 --benchmark_repetitions=3 \
+//     --benchmark_report_aggregates_only=true --benchmark_min_time=0.3
 #include <benchmark/benchmark.h>
 
 #include <omp.h>
@@ -16,13 +20,18 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <numeric>
+#include <random>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "ho_integrator.hpp"
+#include "loom/explicit_springs.hpp"
+#include "loom/vertex_order.hpp"
 #include "loom/kernels/spring.hpp"
 #include "loom/mesh.hpp"
 #include "loom/params.hpp"
@@ -92,6 +101,9 @@ struct Cloth {
   // float copies
   HoSprings<float> fs;
   std::vector<float> fx, fv, fw, fdv, fx0;
+  // the fused spring path (symplectic Euler, RK4)
+  SpringSweep<double> sweep;
+  SpringSweep<float> fsweep;
   Index springs() const { return ho.springs().size(); }
 };
 
@@ -127,6 +139,8 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   c->fdv.assign(sc.state.x.size(), 0.f);
   c->fw.assign(sc.state.inv_mass.begin(), sc.state.inv_mass.end());
   update_ho_coefficients(c->fs, HoVariant::Velocity, c->fw.data(), static_cast<float>(c->h));
+  c->sweep.build(sc.state.size(), *sc.material->springs());
+  c->fsweep.convert_from(c->sweep);
   return *c;
 }
 
@@ -142,6 +156,17 @@ double rk4_bytes(double T, double N, double S) {
   // 4 force passes (springs: i, j, k, l0; x, v read, f written) + 4 stage passes over x0, v0,
   // xs, vs, f, accumulators
   return 4 * ((8 + 2 * T) * S + N * 9 * T) + 4 * N * 3 * T * 7;
+}
+
+double se_bytes(double T, double N, double S) {
+  // springs: i, j (4 + 4), k, l0; vertices: x, v read and written, inverse mass, the force
+  // accumulator read and written
+  return (8 + 2 * T) * S + N * (12 * T + T + 6 * T);
+}
+double rk4_fused_bytes(double T, double N, double S) {
+  // 4 passes; each: springs (i, j, k, l0) and per vertex x0, v0 read, xs, vs and the two
+  // accumulators read and written, f read and written, inverse mass
+  return 4 * ((8 + 2 * T) * S + N * (6 * T + 12 * T + 12 * T + 6 * T + T));
 }
 
 void set_counters(benchmark::State& st, const Row& r, int threads, double bytes) {
@@ -222,10 +247,11 @@ void BM_Rk4Step_double(benchmark::State& st) {
   std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
   Rk4Integrator rk;
   rk.prepare(c.scene, c.h);
-  for (auto _ : st) rk.step(c.scene, c.h);
-  set_counters(st, r, threads, rk4_bytes(8, c.scene.state.size(), c.springs()));
+  for (auto _ : st) rk.step(c.scene, c.h);   // the plugin: the fused spring path
+  set_counters(st, r, threads, rk4_fused_bytes(8, c.scene.state.size(), c.springs()));
 }
 
+// RK4 in float through rk4_step_arrays (a force pass, then a stage loop: two regions per stage).
 void BM_Rk4Step_float(benchmark::State& st) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
@@ -259,6 +285,123 @@ void BM_Rk4Step_float(benchmark::State& st) {
   set_counters(st, r, threads, rk4_bytes(4, n, c.springs()));
 }
 
+template <class T>
+void se_bench(benchmark::State& st, bool is_float) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  const std::size_t m = c.scene.state.x.size();
+  std::vector<T> x(c.x0.begin(), c.x0.end()), v(m, T(0)), f(m, T(0));
+  std::vector<T> w(c.scene.state.inv_mass.begin(), c.scene.state.inv_mass.end());
+  const T g[3] = {T(0), T(-9.81), T(0)};
+  const SpringSweep<T>* sw = nullptr;
+  if constexpr (std::is_same_v<T, float>) sw = &c.fsweep; else sw = &c.sweep;
+  for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
+  benchmark::DoNotOptimize(x.data());
+  set_counters(st, r, threads, se_bytes(is_float ? 4 : 8, c.scene.state.size(), c.springs()));
+}
+void BM_SeStep_double(benchmark::State& st) { se_bench<double>(st, false); }
+void BM_SeStep_float(benchmark::State& st) { se_bench<float>(st, true); }
+
+template <class T>
+void rk4_fused_bench(benchmark::State& st, bool is_float) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  const std::size_t m = c.scene.state.x.size();
+  std::vector<T> x(c.x0.begin(), c.x0.end()), v(m, T(0)), f(m, T(0)), xs(m), vs(m), ax(m), av(m);
+  std::vector<T> w(c.scene.state.inv_mass.begin(), c.scene.state.inv_mass.end());
+  const std::array<T, 3> g{T(0), T(-9.81), T(0)};
+  const SpringSweep<T>* sw = nullptr;
+  if constexpr (std::is_same_v<T, float>) sw = &c.fsweep; else sw = &c.sweep;
+  for (auto _ : st)
+    rk4_step_springs<T>(*sw, x.data(), v.data(), w.data(), g, static_cast<T>(c.h), xs.data(), vs.data(), f.data(),
+                        ax.data(), av.data(), [](int) {});
+  benchmark::DoNotOptimize(x.data());
+  set_counters(st, r, threads, rk4_fused_bytes(is_float ? 4 : 8, c.scene.state.size(), c.springs()));
+}
+void BM_Rk4Fused_double(benchmark::State& st) { rk4_fused_bench<double>(st, false); }
+void BM_Rk4Fused_float(benchmark::State& st) { rk4_fused_bench<float>(st, true); }
+
+// The Table 1 cloth with its vertices numbered in a random order (fixed seed): HO with the
+// mesh's order (reorder: none) and with the RCM order (reorder: rcm, which also copies x and v
+// into the internal order and back every step; counted in the bytes).
+struct Shuffled {
+  int n = 0;
+  Scene scene;
+  std::vector<double> x0;
+};
+Shuffled& shuffled(int n) {
+  static std::unique_ptr<Shuffled> c;
+  if (c && c->n == n) return *c;
+  c.reset();
+  c = std::make_unique<Shuffled>();
+  c->n = n;
+  Cloth& base = cloth(n);
+  const Index N = base.scene.state.size();
+  std::vector<Index> pi(static_cast<std::size_t>(N));   // grid vertex g -> user vertex pi[g]
+  std::iota(pi.begin(), pi.end(), 0);
+  std::shuffle(pi.begin(), pi.end(), std::mt19937(12345));
+  Scene& sc = c->scene;
+  sc.source = "table1 shuffled";
+  SpringSet set = *base.scene.material->springs();
+  for (Index& a : set.i) a = pi[a];
+  for (Index& b : set.j) b = pi[b];
+  std::vector<double> mass(static_cast<std::size_t>(N));
+  for (Index q = 0; q < N; ++q) mass[pi[q]] = base.scene.state.mass[q];
+  struct SetMaterial final : Material {
+    SpringSet s;
+    std::vector<double> m;
+    std::string name() const override { return "springs"; }
+    void compute_masses(std::span<double> out) const override { std::copy(m.begin(), m.end(), out.begin()); }
+    void compute_forces(std::span<const double>, std::span<const double>, std::span<double>) const override {
+      throw std::logic_error("not used");
+    }
+    double elastic_energy(std::span<const double>) const override { return 0; }
+    double max_strain(std::span<const double>) const override { return 0; }
+    const SpringSet* springs() const override { return &s; }
+  };
+  auto mat = std::make_unique<SetMaterial>();
+  mat->s = std::move(set);
+  mat->m = mass;
+  sc.material = std::move(mat);
+  sc.state.resize(N);
+  for (Index q = 0; q < N; ++q)
+    for (int e = 0; e < 3; ++e) sc.state.x[3 * pi[q] + e] = base.x0[3 * q + e];
+  sc.state.mass = mass;
+  for (Index q = 0; q < N; ++q)
+    if (base.scene.state.pinned[q]) sc.state.pin(pi[q]);
+  sc.state.update_inverse_masses();
+  sc.gravity = {0, -9.81, 0};
+  c->x0 = sc.state.x;
+  return *c;
+}
+
+void ho_shuffled(benchmark::State& st, HoReorder mode) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Shuffled& c = shuffled(r.n);
+  omp_set_num_threads(threads);
+  c.scene.state.x = c.x0;
+  std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  HoIntegrator ho(HoVariant::Velocity, true, true, mode);
+  const double h = 1e-6;
+  ho.prepare(c.scene, h);
+  for (auto _ : st) ho.step(c.scene, h);
+  const double N = c.scene.state.size();
+  // reorder: 2 x (read 48 + write 48) bytes per vertex for the copies in and out
+  set_counters(st, r, threads, ho_bytes(8, N, ho.springs().size(), ho.springs().table) + (ho.reordered() ? 192 * N : 0));
+  st.counters["reordered"] = ho.reordered() ? 1 : 0;
+  st.counters["span"] = mean_spring_span(ho.springs().i, ho.springs().j);
+}
+void BM_HoStep_shuffled_none(benchmark::State& st) { ho_shuffled(st, HoReorder::None); }
+void BM_HoStep_shuffled_rcm(benchmark::State& st) { ho_shuffled(st, HoReorder::Rcm); }
+
 // The machine's memory bandwidth: STREAM-like triad, 3 x 128 MB, 24 bytes per element.
 void BM_Triad(benchmark::State& st) {
   const int threads = static_cast<int>(st.range(0));
@@ -288,5 +431,11 @@ BENCHMARK(BM_HoStep_double_direct)->Apply(rows_args);
 BENCHMARK(BM_HoStep_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_float)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double)->Apply(rows_args);
+BENCHMARK(BM_SeStep_float)->Apply(rows_args);
+BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
+BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
+BENCHMARK(BM_HoStep_shuffled_none)->Apply(rows_args);
+BENCHMARK(BM_HoStep_shuffled_rcm)->Apply(rows_args);
 
 BENCHMARK_MAIN();
