@@ -617,6 +617,14 @@ TEST(VertexOrder, RcmIsAPermutationThatShrinksTheSpan) {
   for (int k = 0; k < 10; ++k) EXPECT_EQ(b[3 * k + 1], a[3 * p.perm[k] + 1]);
   scatter_vertices<3>(p, b.data(), c.data());
   EXPECT_EQ(a, c);
+  std::vector<double> d(30), e2(30), f2(30), g2(30);
+  for (int q = 0; q < 30; ++q) d[q] = -q * 0.5;
+  gather_state(p, a.data(), d.data(), e2.data(), f2.data());
+  EXPECT_EQ(e2, b);
+  for (int k = 0; k < 10; ++k) EXPECT_EQ(f2[3 * k + 2], d[3 * p.perm[k] + 2]);
+  scatter_state(p, e2.data(), f2.data(), c.data(), g2.data());
+  EXPECT_EQ(c, a);
+  EXPECT_EQ(g2, d);
 }
 
 // A run in the RCM order equals the run in the user's order to rounding, and is reported in

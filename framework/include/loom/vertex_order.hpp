@@ -13,6 +13,7 @@
 //   VertexOrder o = rcm_order(n, i, j);       // o.perm[k]: user vertex of internal vertex k
 //   gather_vertices<3>(o, x_user, x_int);     // x_int[3k + e] = x_user[3 perm[k] + e]
 //   scatter_vertices<3>(o, x_int, x_user);    // the inverse
+//   gather_state(o, x, v, xi, vi); scatter_state(o, xi, vi, x, v);   // both arrays, one pass
 //   mean_spring_span(n, i, j, &o)             // mean |i' - j'| under the order (locality)
 #pragma once
 
@@ -180,6 +181,38 @@ void scatter_vertices(const VertexOrder& o, const U* in, T* out) {
     for (Index k = v0; k < v1; ++k) {
       const std::size_t a = static_cast<std::size_t>(D) * static_cast<std::size_t>(P[k]);
       for (int e = 0; e < D; ++e) out[a + e] = static_cast<T>(in[static_cast<std::size_t>(D) * k + e]);
+    }
+  });
+}
+
+/// Positions and velocities (3 per vertex) user -> internal, in one pass (one parallel region).
+template <class T, class U>
+void gather_state(const VertexOrder& o, const U* x, const U* v, T* xo, T* vo) {
+  const Index n = static_cast<Index>(o.perm.size());
+  const Index* P = o.perm.data();
+  for_vertex_ranges(n, [=](Index v0, Index v1) {
+    for (Index k = v0; k < v1; ++k) {
+      const std::size_t a = 3 * static_cast<std::size_t>(P[k]), b = 3 * static_cast<std::size_t>(k);
+      for (int e = 0; e < 3; ++e) {
+        xo[b + e] = static_cast<T>(x[a + e]);
+        vo[b + e] = static_cast<T>(v[a + e]);
+      }
+    }
+  });
+}
+
+/// Positions and velocities internal -> user, in one pass.
+template <class T, class U>
+void scatter_state(const VertexOrder& o, const U* x, const U* v, T* xo, T* vo) {
+  const Index n = static_cast<Index>(o.perm.size());
+  const Index* P = o.perm.data();
+  for_vertex_ranges(n, [=](Index v0, Index v1) {
+    for (Index k = v0; k < v1; ++k) {
+      const std::size_t a = 3 * static_cast<std::size_t>(P[k]), b = 3 * static_cast<std::size_t>(k);
+      for (int e = 0; e < 3; ++e) {
+        xo[a + e] = static_cast<T>(x[b + e]);
+        vo[a + e] = static_cast<T>(v[b + e]);
+      }
     }
   });
 }

@@ -225,8 +225,7 @@ void HoIntegrator::step(Scene& scene, double h) {
   const double* w = s.inv_mass.data();
   const bool reordered = !order_.identity();
   if (reordered) {   // the step runs on copies in the internal order
-    gather_vertices<3>(order_, x, xp_.data());
-    gather_vertices<3>(order_, v, vp_.data());
+    gather_state(order_, x, v, xp_.data(), vp_.data());
     x = xp_.data();
     v = vp_.data();
     w = wp_.data();
@@ -243,8 +242,7 @@ void HoIntegrator::step(Scene& scene, double h) {
       break;
   }
   if (reordered) {
-    scatter_vertices<3>(order_, xp_.data(), s.x.data());
-    scatter_vertices<3>(order_, vp_.data(), s.v.data());
+    scatter_state(order_, xp_.data(), vp_.data(), s.x.data(), s.v.data());
   }
   // Moving pins (w = 0: the springs treat them as infinite masses at their prescribed
   // velocity): exactly the prescribed positions and velocities at the end of the step.
