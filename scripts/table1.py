@@ -24,7 +24,7 @@ def run_bench(json_path):
         sys.exit("build/bin/table1 not found: build first (scripts/setup.sh)")
     env = dict(os.environ, OMP_PROC_BIND="close", OMP_PLACES="cores")
     subprocess.run([exe, "--benchmark_repetitions=3", "--benchmark_report_aggregates_only=true",
-                    "--benchmark_min_time=0.3", "--benchmark_filter=HoStep|Rk4Step|Triad",
+                    "--benchmark_min_time=0.3", "--benchmark_filter=Triad|HoStep_double/|HoStep_float|SeStep|Rk4Fused|HoStep_shuffled",
                     "--benchmark_out_format=json", f"--benchmark_out={json_path}"], check=True, env=env)
 
 
@@ -54,22 +54,28 @@ def main():
     ctx, rows = load(a.json)
     lines = ["| vertices | springs: paper / kang_cho_table1 / radius_sqrt5 | paper fps (GTX 590) | "
              "HO double 1 thr fps (x paper) | HO double 2 thr fps (x paper) | HO float 2 thr fps (x paper) | "
-             "RK4 double 2 thr fps | HO double 2 thr GB/s (bw frac) |",
-             "|---|---|---|---|---|---|---|---|"]
+             "RK4 double 2 thr fps | HO double 2 thr GB/s (bw frac) | SE double 2 thr ms (bw frac) | "
+             "SE float 2 thr ms | RK4 fused double 2 thr ms (bw frac) | HO shuffled 2 thr ms: none / rcm |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     pts = []
+    ms = lambda b: f"{1e3 / b['fps']:.3g}" if b else "-"
+    msbw = lambda b: f"{1e3 / b['fps']:.3g} ({b['bw_frac']:.2f})" if b else "-"
     for r in sorted(rows):
         d = rows[r]
         ho1, ho2 = d.get(("HoStep_double", 1)), d.get(("HoStep_double", 2))
         f2, s5 = d.get(("HoStep_float", 2)), d.get(("HoStep_double_sqrt5", 1))
-        rk2 = d.get(("Rk4Step_double", 2))
+        rk2 = d.get(("Rk4Step_double", 2)) or d.get(("Rk4Fused_double", 2))
+        se2, sef2, rkf2 = d.get(("SeStep_double", 2)), d.get(("SeStep_float", 2)), d.get(("Rk4Fused_double", 2))
+        shn, shr = d.get(("HoStep_shuffled_none", 2)), d.get(("HoStep_shuffled_rcm", 2))
         if not ho1:
             continue
         paper = ho1["paper_fps"]
         fmt = lambda b: f"{b['fps']:.0f} ({b['fps'] / paper:.1f}x)" if b else "-"
-        springs = f"{ho1['paper_springs']:.0f} / {ho1['springs']:.0f} / " + (f"{s5['springs']:.0f}" if s5 else "-")
+        springs = f"{ho1['paper_springs']:.0f} / {ho1.get('springs', 0):.0f} / " + (f"{s5['springs']:.0f}" if s5 else "-")
         rk = f"{rk2['fps']:.0f}" if rk2 else "-"
         bw = f"{ho2['GB/s']:.1f} ({ho2['bw_frac']:.2f})" if ho2 else "-"
-        lines.append(f"| {ho1['vertices']:.0f} | {springs} | {paper} | {fmt(ho1)} | {fmt(ho2)} | {fmt(f2)} | {rk} | {bw} |")
+        lines.append(f"| {ho1['vertices']:.0f} | {springs} | {paper} | {fmt(ho1)} | {fmt(ho2)} | {fmt(f2)} | {rk} | {bw} | "
+                     f"{msbw(se2)} | {ms(sef2)} | {msbw(rkf2)} | {ms(shn)} / {ms(shr)} |")
         pts.append((ho1["vertices"], ho1["paper_springs"], paper, ho1["fps"], ho2["fps"] if ho2 else None,
                     f2["fps"] if f2 else None))
     table = "\n".join(lines)
