@@ -286,7 +286,7 @@ void BM_Rk4Step_float(benchmark::State& st) {
 }
 
 template <class T>
-void se_bench(benchmark::State& st, bool is_float) {
+void se_bench(benchmark::State& st, bool is_float, bool blocked = false) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -296,14 +296,19 @@ void se_bench(benchmark::State& st, bool is_float) {
   std::vector<T> x(c.x0.begin(), c.x0.end()), v(m, T(0)), f(m, T(0));
   std::vector<T> w(c.scene.state.inv_mass.begin(), c.scene.state.inv_mass.end());
   const T g[3] = {T(0), T(-9.81), T(0)};
-  const SpringSweep<T>* sw = nullptr;
+  SpringSweep<T>* sw = nullptr;
   if constexpr (std::is_same_v<T, float>) sw = &c.fsweep; else sw = &c.sweep;
+  sw->blocked = blocked;
   for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
+  sw->blocked = false;
   benchmark::DoNotOptimize(x.data());
   set_counters(st, r, threads, se_bytes(is_float ? 4 : 8, c.scene.state.size(), c.springs()));
 }
 void BM_SeStep_double(benchmark::State& st) { se_bench<double>(st, false); }
 void BM_SeStep_float(benchmark::State& st) { se_bench<float>(st, true); }
+// The blocked sweep (forces of 128 springs by one `omp simd` loop, then scattered).
+void BM_SeStep_double_blocked(benchmark::State& st) { se_bench<double>(st, false, true); }
+void BM_SeStep_float_blocked(benchmark::State& st) { se_bench<float>(st, true, true); }
 
 template <class T>
 void rk4_fused_bench(benchmark::State& st, bool is_float) {
@@ -433,6 +438,8 @@ BENCHMARK(BM_Rk4Step_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_float)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double)->Apply(rows_args);
 BENCHMARK(BM_SeStep_float)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_blocked)->Apply(rows_args);
+BENCHMARK(BM_SeStep_float_blocked)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
 BENCHMARK(BM_HoStep_shuffled_none)->Apply(rows_args);

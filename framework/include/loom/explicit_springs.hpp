@@ -17,7 +17,10 @@
 // deterministic for a fixed layout (any thread count gives the same bits).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "loom/common.hpp"
@@ -36,6 +39,12 @@ struct SpringSweep {
   std::vector<std::uint8_t> is_deferred;   ///< per vertex: touched by a cross spring
   std::vector<Index> deferred;
   Index n = 0;
+  /// Blocked sweep: the forces of kSweepBlock springs computed by one vectorised loop (`omp
+  /// simd`: gathers of x, v; one sqrt and one division per lane) into a buffer, then scattered.
+  /// false (default): one spring at a time, which measured faster on the earlier benchmark
+  /// machine (docs/plugins/mass_spring.md); bench table1 times both (SeStep_*_blocked).
+  bool blocked = false;
+  static constexpr Index kSweepBlock = 128;
 
   Index size() const { return static_cast<Index>(i.size()); }
   bool damped() const { return !c.empty(); }
@@ -82,6 +91,7 @@ struct SpringSweep {
     is_deferred = o.is_deferred;
     deferred = o.deferred;
     n = o.n;
+    blocked = o.blocked;
   }
 
   /// Spring forces at (x, v) accumulated into f, with fin(q, f + 3q) per completed vertex
@@ -89,13 +99,40 @@ struct SpringSweep {
   template <class Fin>
   void forces(const T* x, const T* v, T* f, Fin&& fin) const {
     if (damped())
-      run<true>(x, v, f, fin);
+      blocked ? run<true, true>(x, v, f, fin) : run<true, false>(x, v, f, fin);
     else
-      run<false>(x, v, f, fin);
+      blocked ? run<false, true>(x, v, f, fin) : run<false, false>(x, v, f, fin);
   }
 
  private:
-  template <bool Damped, class Fin>
+  /// Forces on the lower endpoints of springs [s, s + m) into F (3 per spring), vectorised.
+  template <bool Damped>
+  static void block_forces(Index m, const Index* __restrict I, const Index* __restrict J, const T* __restrict K,
+                           const T* __restrict L0, const T* __restrict C, const T* __restrict x,
+                           const T* __restrict v, T* __restrict F) {
+#pragma omp simd
+    for (Index r = 0; r < m; ++r) {
+      const std::size_t a = 3 * static_cast<std::size_t>(I[r]), b = 3 * static_cast<std::size_t>(J[r]);
+      const T d0 = x[b] - x[a], d1 = x[b + 1] - x[a + 1], d2 = x[b + 2] - x[a + 2];
+      const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+      // kernels::spring_inv_length without a comparison (under the default -ftrapping-math a
+      // compare blocks the vectoriser): adding the smallest normal number changes l2 only below
+      // 2^52 (double) / 2^23 (float) times it, and a zero-length spring still gets zero force
+      // (d = 0 times a finite scale)
+      using std::sqrt;
+      const T il = T(1) / sqrt(l2 + std::numeric_limits<T>::min());
+      T sc = K[r] * (T(1) - L0[r] * il);
+      if constexpr (Damped) {
+        const T du = d0 * (v[b] - v[a]) + d1 * (v[b + 1] - v[a + 1]) + d2 * (v[b + 2] - v[a + 2]);
+        sc += C[r] * du * il * il;
+      }
+      F[3 * r] = sc * d0;
+      F[3 * r + 1] = sc * d1;
+      F[3 * r + 2] = sc * d2;
+    }
+  }
+
+  template <bool Damped, bool Blocked, class Fin>
   void run(const T* x, const T* v, T* f, Fin& fin) const {
     const Index* I = i.data();
     const Index* J = j.data();
@@ -115,7 +152,41 @@ struct SpringSweep {
       else
         kernels::spring_force(x + a, x + b, K[q], L0[q], fi);
     };
+    auto sweep_blocked = [&](int p) {
+      const Index ve = layout.part_vertex_end(p);
+      const Index se = layout.part_spring_end(p);
+      Index q = layout.part_vertex_begin(p);
+      Index s = layout.part_spring_begin(p);
+      alignas(64) T F[3 * kSweepBlock];
+      while (s < se) {
+        const Index m = std::min<Index>(kSweepBlock, se - s);
+        block_forces<Damped>(m, I + s, J + s, K + s, L0 + s, Damped ? C + s : nullptr, x, v, F);
+        for (Index r = 0; r < m;) {
+          const Index a = I[s + r];
+          for (; q < a; ++q)
+            if (!def[q]) finish(q);
+          T fa[3] = {T(0), T(0), T(0)};
+          do {
+            T* fb = f + 3 * static_cast<std::size_t>(J[s + r]);
+            for (int e = 0; e < 3; ++e) {
+              fa[e] += F[3 * r + e];
+              fb[e] -= F[3 * r + e];
+            }
+            ++r;
+          } while (r < m && I[s + r] == a);
+          T* fp = f + 3 * static_cast<std::size_t>(a);
+          for (int e = 0; e < 3; ++e) fp[e] += fa[e];
+        }
+        s += m;
+      }
+      for (; q < ve; ++q)
+        if (!def[q]) finish(q);
+    };
     auto sweep = [&](int p) {
+      if constexpr (Blocked) {
+        sweep_blocked(p);
+        return;
+      }
       const Index ve = layout.part_vertex_end(p);
       const Index se = layout.part_spring_end(p);
       Index q = layout.part_vertex_begin(p);

@@ -20,6 +20,7 @@
 #pragma once
 
 #include <cmath>
+#include <limits>
 
 #include "loom/common.hpp"
 
@@ -187,18 +188,23 @@ LOOM_HD inline KangChoCoeffs<T> kang_cho_coefficients(T k, T wi, T wj, T h) {
 // The per-spring functions below read the endpoints as x[a + e], x[b + e] (a = 3 i, b = 3 j):
 // a base pointer plus an index lets a compiler turn a loop over springs into vector gathers.
 
-/// Geometry of one spring: unit axis n (zero for a degenerate spring), delta, delta_dot.
+/// Geometry of one spring: unit axis n (zero for a degenerate spring; its delta is then -l0, and
+/// every impulse, a multiple of n, is zero), delta, delta_dot.
 template <class T, class I>
 LOOM_HD inline void ho_spring_axis(const T* x, const T* v, I a, I b, T l0, T n[3], T& delta, T& delta_dot) {
   using std::sqrt;
   const T d0 = x[b] - x[a], d1 = x[b + 1] - x[a + 1], d2 = x[b + 2] - x[a + 2];
   const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
   const T l = sqrt(l2);
-  const T inv = l > T(0) ? T(1) / l : T(0);
+  // No comparison (a compare under -ftrapping-math, GCC's default, keeps loops over springs from
+  // vectorising): adding the smallest normal number changes l2 only when l2 is below about 2^53
+  // (double) or 2^24 (float) times it. A degenerate spring (d = 0) gets n = 0 (d times a finite
+  // 1/sqrt), so its impulse s n is 0 whatever delta is.
+  const T inv = T(1) / sqrt(l2 + std::numeric_limits<T>::min());
   n[0] = d0 * inv;
   n[1] = d1 * inv;
   n[2] = d2 * inv;
-  delta = l > T(0) ? l - l0 : T(0);
+  delta = l - l0;
   delta_dot = n[0] * (v[b] - v[a]) + n[1] * (v[b + 1] - v[a + 1]) + n[2] * (v[b + 2] - v[a + 2]);
 }
 
