@@ -240,7 +240,9 @@ TEST_P(CudaRk4Run, MatchesTheCpuBackend) {
   EXPECT_EQ(di->last_step().force_evaluations, 4);
   EXPECT_GT(rel_diff(cpu->state.x, cpu->mesh.positions), 1e-4);
   EXPECT_LE(rel_diff(dev->state.x, cpu->state.x), 1e-12);
-  EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), 1e-12);
+  // velocities of the damped springs: 1.1e-12 since the CPU's RK4 takes the fused spring path
+  // (loom/explicit_springs.hpp: a vertex's run of springs summed in registers, another order)
+  EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), 1e-11);
 }
 INSTANTIATE_TEST_SUITE_P(Materials, CudaRk4Run, ::testing::Values(Mat::Springs, Mat::DampedSprings, Mat::Gnatv));
 
