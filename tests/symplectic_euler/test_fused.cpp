@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
+#include <random>
 #include <vector>
 
 #include "loom/explicit_springs.hpp"
@@ -131,4 +133,84 @@ TEST(SymplecticEulerFused, BlockedSweepMatchesPlainSweep) {
     blocked_matches_plain<double>(damped, 1e-9);
     blocked_matches_plain<float>(damped, 1e-3);
   }
+}
+
+// reorder: the fused step in the RCM order equals the step in the mesh's order to rounding,
+// reported in the mesh's numbering (positions, velocities; the fixed pin bit for bit); auto
+// reorders a large mesh numbered at random and leaves a row-by-row grid alone.
+namespace {
+struct Shuffled {
+  std::vector<double> x, v, m;
+  SpringSet s;
+  std::vector<Index> pins;
+  Shuffled(int nx, bool shuffle) {
+    const int n = nx * nx;
+    std::vector<Index> pi(n);
+    std::iota(pi.begin(), pi.end(), 0);
+    if (shuffle) std::shuffle(pi.begin(), pi.end(), std::mt19937(17));
+    x.resize(3 * n);
+    v.resize(3 * n);
+    m.resize(n);
+    for (int r = 0; r < nx; ++r)
+      for (int c = 0; c < nx; ++c) {
+        const Index u = pi[r * nx + c];
+        x[3 * u] = 0.02 * c;
+        x[3 * u + 1] = 0.001 * std::sin(0.7 * c + r);
+        x[3 * u + 2] = 0.02 * r;
+        v[3 * u] = 0.01 * std::sin(r + 2.0 * c);
+        v[3 * u + 1] = 0.02 * std::cos(3.0 * r - c);
+        m[u] = 1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5));
+      }
+    for (int r = 0; r < nx; ++r)
+      for (int c = 0; c < nx; ++c) {
+        const int a = r * nx + c;
+        if (c + 1 < nx) s.add(pi[a], pi[a + 1], 0.02, 2000, 0.02, SpringClass::Structural);
+        if (r + 1 < nx) s.add(pi[a + nx], pi[a], 0.02, 2000, 0.0, SpringClass::Structural);
+        if (c + 1 < nx && r + 1 < nx) s.add(pi[a], pi[a + nx + 1], 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+        if (c + 2 < nx) s.add(pi[a], pi[a + 2], 0.04, 50, 0.0, SpringClass::Bend);
+      }
+    pins = {pi[nx * (nx - 1)], pi[nx * nx - 1]};
+  }
+};
+}  // namespace
+
+TEST(SymplecticEulerReorder, ReorderedRunEqualsUserOrderRun) {
+  const Shuffled g(40, true);
+  std::vector<double> res[2];
+  for (int ro : {0, 1}) {
+    auto scene = make_scene(g.x, g.v, g.m, g.pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(g.s, g.m));
+    symplectic_euler::SymplecticEuler se{Params::from_string(ro ? "reorder: rcm\n" : "reorder: none\n")};
+    se.prepare(*scene, 1e-4);
+    EXPECT_TRUE(se.fused());
+    EXPECT_EQ(se.reordered(), ro == 1);
+    for (int st = 0; st < 60; ++st) se.step(*scene, 1e-4);
+    for (int e = 0; e < 3; ++e) EXPECT_EQ(scene->state.x[3 * g.pins[0] + e], g.x[3 * g.pins[0] + e]);
+    res[ro] = scene->state.x;
+    res[ro].insert(res[ro].end(), scene->state.v.begin(), scene->state.v.end());
+  }
+  const std::size_t m3 = g.x.size();
+  double sx = 0, sv = 0, moved = 0;
+  for (std::size_t q = 0; q < m3; ++q) {
+    sx = std::max(sx, std::abs(res[0][q]));
+    sv = std::max(sv, std::abs(res[0][m3 + q]));
+    moved = std::max(moved, std::abs(res[0][q] - g.x[q]));
+  }
+  EXPECT_GT(moved, 1e-6);
+  for (std::size_t q = 0; q < m3; ++q) {
+    ASSERT_NEAR(res[1][q], res[0][q], 1e-13 * sx) << "x " << q;
+    ASSERT_NEAR(res[1][m3 + q], res[0][m3 + q], 1e-11 * sv) << "v " << q;
+  }
+}
+
+TEST(SymplecticEulerReorder, AutoRuleAndParameter) {
+  for (bool shuffle : {true, false}) {
+    const Shuffled g(130, shuffle);   // 16900 vertices >= kReorderMinVertices
+    auto scene = make_scene(g.x, g.v, g.m, g.pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(g.s, g.m));
+    symplectic_euler::SymplecticEuler se{Params()};
+    se.prepare(*scene, 1e-4);
+    EXPECT_EQ(se.reordered(), shuffle);
+  }
+  EXPECT_EQ(symplectic_euler::SymplecticEuler(Params::from_string("reorder: rcm\n")).reorder_mode(), ReorderMode::Rcm);
+  EXPECT_EQ(symplectic_euler::SymplecticEuler(Params()).reorder_mode(), ReorderMode::Auto);
+  EXPECT_THROW(symplectic_euler::SymplecticEuler(Params::from_string("reorder: metis\n")), InputError);
 }

@@ -54,7 +54,7 @@ HoIntegrator::HoIntegrator(const Params& p) {
     const ParamReader r(p, harmonic_oscillation_spec());
     allow_table_ = r.text("storage") == "auto";
     const std::string ro = r.text("reorder");
-    reorder_ = ro == "none" ? HoReorder::None : ro == "rcm" ? HoReorder::Rcm : HoReorder::Auto;
+    reorder_ = parse_reorder_mode(ro);
   }
 }
 
@@ -181,13 +181,7 @@ void HoIntegrator::prepare(Scene& scene, double h) {
   const Index n = scene.state.size();
   if (set != source_ || layout_.num_vertices() != n || layout_.num_springs() != set->size()) {
     // Vertex order: computed once per spring set (docs/plugins/integrators.md, `reorder`).
-    order_ = VertexOrder{};
-    if (reorder_ != HoReorder::None && n > 0) {
-      VertexOrder rcm = rcm_order(n, set->i, set->j);
-      if (reorder_ == HoReorder::Rcm ||
-          ho_reorder_pays(n, mean_spring_span(set->i, set->j), mean_spring_span(set->i, set->j, &rcm)))
-        order_ = std::move(rcm);
-    }
+    order_ = choose_vertex_order(reorder_, n, set->i, set->j);
     if (order_.identity()) {
       build_ho_springs(n, *set, layout_, springs_, allow_grouping_);
     } else {

@@ -107,18 +107,10 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
   out.table = false;
 }
 
-/// Vertex order of the step (key `reorder`): auto uses a reverse Cuthill-McKee order when it
-/// pays (ho_reorder_pays), none keeps the user's numbering, rcm always reorders.
-enum class HoReorder { Auto, None, Rcm };
-/// reorder: auto applies the RCM order only to meshes of at least this many vertices (below it
-/// the positions and velocities, 48 bytes a vertex, stay in a core's L2 cache whatever the order)
-constexpr Index kHoReorderMinVertices = 16384;
-/// ... and only when it shrinks the mean spring span |i - j| by at least this factor.
-constexpr double kHoReorderMinGain = 4.0;
-/// The auto rule: n vertices, mean span in the user order and in the RCM order.
-inline bool ho_reorder_pays(Index n, double span_user, double span_rcm) {
-  return n >= kHoReorderMinVertices && span_user >= kHoReorderMinGain * span_rcm;
-}
+/// Vertex order of the step (key `reorder`; the rule is loom/vertex_order.hpp's).
+using HoReorder = ReorderMode;
+constexpr Index kHoReorderMinVertices = kReorderMinVertices;
+inline bool ho_reorder_pays(Index n, double span_user, double span_rcm) { return reorder_pays(n, span_user, span_rcm); }
 
 /// Below this many springs a step runs on the calling thread.
 constexpr Index kHoSerialSprings = kParallelMinSprings;  // the rule in common.hpp

@@ -11,10 +11,11 @@
 #include "loom/integrator.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
+#include "loom/vertex_order.hpp"
 
 namespace loom::symplectic_euler {
 
-/// symplectic_euler has no keys of its own (dt, substeps: the framework's).
+/// The keys of symplectic_euler: reorder (dt, substeps: the framework's).
 const ParamSpec& spec();
 
 class SymplecticEuler final : public Integrator {
@@ -26,12 +27,18 @@ class SymplecticEuler final : public Integrator {
   StepStats last_step() const override { return stats_; }
   /// Whether the step runs the fused spring path.
   bool fused() const { return sweep_source_ != nullptr; }
+  /// Whether the fused path runs in an internal vertex order (key `reorder`).
+  bool reordered() const { return !order_.identity(); }
+  ReorderMode reorder_mode() const { return reorder_; }
 
  private:
   void generic_step(Scene& scene, double h);
   std::vector<double> f_;
   SpringSweep<double> sweep_;
   const SpringSet* sweep_source_ = nullptr;
+  ReorderMode reorder_ = ReorderMode::Auto;
+  VertexOrder order_;                   ///< internal vertex k is user vertex order_.perm[k]
+  std::vector<double> xp_, vp_, wp_;    ///< state in the internal order (reordered runs only)
   StepStats stats_;
 };
 
