@@ -6,6 +6,7 @@
 #endif
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <type_traits>
@@ -145,6 +146,15 @@ bool spd_inverse(const double* A, double* Ainv) {
   return true;
 }
 
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+// Adds the scope's duration to `total` (every return path of setup()).
+struct ScopeTimer {
+  double& total;
+  Clock::time_point t0 = Clock::now();
+  ~ScopeTimer() { total += since(t0); }
+};
+
 double frob(const double* b, std::size_t n) {
   double s = 0;
   for (std::size_t k = 0; k < n; ++k) s += b[k] * b[k];
@@ -220,6 +230,34 @@ void SaAmg::aggregate(std::size_t l) {
       }
     }
     sp[i + 1] = static_cast<Index>(sc.size());
+  }
+  if (static_cast<int>(l) < o_.aggressive_levels) {
+    // Distance-2 graph: j is a neighbour of i when a strong path i - k - j exists; its weight
+    // is the strongest such path (the product of the two weights), a direct edge counts too.
+    std::vector<Index> sp2(n + 1, 0), sc2;
+    std::vector<double> sw2;
+    std::vector<Index> pos(n, -1);
+    for (Index i = 0; i < n; ++i) {
+      const std::size_t start = sc2.size();
+      auto add = [&](Index j, double w) {
+        if (j == i) return;
+        if (pos[j] < static_cast<Index>(start) || pos[j] >= static_cast<Index>(sc2.size()) || sc2[pos[j]] != j) {
+          pos[j] = static_cast<Index>(sc2.size());
+          sc2.push_back(j);
+          sw2.push_back(w);
+        } else {
+          sw2[pos[j]] = std::max(sw2[pos[j]], w);
+        }
+      };
+      for (Index k = sp[i]; k < sp[i + 1]; ++k) {
+        add(sc[k], sw[k]);
+        for (Index q = sp[sc[k]]; q < sp[sc[k] + 1]; ++q) add(sc[q], sw[k] * sw[q]);
+      }
+      sp2[i + 1] = static_cast<Index>(sc2.size());
+    }
+    sp = std::move(sp2);
+    sc = std::move(sc2);
+    sw = std::move(sw2);
   }
   std::vector<Index> agg(n, -1);
   Index na = 0;
@@ -684,6 +722,8 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   const bool rebuild = !built_ || pattern_ != &A.pattern() || pattern_nnz_ != A.pattern().nnz_blocks() ||
                        L_.empty() || L_[0].A.rows != A.rows() || coords != had_coordinates_;
   ++refreshes_;
+  ++t_.setups;
+  const ScopeTimer timer{t_.setup};
   if (rebuild) {
     built_ = false;
     pattern_ = &A.pattern();
@@ -754,11 +794,15 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
       break;
     }
     if (new_p) {
+      const auto tp = Clock::now();
       if (l == 0) near_null_level0(S, x);
       tentative(l);
       smooth_prolongator(l);
+      t_.setup_prolongator += since(tp);
     }
+    const auto tg = Clock::now();
     galerkin(l);
+    t_.setup_galerkin += since(tg);
   }
   if (new_p) {
     since_prolongator_ = 0;
@@ -845,11 +889,21 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
     return;
   }
   Level& C = L_[l + 1];
+  const bool timed = l == 0;
+  Clock::time_point t0{};
+  if (timed) t0 = Clock::now();
+  auto lap = [&](double& total) {
+    if (!timed) return;
+    const auto t1 = Clock::now();
+    total += std::chrono::duration<double>(t1 - t0).count();
+    t0 = t1;
+  };
   std::fill(x, x + N, 0.0);
   with_sizes(bs, m_, [&](auto Bc, auto Mc) {
     constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
     constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
     for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+    lap(t_.apply_fine_smooth);
     double* r = L.r.data();
     const Index nc = C.A.rows;
 #pragma omp parallel if (par)
@@ -866,19 +920,26 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
           gemv_add<M, B>(L.R.v.data() + PB * k, r + static_cast<std::size_t>(B) * L.R.ci[k], bi);
       }
     }
+    lap(t_.apply_fine_transfer);
     cycle(l + 1, C.b.data(), C.x.data());
+    lap(t_.apply_coarse);
 #pragma omp parallel for schedule(static) if (par)
     for (Index i = 0; i < n; ++i)
       for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k)
         gemv_add<B, M>(L.P.v.data() + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
                        x + static_cast<std::size_t>(B) * i);
+    lap(t_.apply_fine_transfer);
     for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+    lap(t_.apply_fine_smooth);
   });
 }
 
 void SaAmg::apply(const double* r, double* z) {
   if (!built_) throw std::logic_error("sa_amg: apply() before a successful setup()");
+  const auto t0 = Clock::now();
   cycle(0, r, z);
+  t_.apply += since(t0);
+  ++t_.applies;
 }
 
 }  // namespace loom::amg

@@ -42,6 +42,10 @@ struct SaAmgOptions {
   /// between only level 0 (A~ and its diagonal blocks) follows the new matrix. Any k keeps the
   /// V-cycle SPD (NUMERICS.md 3.6); a changed S always refreshes everything.
   int hierarchy_refresh_steps = 1;
+  /// Levels (from the finest) that aggregate on the distance-2 strength graph (aggregates of
+  /// about 19 instead of 7 vertices on a triangle grid): a coarser, sparser next level, so a
+  /// cheaper V-cycle and Galerkin product for possibly more iterations (NUMERICS.md 3.6).
+  int aggressive_levels = 0;
   double prolongator_damping = 4.0 / 3.0;  ///< omega = damping / lambda_max(D^-1 A)
   Index parallel_min_dofs = 6144;  ///< loops run on all OpenMP threads from this many DOFs on
 };
@@ -56,6 +60,21 @@ struct BlockMatrix {
   Index nnz() const { return static_cast<Index>(ci.size()); }
   double* block(Index k) { return v.data() + bsize() * static_cast<std::size_t>(k); }
   const double* block(Index k) const { return v.data() + bsize() * static_cast<std::size_t>(k); }
+};
+
+/// Seconds spent in the preconditioner, cumulative since construction (steady clock; a few
+/// clock reads per setup and per V-cycle). `apply_fine_*` split level 0's share of the
+/// V-cycles: smoothing sweeps vs residual + restriction + prolongation; `apply_coarse` is
+/// everything below level 0 (coarser smoothing and the coarsest solve).
+struct SaAmgTimings {
+  double setup = 0;            ///< setup(): level-0 copy, diagonal inverses, P, Galerkin, factor
+  double setup_galerkin = 0;   ///< of which Galerkin products (A P, P^T A P)
+  double setup_prolongator = 0;  ///< of which tentative + smoothed prolongators (when rebuilt)
+  double apply = 0;            ///< apply(): whole V-cycles
+  double apply_fine_smooth = 0;
+  double apply_fine_transfer = 0;
+  double apply_coarse = 0;
+  long setups = 0, applies = 0;
 };
 
 struct LevelInfo {
@@ -87,6 +106,7 @@ class SaAmg {
   int prolongator_builds() const { return prolongator_builds_; }
   int hierarchy_builds() const { return hierarchy_builds_; }
   const SaAmgOptions& options() const { return o_; }
+  const SaAmgTimings& timings() const { return t_; }
 
  private:
   struct Level {
@@ -124,6 +144,7 @@ class SaAmg {
   bool parallel(const Level& L) const { return static_cast<Index>(L.A.rows) * L.A.br >= o_.parallel_min_dofs; }
 
   SaAmgOptions o_;
+  SaAmgTimings t_;
   bool built_ = false;
   const BsrPattern* pattern_ = nullptr;
   Index pattern_nnz_ = -1;
