@@ -34,9 +34,9 @@ void with_sizes(int a, int b, F&& f) {
   with_size(a, [&](auto A) { with_size(b, [&](auto B) { f(A, B); }); });
 }
 
-// y += M x, M is R x C row-major.
-template <int R, int C>
-inline void gemv_add(const double* M, const double* x, double* y) {
+// y += M x, M is R x C row-major (double or float entries, double arithmetic).
+template <int R, int C, class T>
+inline void gemv_add(const T* M, const double* x, double* y) {
   for (int a = 0; a < R; ++a) {
     double s = 0;
     for (int c = 0; c < C; ++c) s += M[a * C + c] * x[c];
@@ -44,8 +44,8 @@ inline void gemv_add(const double* M, const double* x, double* y) {
   }
 }
 // y -= M x
-template <int R, int C>
-inline void gemv_sub(const double* M, const double* x, double* y) {
+template <int R, int C, class T>
+inline void gemv_sub(const T* M, const double* x, double* y) {
   for (int a = 0; a < R; ++a) {
     double s = 0;
     for (int c = 0; c < C; ++c) s += M[a * C + c] * x[c];
@@ -94,22 +94,88 @@ inline void row_multiply6(const Index* rp, const Index* col, const double* val, 
 #endif
 }
 
-// acc = b_i - (A x)_i for block row i.
-template <int B>
-inline void row_residual(const BlockMatrix& A, const double* b, const double* x, Index i, double* acc) {
-  if constexpr (B == 6) {
-    double ax[6];
-    row_multiply6(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
-    for (int a = 0; a < 6; ++a) acc[a] = b[6 * static_cast<std::size_t>(i) + a] - ax[a];
-  } else if constexpr (B == 3) {
-    double ax[3];
-    block_row_multiply3(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
-    for (int a = 0; a < 3; ++a) acc[a] = b[3 * static_cast<std::size_t>(i) + a] - ax[a];
-  } else {
-    for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a];
-    for (Index k = A.rp[i]; k < A.rp[i + 1]; ++k)
-      gemv_sub<B, B>(A.block(k), x + static_cast<std::size_t>(B) * A.ci[k], acc);
+// Float-storage versions of the two block-row products (sa_amg storage: float): the blocks
+// are read as floats and widened, the sums are in double.
+inline void row_multiply3f(const Index* rp, const Index* col, const float* val, const double* x, Index i,
+                           double* yi) {
+#if defined(__AVX2__) && defined(__FMA__)
+  const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
+  const __m128i m3f = _mm_setr_epi32(-1, -1, -1, 0);
+  __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd();
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+    const float* B = val + 9 * static_cast<std::size_t>(k);
+    const __m256d xv = _mm256_maskload_pd(x + 3 * static_cast<std::size_t>(col[k]), m3);
+    a0 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B)), xv, a0);
+    a1 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B + 3)), xv, a1);
+    a2 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_maskload_ps(B + 6, m3f)), xv, a2);
   }
+  // lane 3 of a0 and a1 multiplies x's masked zero (the float read past the row is finite:
+  // the next block's entry or, for the last block, lane 3 of the masked load).
+  const __m256d h01 = _mm256_hadd_pd(a0, a1);
+  const __m128d s01 = _mm_add_pd(_mm256_castpd256_pd128(h01), _mm256_extractf128_pd(h01, 1));
+  const __m128d l2 = _mm_add_pd(_mm256_castpd256_pd128(a2), _mm256_extractf128_pd(a2, 1));
+  yi[0] = _mm_cvtsd_f64(s01);
+  yi[1] = _mm_cvtsd_f64(_mm_unpackhi_pd(s01, s01));
+  yi[2] = _mm_cvtsd_f64(_mm_add_sd(l2, _mm_unpackhi_pd(l2, l2)));
+#else
+  for (int r = 0; r < 3; ++r) yi[r] = 0;
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<3, 3>(val + 9 * static_cast<std::size_t>(k), x + 3 * static_cast<std::size_t>(col[k]), yi);
+#endif
+}
+
+inline void row_multiply6f(const Index* rp, const Index* col, const float* val, const double* x, Index i,
+                           double* yi) {
+#if defined(__AVX2__) && defined(__FMA__)
+  __m256d a[6];
+  __m128d c[6];
+  for (int r = 0; r < 6; ++r) {
+    a[r] = _mm256_setzero_pd();
+    c[r] = _mm_setzero_pd();
+  }
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+    const float* B = val + 36 * static_cast<std::size_t>(k);
+    const double* xk = x + 6 * static_cast<std::size_t>(col[k]);
+    const __m256d x4 = _mm256_loadu_pd(xk);
+    const __m128d x2 = _mm_loadu_pd(xk + 4);
+    for (int r = 0; r < 6; ++r) {
+      a[r] = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B + 6 * r)), x4, a[r]);
+      const __m128 f2 = _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(B + 6 * r + 4)));
+      c[r] = _mm_fmadd_pd(_mm_cvtps_pd(f2), x2, c[r]);
+    }
+  }
+  for (int r = 0; r < 6; ++r) {
+    const __m128d h = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a[r]), _mm256_extractf128_pd(a[r], 1)), c[r]);
+    yi[r] = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
+  }
+#else
+  for (int r = 0; r < 6; ++r) yi[r] = 0;
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<6, 6>(val + 36 * static_cast<std::size_t>(k), x + 6 * static_cast<std::size_t>(col[k]), yi);
+#endif
+}
+
+// The values of M in storage T: the doubles, or their float copy (sync_float()).
+template <class T>
+const T* values(const BlockMatrix& M) {
+  if constexpr (std::is_same_v<T, float>)
+    return M.f.data();
+  else
+    return M.v.data();
+}
+
+// acc = b_i - (A x)_i for block row i.
+template <int B, class T>
+inline void row_residual(const BlockMatrix& A, const double* b, const double* x, Index i, double* acc) {
+  const T* val = values<T>(A);
+  double ax[B];
+  if constexpr (B == 6 && std::is_same_v<T, double>)
+    row_multiply6(A.rp.data(), A.ci.data(), val, x, i, ax);
+  else if constexpr (B == 6)
+    row_multiply6f(A.rp.data(), A.ci.data(), val, x, i, ax);
+  else if constexpr (std::is_same_v<T, double>)
+    block_row_multiply3(A.rp.data(), A.ci.data(), val, x, i, ax);
+  else
+    row_multiply3f(A.rp.data(), A.ci.data(), val, x, i, ax);
+  for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - ax[a];
 }
 
 // Inverse of a B x B SPD matrix by Cholesky; false when it is not (numerically) SPD.
@@ -692,6 +758,25 @@ bool SaAmg::factor_coarsest(std::string& message) {
   return true;
 }
 
+void SaAmg::sync_float(bool level0_only) {
+  if (!o_.float_storage) return;
+  auto copy = [&](BlockMatrix& M, bool par) {
+    const std::ptrdiff_t N = static_cast<std::ptrdiff_t>(M.v.size());
+    M.f.resize(M.v.size());
+#pragma omp parallel for schedule(static) if (par)
+    for (std::ptrdiff_t k = 0; k < N; ++k) M.f[k] = static_cast<float>(M.v[k]);
+  };
+  for (std::size_t l = 0; l < L_.size(); ++l) {
+    Level& L = L_[l];
+    copy(L.A, parallel(L));
+    if (level0_only) break;
+    if (l + 1 < L_.size()) {
+      copy(L.P, parallel(L));
+      copy(L.R, parallel(L));
+    }
+  }
+}
+
 bool SaAmg::filter_changed(const Filter& S) const {
   if (S.constrained() != s_constrained_) return true;
   std::size_t o = 0;
@@ -753,6 +838,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
       built_ = false;
       return false;
     }
+    sync_float(true);
     return true;
   }
   since_hierarchy_ = 0;
@@ -816,6 +902,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
     return false;
   }
   built_ = true;
+  sync_float(false);
   info_.clear();
   for (const Level& L : L_)
     info_.push_back({L.A.rows, L.A.br, L.A.nnz(),
@@ -831,7 +918,7 @@ namespace {
 // one colour are not coupled). Backward: exactly the reverse order. Every update is a
 // sequential Gauss-Seidel step in one fixed row order, so the backward sweep is the adjoint
 // of the forward one, with no races and the same result on any number of threads.
-template <int B>
+template <int B, class T>
 void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::vector<Index>& cp,
               const std::vector<Index>& cr, const std::vector<Index>& pp, const std::vector<Index>& pr,
               const double* b, double* x, bool forward, bool par) {
@@ -839,7 +926,7 @@ void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::
   const int np = static_cast<int>(pp.size()) - 1;
   auto update = [&](Index i) {
     double acc[B];
-    row_residual<B>(A, b, x, i, acc);
+    row_residual<B, T>(A, b, x, i, acc);
     gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
   };
 #pragma omp parallel if (par)
@@ -864,6 +951,7 @@ void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::
 
 }  // namespace
 
+template <class T>
 void SaAmg::cycle(std::size_t l, const double* b, double* x) {
   Level& L = L_[l];
   const Index n = L.A.rows;
@@ -881,8 +969,8 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       with_size(bs, [&](auto Bc) {
         constexpr int B = decltype(Bc)::value;
         for (int s = 0; s < 2; ++s) {
-          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
-          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+          gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+          gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
         }
       });
     }
@@ -902,7 +990,7 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
   with_sizes(bs, m_, [&](auto Bc, auto Mc) {
     constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
     constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
-    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
     lap(t_.apply_fine_smooth);
     double* r = L.r.data();
     const Index nc = C.A.rows;
@@ -910,26 +998,26 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
     {
 #pragma omp for schedule(static)
       for (Index i = 0; i < n; ++i) {
-        row_residual<B>(L.A, b, x, i, r + static_cast<std::size_t>(B) * i);
+        row_residual<B, T>(L.A, b, x, i, r + static_cast<std::size_t>(B) * i);
       }
 #pragma omp for schedule(static)
       for (Index I = 0; I < nc; ++I) {
         double* bi = C.b.data() + static_cast<std::size_t>(M) * I;
         std::fill(bi, bi + M, 0.0);
         for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k)
-          gemv_add<M, B>(L.R.v.data() + PB * k, r + static_cast<std::size_t>(B) * L.R.ci[k], bi);
+          gemv_add<M, B>(values<T>(L.R) + PB * k, r + static_cast<std::size_t>(B) * L.R.ci[k], bi);
       }
     }
     lap(t_.apply_fine_transfer);
-    cycle(l + 1, C.b.data(), C.x.data());
+    cycle<T>(l + 1, C.b.data(), C.x.data());
     lap(t_.apply_coarse);
 #pragma omp parallel for schedule(static) if (par)
     for (Index i = 0; i < n; ++i)
       for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k)
-        gemv_add<B, M>(L.P.v.data() + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
+        gemv_add<B, M>(values<T>(L.P) + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
                        x + static_cast<std::size_t>(B) * i);
     lap(t_.apply_fine_transfer);
-    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
     lap(t_.apply_fine_smooth);
   });
 }
@@ -937,7 +1025,10 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
 void SaAmg::apply(const double* r, double* z) {
   if (!built_) throw std::logic_error("sa_amg: apply() before a successful setup()");
   const auto t0 = Clock::now();
-  cycle(0, r, z);
+  if (o_.float_storage)
+    cycle<float>(0, r, z);
+  else
+    cycle<double>(0, r, z);
   t_.apply += since(t0);
   ++t_.applies;
 }

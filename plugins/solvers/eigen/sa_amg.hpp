@@ -47,6 +47,11 @@ struct SaAmgOptions {
   /// cheaper V-cycle and Galerkin product for possibly more iterations (NUMERICS.md 3.6).
   int aggressive_levels = 0;
   double prolongator_damping = 4.0 / 3.0;  ///< omega = damping / lambda_max(D^-1 A)
+  /// The V-cycle reads float copies of the level matrices and transfer operators (set-up and
+  /// all arithmetic stay double): half the memory traffic of the bandwidth-bound V-cycle. The
+  /// V-cycle is still exactly symmetric (the smoother and residual use the same rounded
+  /// matrix, R is the exact transpose of P; NUMERICS.md 3.6).
+  bool float_storage = false;
   Index parallel_min_dofs = 6144;  ///< loops run on all OpenMP threads from this many DOFs on
 };
 
@@ -56,6 +61,7 @@ struct BlockMatrix {
   int br = 3, bc = 3;
   std::vector<Index> rp, ci;
   std::vector<double> v;
+  std::vector<float> f;  ///< float copy of v read by the V-cycle (SaAmgOptions::float_storage)
   std::size_t bsize() const { return static_cast<std::size_t>(br) * bc; }
   Index nnz() const { return static_cast<Index>(ci.size()); }
   double* block(Index k) { return v.data() + bsize() * static_cast<std::size_t>(k); }
@@ -138,7 +144,9 @@ class SaAmg {
   void aggregate(std::size_t l);
   void colour(std::size_t l);
   void build_patterns(std::size_t l);
+  template <class T>
   void cycle(std::size_t l, const double* b, double* x);
+  void sync_float(bool level0_only);
   bool filter_changed(const Filter& S) const;
   void remember_filter(const Filter& S);
   bool parallel(const Level& L) const { return static_cast<Index>(L.A.rows) * L.A.br >= o_.parallel_min_dofs; }
