@@ -183,9 +183,9 @@ std::vector<SolverVariant> variants() {
   amg.amg.aggressive_levels = 2;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_aggressive2", false, amg});
   amg.amg.aggressive_levels = 0;
-  amg.amg.float_storage = true;
-  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_float", false, amg});
   amg.amg.float_storage = false;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_double", false, amg});
+  amg.amg.float_storage = true;
   amg.amg.prolongator_refresh_steps = 1;
   amg.amg.hierarchy_refresh_steps = 10;
   v.push_back({"eigen_pcg_sa_amg_rigid_hierarchy10", false, amg});

@@ -81,9 +81,11 @@ Eigen::MatrixXd dense_preconditioner(SaAmg& M, const loom::Filter& S, Index n) {
 }  // namespace
 
 TEST(SaAmg, VCycleIsSymmetricPositiveDefiniteOnRangeOfS) {
-  for (int modes : {6, 3}) {
+  for (int modes : {6, 3, -6}) {  // -6: rigid modes with storage: double (the default is float)
     for (ts::System& s : systems()) {
-      SaAmg M(small_coarse(modes));
+      SaAmgOptions mo = small_coarse(std::abs(modes));
+      mo.float_storage = modes > 0;
+      SaAmg M(mo);
       std::string msg;
       ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
       ASSERT_GE(M.levels().size(), 3u) << "the test needs a real hierarchy";
@@ -432,7 +434,9 @@ TEST(SaAmg, FloatStorageStaysSpdAndExact) {
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
     EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "n " << s.n;
     // The float V-cycle differs from the double one at float rounding, not more.
-    SaAmg Md(small_coarse());
+    SaAmgOptions dou = small_coarse();
+    dou.float_storage = false;
+    SaAmg Md(dou);
     ASSERT_TRUE(Md.setup(s.A, s.S, s.x, msg)) << msg;
     const Eigen::MatrixXd Dd = dense_preconditioner(Md, s.S, s.n);
     EXPECT_LT((D - Dd).cwiseAbs().maxCoeff() / Dd.cwiseAbs().maxCoeff(), 1e-4) << "n " << s.n;

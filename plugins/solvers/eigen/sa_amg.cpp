@@ -487,6 +487,14 @@ void SaAmg::build_patterns(std::size_t l) {
     for (Index k = C.A.rp[I]; k < C.A.rp[I + 1]; ++k)
       if (C.A.ci[k] == I) C.diag[I] = k;
   }
+  // The Galerkin pattern is symmetric (A's is): position of each block's transpose.
+  C.trans.assign(C.A.ci.begin(), C.A.ci.end());  // (sized like ci; overwritten below)
+  for (Index I = 0; I < nc; ++I)
+    for (Index k = C.A.rp[I]; k < C.A.rp[I + 1]; ++k) {
+      const Index J = C.A.ci[k];
+      const auto b = C.A.ci.begin() + C.A.rp[J], e = C.A.ci.begin() + C.A.rp[J + 1];
+      C.trans[k] = static_cast<Index>(std::lower_bound(b, e, I) - C.A.ci.begin());
+    }
   C.B.assign(static_cast<std::size_t>(nc) * m * m, 0.0);
   C.dead.assign(static_cast<std::size_t>(nc) * m, 0);
   C.x.assign(static_cast<std::size_t>(nc) * m, 0.0);
@@ -715,7 +723,9 @@ void SaAmg::galerkin(std::size_t l) {
             gemm_add<B, B, M>(L.A.block(k), L.P.v.data() + PB * q, L.AP.v.data() + PB * mk[L.P.ci[q]]);
         }
       }
-#pragma omp for schedule(static)
+      // P^T A P is symmetric: the blocks on and above the diagonal (J >= I), then each block
+      // below it as the transpose of its mirror (half the products; exactly symmetric).
+#pragma omp for schedule(dynamic, 64)
       for (Index I = 0; I < nc; ++I) {
         const Index c0 = C.A.rp[I], c1 = C.A.rp[I + 1];
         for (Index q = c0; q < c1; ++q) mk[C.A.ci[q]] = q;
@@ -724,12 +734,21 @@ void SaAmg::galerkin(std::size_t l) {
           const Index i = L.R.ci[k];
           const double* Rk = L.R.v.data() + PB * k;
           for (Index q = L.AP.rp[i]; q < L.AP.rp[i + 1]; ++q)
-            gemm_add<M, B, M>(Rk, L.AP.v.data() + PB * q, C.A.v.data() + CB * mk[L.AP.ci[q]]);
+            if (L.AP.ci[q] >= I) gemm_add<M, B, M>(Rk, L.AP.v.data() + PB * q, C.A.v.data() + CB * mk[L.AP.ci[q]]);
         }
         double* D = C.A.block(C.diag[I]);
         for (int c = 0; c < M; ++c)
           if (C.dead[static_cast<std::size_t>(M) * I + c]) D[c * M + c] += 1.0;
       }
+#pragma omp for schedule(static)
+      for (Index I = 0; I < nc; ++I)
+        for (Index q = C.A.rp[I]; q < C.A.rp[I + 1]; ++q) {
+          if (C.A.ci[q] >= I) continue;
+          const double* U = C.A.v.data() + CB * C.trans[q];
+          double* Lq = C.A.v.data() + CB * q;
+          for (int a = 0; a < M; ++a)
+            for (int c = 0; c < M; ++c) Lq[a * M + c] = U[c * M + a];
+        }
     }
   });
 }

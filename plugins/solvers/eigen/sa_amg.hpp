@@ -51,7 +51,7 @@ struct SaAmgOptions {
   /// all arithmetic stay double): half the memory traffic of the bandwidth-bound V-cycle. The
   /// V-cycle is still exactly symmetric (the smoother and residual use the same rounded
   /// matrix, R is the exact transpose of P; NUMERICS.md 3.6).
-  bool float_storage = false;
+  bool float_storage = true;
   Index parallel_min_dofs = 6144;  ///< loops run on all OpenMP threads from this many DOFs on
 };
 
@@ -128,6 +128,7 @@ class SaAmg {
     std::vector<std::uint8_t> dead;   // per scalar DOF of this level: a zero column of P above
     BlockMatrix P, R, AP;             // to/from the next level: P (b x m), R = P^T, A P
     std::vector<Index> r_from_p;      // block of P transposed into each block of R
+    std::vector<Index> trans;         // position of the transposed block (j, i) of each block (i, j) of A
     std::vector<double> x, b, r;      // work vectors
     std::vector<double> ev;           // last power-iteration vector of D^-1 A (warm start)
   };
