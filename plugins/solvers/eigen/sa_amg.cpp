@@ -178,6 +178,21 @@ inline void row_residual(const BlockMatrix& A, const double* b, const double* x,
   for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - ax[a];
 }
 
+// out = sum over blocks k0 <= k < k1 of A_k x_col(k) (a contiguous part of one block row).
+template <int B, class T>
+inline void row_partial(const BlockMatrix& A, Index k0, Index k1, const double* x, double* out) {
+  const Index range[2] = {k0, k1};
+  const T* val = values<T>(A);
+  if constexpr (B == 6 && std::is_same_v<T, double>)
+    row_multiply6(range, A.ci.data(), val, x, 0, out);
+  else if constexpr (B == 6)
+    row_multiply6f(range, A.ci.data(), val, x, 0, out);
+  else if constexpr (std::is_same_v<T, double>)
+    block_row_multiply3(range, A.ci.data(), val, x, 0, out);
+  else
+    row_multiply3f(range, A.ci.data(), val, x, 0, out);
+}
+
 // Inverse of a B x B SPD matrix by Cholesky; false when it is not (numerically) SPD.
 template <int B>
 bool spd_inverse(const double* A, double* Ainv) {
@@ -371,6 +386,10 @@ void SaAmg::colour(std::size_t l) {
   for (Index i = 0; i < n; ++i)
     for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
       if (part(L.A.ci[k]) != part(i)) boundary[i] = 1;
+  L.clean.assign(n, 1);
+  for (Index i = 0; i < n; ++i)
+    for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
+      if (boundary[L.A.ci[k]]) L.clean[i] = 0;
   L.part_ptr.assign(static_cast<std::size_t>(parts) + 1, 0);
   L.part_rows.clear();
   for (int p = 0; p < parts; ++p) {
@@ -968,6 +987,59 @@ void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::
   }
 }
 
+// The first forward sweep from x = 0, fused with the residual that follows it. An interior
+// row is swept before every boundary row and after the interior rows below it in its own
+// part, so when it is updated the only nonzero x_j of its neighbours are those with j < i:
+// the blocks left of the diagonal (the columns are sorted). Its partial residual
+// acc_i = b_i - sum_{j<i} A_ij x_j is kept in r. After the sweep, for a `clean` row (interior,
+// no boundary neighbour: no neighbour changed after it except j > i), the residual is
+// r_i = acc_i - sum_{j>=i} A_ij x_j, the blocks from the diagonal on; every other row gets
+// the full b_i - (A x)_i. Together one pass over A instead of two (a sweep and a residual),
+// the same operator as gs_sweep + residual up to rounding.
+template <int B, class T>
+void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<Index>& diag,
+                                       const std::vector<double>& dinv, const std::vector<std::uint8_t>& clean,
+                                       const std::vector<Index>& cp, const std::vector<Index>& cr,
+                                       const std::vector<Index>& pp, const std::vector<Index>& pr, const double* b,
+                                       double* x, double* r, bool par) {
+  const int nc = static_cast<int>(cp.size()) - 1;
+  const int np = static_cast<int>(pp.size()) - 1;
+  const Index n = A.rows;
+#pragma omp parallel if (par)
+  {
+#pragma omp for schedule(static, 1)
+    for (int p = 0; p < np; ++p)
+      for (Index t = pp[p]; t < pp[p + 1]; ++t) {
+        const Index i = pr[t];
+        double lo[B];
+        row_partial<B, T>(A, A.rp[i], diag[i], x, lo);
+        double* acc = r + static_cast<std::size_t>(B) * i;
+        for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - lo[a];
+        gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+      }
+    for (int c = 0; c < nc; ++c) {
+#pragma omp for schedule(static)
+      for (Index t = cp[c]; t < cp[c + 1]; ++t) {
+        const Index i = cr[t];
+        double acc[B];
+        row_residual<B, T>(A, b, x, i, acc);
+        gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+      }
+    }
+#pragma omp for schedule(static)
+    for (Index i = 0; i < n; ++i) {
+      double* ri = r + static_cast<std::size_t>(B) * i;
+      if (clean[i]) {
+        double up[B];
+        row_partial<B, T>(A, diag[i], A.rp[i + 1], x, up);
+        for (int a = 0; a < B; ++a) ri[a] -= up[a];
+      } else {
+        row_residual<B, T>(A, b, x, i, ri);
+      }
+    }
+  }
+}
+
 }  // namespace
 
 template <class T>
@@ -1009,15 +1081,24 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
   with_sizes(bs, m_, [&](auto Bc, auto Mc) {
     constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
     constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
-    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
-    lap(t_.apply_fine_smooth);
     double* r = L.r.data();
     const Index nc = C.A.rows;
+    const bool fused = o_.smoothing_sweeps == 1 && L.clean.size() == static_cast<std::size_t>(n);
+    if (fused) {
+      gs_forward_from_zero_and_residual<B, T>(L.A, L.diag, L.dinv, L.clean, L.colour_ptr, L.colour_rows, L.part_ptr,
+                                              L.part_rows, b, x, r, par);
+      lap(t_.apply_fine_smooth);
+    } else {
+      for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+      lap(t_.apply_fine_smooth);
+    }
 #pragma omp parallel if (par)
     {
+      if (!fused) {
 #pragma omp for schedule(static)
-      for (Index i = 0; i < n; ++i) {
-        row_residual<B, T>(L.A, b, x, i, r + static_cast<std::size_t>(B) * i);
+        for (Index i = 0; i < n; ++i) {
+          row_residual<B, T>(L.A, b, x, i, r + static_cast<std::size_t>(B) * i);
+        }
       }
 #pragma omp for schedule(static)
       for (Index I = 0; I < nc; ++I) {

@@ -77,7 +77,7 @@ struct SaAmgTimings {
   double setup_galerkin = 0;   ///< of which Galerkin products (A P, P^T A P)
   double setup_prolongator = 0;  ///< of which tentative + smoothed prolongators (when rebuilt)
   double apply = 0;            ///< apply(): whole V-cycles
-  double apply_fine_smooth = 0;
+  double apply_fine_smooth = 0;  ///< (with smoothing_sweeps 1 it includes the residual fused into the first sweep)
   double apply_fine_transfer = 0;
   double apply_coarse = 0;
   long setups = 0, applies = 0;
@@ -121,6 +121,7 @@ class SaAmg {
     std::vector<double> dinv;         // b*b per row: inverse of the diagonal block
     std::vector<Index> colour_ptr, colour_rows;  // boundary rows (coupled to another part) by colour
     std::vector<Index> part_ptr, part_rows;      // interior rows of each part, increasing
+    std::vector<std::uint8_t> clean;  // interior row with no boundary neighbour (fused residual)
     std::vector<Index> agg;           // aggregate of each row, -1 when in none
     std::vector<Index> member_ptr, members;  // rows of each aggregate
     std::vector<double> B;            // near-null space on this level: b x m per row
