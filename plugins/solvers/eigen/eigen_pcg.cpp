@@ -66,6 +66,10 @@ const ParamSpec& pcg_spec() {
         .units("refreshes").help("rebuild the prolongator every k refreshes (1 = every step)");
     a.integer("hierarchy_refresh_steps", m.hierarchy_refresh_steps).range(ParamRange::closed(1, 1e6))
         .units("refreshes").help("recompute the coarse levels every k refreshes (1 = every step)");
+    a.integer("aggressive_levels", m.aggressive_levels).range(ParamRange::closed(0, 30)).help(
+        "levels (from the finest) aggregated on the distance-2 strength graph: bigger aggregates");
+    a.choice("storage", m.float_storage ? "float" : "double", {"double", "float"}).help(
+        "precision of the hierarchy's matrices read by the V-cycle (set-up and sums stay double)");
     a.number("prolongator_damping", m.prolongator_damping).range(ParamRange::closed(0, 1.9)).help(
         "omega = damping / lambda_max(D^-1 A)");
     s.map("sa_amg", std::move(a)).help("options of preconditioner: sa_amg");
@@ -99,6 +103,8 @@ PcgOptions parse_pcg_options(const Params& p) {
     m.max_levels = a.int32("max_levels");
     m.prolongator_refresh_steps = a.int32("prolongator_refresh_steps");
     m.hierarchy_refresh_steps = a.int32("hierarchy_refresh_steps");
+    m.aggressive_levels = a.int32("aggressive_levels");
+    m.float_storage = a.text("storage") == "float";
     m.prolongator_damping = a.number("prolongator_damping");
     a.params().check_unused();
   }

@@ -6,6 +6,7 @@
 #endif
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <type_traits>
@@ -33,9 +34,9 @@ void with_sizes(int a, int b, F&& f) {
   with_size(a, [&](auto A) { with_size(b, [&](auto B) { f(A, B); }); });
 }
 
-// y += M x, M is R x C row-major.
-template <int R, int C>
-inline void gemv_add(const double* M, const double* x, double* y) {
+// y += M x, M is R x C row-major (double or float entries, double arithmetic).
+template <int R, int C, class T>
+inline void gemv_add(const T* M, const double* x, double* y) {
   for (int a = 0; a < R; ++a) {
     double s = 0;
     for (int c = 0; c < C; ++c) s += M[a * C + c] * x[c];
@@ -43,8 +44,8 @@ inline void gemv_add(const double* M, const double* x, double* y) {
   }
 }
 // y -= M x
-template <int R, int C>
-inline void gemv_sub(const double* M, const double* x, double* y) {
+template <int R, int C, class T>
+inline void gemv_sub(const T* M, const double* x, double* y) {
   for (int a = 0; a < R; ++a) {
     double s = 0;
     for (int c = 0; c < C; ++c) s += M[a * C + c] * x[c];
@@ -93,22 +94,103 @@ inline void row_multiply6(const Index* rp, const Index* col, const double* val, 
 #endif
 }
 
-// acc = b_i - (A x)_i for block row i.
-template <int B>
-inline void row_residual(const BlockMatrix& A, const double* b, const double* x, Index i, double* acc) {
-  if constexpr (B == 6) {
-    double ax[6];
-    row_multiply6(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
-    for (int a = 0; a < 6; ++a) acc[a] = b[6 * static_cast<std::size_t>(i) + a] - ax[a];
-  } else if constexpr (B == 3) {
-    double ax[3];
-    block_row_multiply3(A.rp.data(), A.ci.data(), A.v.data(), x, i, ax);
-    for (int a = 0; a < 3; ++a) acc[a] = b[3 * static_cast<std::size_t>(i) + a] - ax[a];
-  } else {
-    for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a];
-    for (Index k = A.rp[i]; k < A.rp[i + 1]; ++k)
-      gemv_sub<B, B>(A.block(k), x + static_cast<std::size_t>(B) * A.ci[k], acc);
+// Float-storage versions of the two block-row products (sa_amg storage: float): the blocks
+// are read as floats and widened, the sums are in double.
+inline void row_multiply3f(const Index* rp, const Index* col, const float* val, const double* x, Index i,
+                           double* yi) {
+#if defined(__AVX2__) && defined(__FMA__)
+  const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
+  const __m128i m3f = _mm_setr_epi32(-1, -1, -1, 0);
+  __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd();
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+    const float* B = val + 9 * static_cast<std::size_t>(k);
+    const __m256d xv = _mm256_maskload_pd(x + 3 * static_cast<std::size_t>(col[k]), m3);
+    a0 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B)), xv, a0);
+    a1 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B + 3)), xv, a1);
+    a2 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_maskload_ps(B + 6, m3f)), xv, a2);
   }
+  // lane 3 of a0 and a1 multiplies x's masked zero (the float read past the row is finite:
+  // the next block's entry or, for the last block, lane 3 of the masked load).
+  const __m256d h01 = _mm256_hadd_pd(a0, a1);
+  const __m128d s01 = _mm_add_pd(_mm256_castpd256_pd128(h01), _mm256_extractf128_pd(h01, 1));
+  const __m128d l2 = _mm_add_pd(_mm256_castpd256_pd128(a2), _mm256_extractf128_pd(a2, 1));
+  yi[0] = _mm_cvtsd_f64(s01);
+  yi[1] = _mm_cvtsd_f64(_mm_unpackhi_pd(s01, s01));
+  yi[2] = _mm_cvtsd_f64(_mm_add_sd(l2, _mm_unpackhi_pd(l2, l2)));
+#else
+  for (int r = 0; r < 3; ++r) yi[r] = 0;
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<3, 3>(val + 9 * static_cast<std::size_t>(k), x + 3 * static_cast<std::size_t>(col[k]), yi);
+#endif
+}
+
+inline void row_multiply6f(const Index* rp, const Index* col, const float* val, const double* x, Index i,
+                           double* yi) {
+#if defined(__AVX2__) && defined(__FMA__)
+  __m256d a[6];
+  __m128d c[6];
+  for (int r = 0; r < 6; ++r) {
+    a[r] = _mm256_setzero_pd();
+    c[r] = _mm_setzero_pd();
+  }
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+    const float* B = val + 36 * static_cast<std::size_t>(k);
+    const double* xk = x + 6 * static_cast<std::size_t>(col[k]);
+    const __m256d x4 = _mm256_loadu_pd(xk);
+    const __m128d x2 = _mm_loadu_pd(xk + 4);
+    for (int r = 0; r < 6; ++r) {
+      a[r] = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B + 6 * r)), x4, a[r]);
+      const __m128 f2 = _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(B + 6 * r + 4)));
+      c[r] = _mm_fmadd_pd(_mm_cvtps_pd(f2), x2, c[r]);
+    }
+  }
+  for (int r = 0; r < 6; ++r) {
+    const __m128d h = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a[r]), _mm256_extractf128_pd(a[r], 1)), c[r]);
+    yi[r] = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
+  }
+#else
+  for (int r = 0; r < 6; ++r) yi[r] = 0;
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<6, 6>(val + 36 * static_cast<std::size_t>(k), x + 6 * static_cast<std::size_t>(col[k]), yi);
+#endif
+}
+
+// The values of M in storage T: the doubles, or their float copy (sync_float()).
+template <class T>
+const T* values(const BlockMatrix& M) {
+  if constexpr (std::is_same_v<T, float>)
+    return M.f.data();
+  else
+    return M.v.data();
+}
+
+// acc = b_i - (A x)_i for block row i.
+template <int B, class T>
+inline void row_residual(const BlockMatrix& A, const double* b, const double* x, Index i, double* acc) {
+  const T* val = values<T>(A);
+  double ax[B];
+  if constexpr (B == 6 && std::is_same_v<T, double>)
+    row_multiply6(A.rp.data(), A.ci.data(), val, x, i, ax);
+  else if constexpr (B == 6)
+    row_multiply6f(A.rp.data(), A.ci.data(), val, x, i, ax);
+  else if constexpr (std::is_same_v<T, double>)
+    block_row_multiply3(A.rp.data(), A.ci.data(), val, x, i, ax);
+  else
+    row_multiply3f(A.rp.data(), A.ci.data(), val, x, i, ax);
+  for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - ax[a];
+}
+
+// out = sum over blocks k0 <= k < k1 of A_k x_col(k) (a contiguous part of one block row).
+template <int B, class T>
+inline void row_partial(const BlockMatrix& A, Index k0, Index k1, const double* x, double* out) {
+  const Index range[2] = {k0, k1};
+  const T* val = values<T>(A);
+  if constexpr (B == 6 && std::is_same_v<T, double>)
+    row_multiply6(range, A.ci.data(), val, x, 0, out);
+  else if constexpr (B == 6)
+    row_multiply6f(range, A.ci.data(), val, x, 0, out);
+  else if constexpr (std::is_same_v<T, double>)
+    block_row_multiply3(range, A.ci.data(), val, x, 0, out);
+  else
+    row_multiply3f(range, A.ci.data(), val, x, 0, out);
 }
 
 // Inverse of a B x B SPD matrix by Cholesky; false when it is not (numerically) SPD.
@@ -144,6 +226,15 @@ bool spd_inverse(const double* A, double* Ainv) {
     }
   return true;
 }
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+// Adds the scope's duration to `total` (every return path of setup()).
+struct ScopeTimer {
+  double& total;
+  Clock::time_point t0 = Clock::now();
+  ~ScopeTimer() { total += since(t0); }
+};
 
 double frob(const double* b, std::size_t n) {
   double s = 0;
@@ -221,6 +312,34 @@ void SaAmg::aggregate(std::size_t l) {
     }
     sp[i + 1] = static_cast<Index>(sc.size());
   }
+  if (static_cast<int>(l) < o_.aggressive_levels) {
+    // Distance-2 graph: j is a neighbour of i when a strong path i - k - j exists; its weight
+    // is the strongest such path (the product of the two weights), a direct edge counts too.
+    std::vector<Index> sp2(n + 1, 0), sc2;
+    std::vector<double> sw2;
+    std::vector<Index> pos(n, -1);
+    for (Index i = 0; i < n; ++i) {
+      const std::size_t start = sc2.size();
+      auto add = [&](Index j, double w) {
+        if (j == i) return;
+        if (pos[j] < static_cast<Index>(start) || pos[j] >= static_cast<Index>(sc2.size()) || sc2[pos[j]] != j) {
+          pos[j] = static_cast<Index>(sc2.size());
+          sc2.push_back(j);
+          sw2.push_back(w);
+        } else {
+          sw2[pos[j]] = std::max(sw2[pos[j]], w);
+        }
+      };
+      for (Index k = sp[i]; k < sp[i + 1]; ++k) {
+        add(sc[k], sw[k]);
+        for (Index q = sp[sc[k]]; q < sp[sc[k] + 1]; ++q) add(sc[q], sw[k] * sw[q]);
+      }
+      sp2[i + 1] = static_cast<Index>(sc2.size());
+    }
+    sp = std::move(sp2);
+    sc = std::move(sc2);
+    sw = std::move(sw2);
+  }
   std::vector<Index> agg(n, -1);
   Index na = 0;
   for (Index i = 0; i < n; ++i) {
@@ -267,6 +386,10 @@ void SaAmg::colour(std::size_t l) {
   for (Index i = 0; i < n; ++i)
     for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
       if (part(L.A.ci[k]) != part(i)) boundary[i] = 1;
+  L.clean.assign(n, 1);
+  for (Index i = 0; i < n; ++i)
+    for (Index k = L.A.rp[i]; k < L.A.rp[i + 1]; ++k)
+      if (boundary[L.A.ci[k]]) L.clean[i] = 0;
   L.part_ptr.assign(static_cast<std::size_t>(parts) + 1, 0);
   L.part_rows.clear();
   for (int p = 0; p < parts; ++p) {
@@ -383,6 +506,14 @@ void SaAmg::build_patterns(std::size_t l) {
     for (Index k = C.A.rp[I]; k < C.A.rp[I + 1]; ++k)
       if (C.A.ci[k] == I) C.diag[I] = k;
   }
+  // The Galerkin pattern is symmetric (A's is): position of each block's transpose.
+  C.trans.assign(C.A.ci.begin(), C.A.ci.end());  // (sized like ci; overwritten below)
+  for (Index I = 0; I < nc; ++I)
+    for (Index k = C.A.rp[I]; k < C.A.rp[I + 1]; ++k) {
+      const Index J = C.A.ci[k];
+      const auto b = C.A.ci.begin() + C.A.rp[J], e = C.A.ci.begin() + C.A.rp[J + 1];
+      C.trans[k] = static_cast<Index>(std::lower_bound(b, e, I) - C.A.ci.begin());
+    }
   C.B.assign(static_cast<std::size_t>(nc) * m * m, 0.0);
   C.dead.assign(static_cast<std::size_t>(nc) * m, 0);
   C.x.assign(static_cast<std::size_t>(nc) * m, 0.0);
@@ -611,7 +742,9 @@ void SaAmg::galerkin(std::size_t l) {
             gemm_add<B, B, M>(L.A.block(k), L.P.v.data() + PB * q, L.AP.v.data() + PB * mk[L.P.ci[q]]);
         }
       }
-#pragma omp for schedule(static)
+      // P^T A P is symmetric: the blocks on and above the diagonal (J >= I), then each block
+      // below it as the transpose of its mirror (half the products; exactly symmetric).
+#pragma omp for schedule(dynamic, 64)
       for (Index I = 0; I < nc; ++I) {
         const Index c0 = C.A.rp[I], c1 = C.A.rp[I + 1];
         for (Index q = c0; q < c1; ++q) mk[C.A.ci[q]] = q;
@@ -620,12 +753,21 @@ void SaAmg::galerkin(std::size_t l) {
           const Index i = L.R.ci[k];
           const double* Rk = L.R.v.data() + PB * k;
           for (Index q = L.AP.rp[i]; q < L.AP.rp[i + 1]; ++q)
-            gemm_add<M, B, M>(Rk, L.AP.v.data() + PB * q, C.A.v.data() + CB * mk[L.AP.ci[q]]);
+            if (L.AP.ci[q] >= I) gemm_add<M, B, M>(Rk, L.AP.v.data() + PB * q, C.A.v.data() + CB * mk[L.AP.ci[q]]);
         }
         double* D = C.A.block(C.diag[I]);
         for (int c = 0; c < M; ++c)
           if (C.dead[static_cast<std::size_t>(M) * I + c]) D[c * M + c] += 1.0;
       }
+#pragma omp for schedule(static)
+      for (Index I = 0; I < nc; ++I)
+        for (Index q = C.A.rp[I]; q < C.A.rp[I + 1]; ++q) {
+          if (C.A.ci[q] >= I) continue;
+          const double* U = C.A.v.data() + CB * C.trans[q];
+          double* Lq = C.A.v.data() + CB * q;
+          for (int a = 0; a < M; ++a)
+            for (int c = 0; c < M; ++c) Lq[a * M + c] = U[c * M + a];
+        }
     }
   });
 }
@@ -652,6 +794,25 @@ bool SaAmg::factor_coarsest(std::string& message) {
     return false;
   }
   return true;
+}
+
+void SaAmg::sync_float(bool level0_only) {
+  if (!o_.float_storage) return;
+  auto copy = [&](BlockMatrix& M, bool par) {
+    const std::ptrdiff_t N = static_cast<std::ptrdiff_t>(M.v.size());
+    M.f.resize(M.v.size());
+#pragma omp parallel for schedule(static) if (par)
+    for (std::ptrdiff_t k = 0; k < N; ++k) M.f[k] = static_cast<float>(M.v[k]);
+  };
+  for (std::size_t l = 0; l < L_.size(); ++l) {
+    Level& L = L_[l];
+    copy(L.A, parallel(L));
+    if (level0_only) break;
+    if (l + 1 < L_.size()) {
+      copy(L.P, parallel(L));
+      copy(L.R, parallel(L));
+    }
+  }
 }
 
 bool SaAmg::filter_changed(const Filter& S) const {
@@ -684,6 +845,8 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   const bool rebuild = !built_ || pattern_ != &A.pattern() || pattern_nnz_ != A.pattern().nnz_blocks() ||
                        L_.empty() || L_[0].A.rows != A.rows() || coords != had_coordinates_;
   ++refreshes_;
+  ++t_.setups;
+  const ScopeTimer timer{t_.setup};
   if (rebuild) {
     built_ = false;
     pattern_ = &A.pattern();
@@ -713,6 +876,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
       built_ = false;
       return false;
     }
+    sync_float(true);
     return true;
   }
   since_hierarchy_ = 0;
@@ -754,11 +918,15 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
       break;
     }
     if (new_p) {
+      const auto tp = Clock::now();
       if (l == 0) near_null_level0(S, x);
       tentative(l);
       smooth_prolongator(l);
+      t_.setup_prolongator += since(tp);
     }
+    const auto tg = Clock::now();
     galerkin(l);
+    t_.setup_galerkin += since(tg);
   }
   if (new_p) {
     since_prolongator_ = 0;
@@ -772,6 +940,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
     return false;
   }
   built_ = true;
+  sync_float(false);
   info_.clear();
   for (const Level& L : L_)
     info_.push_back({L.A.rows, L.A.br, L.A.nnz(),
@@ -787,7 +956,7 @@ namespace {
 // one colour are not coupled). Backward: exactly the reverse order. Every update is a
 // sequential Gauss-Seidel step in one fixed row order, so the backward sweep is the adjoint
 // of the forward one, with no races and the same result on any number of threads.
-template <int B>
+template <int B, class T>
 void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::vector<Index>& cp,
               const std::vector<Index>& cr, const std::vector<Index>& pp, const std::vector<Index>& pr,
               const double* b, double* x, bool forward, bool par) {
@@ -795,7 +964,7 @@ void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::
   const int np = static_cast<int>(pp.size()) - 1;
   auto update = [&](Index i) {
     double acc[B];
-    row_residual<B>(A, b, x, i, acc);
+    row_residual<B, T>(A, b, x, i, acc);
     gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
   };
 #pragma omp parallel if (par)
@@ -818,8 +987,62 @@ void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::
   }
 }
 
+// The first forward sweep from x = 0, fused with the residual that follows it. An interior
+// row is swept before every boundary row and after the interior rows below it in its own
+// part, so when it is updated the only nonzero x_j of its neighbours are those with j < i:
+// the blocks left of the diagonal (the columns are sorted). Its partial residual
+// acc_i = b_i - sum_{j<i} A_ij x_j is kept in r. After the sweep, for a `clean` row (interior,
+// no boundary neighbour: no neighbour changed after it except j > i), the residual is
+// r_i = acc_i - sum_{j>=i} A_ij x_j, the blocks from the diagonal on; every other row gets
+// the full b_i - (A x)_i. Together one pass over A instead of two (a sweep and a residual),
+// the same operator as gs_sweep + residual up to rounding.
+template <int B, class T>
+void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<Index>& diag,
+                                       const std::vector<double>& dinv, const std::vector<std::uint8_t>& clean,
+                                       const std::vector<Index>& cp, const std::vector<Index>& cr,
+                                       const std::vector<Index>& pp, const std::vector<Index>& pr, const double* b,
+                                       double* x, double* r, bool par) {
+  const int nc = static_cast<int>(cp.size()) - 1;
+  const int np = static_cast<int>(pp.size()) - 1;
+  const Index n = A.rows;
+#pragma omp parallel if (par)
+  {
+#pragma omp for schedule(static, 1)
+    for (int p = 0; p < np; ++p)
+      for (Index t = pp[p]; t < pp[p + 1]; ++t) {
+        const Index i = pr[t];
+        double lo[B];
+        row_partial<B, T>(A, A.rp[i], diag[i], x, lo);
+        double* acc = r + static_cast<std::size_t>(B) * i;
+        for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - lo[a];
+        gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+      }
+    for (int c = 0; c < nc; ++c) {
+#pragma omp for schedule(static)
+      for (Index t = cp[c]; t < cp[c + 1]; ++t) {
+        const Index i = cr[t];
+        double acc[B];
+        row_residual<B, T>(A, b, x, i, acc);
+        gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+      }
+    }
+#pragma omp for schedule(static)
+    for (Index i = 0; i < n; ++i) {
+      double* ri = r + static_cast<std::size_t>(B) * i;
+      if (clean[i]) {
+        double up[B];
+        row_partial<B, T>(A, diag[i], A.rp[i + 1], x, up);
+        for (int a = 0; a < B; ++a) ri[a] -= up[a];
+      } else {
+        row_residual<B, T>(A, b, x, i, ri);
+      }
+    }
+  }
+}
+
 }  // namespace
 
+template <class T>
 void SaAmg::cycle(std::size_t l, const double* b, double* x) {
   Level& L = L_[l];
   const Index n = L.A.rows;
@@ -837,48 +1060,77 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       with_size(bs, [&](auto Bc) {
         constexpr int B = decltype(Bc)::value;
         for (int s = 0; s < 2; ++s) {
-          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
-          gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+          gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+          gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
         }
       });
     }
     return;
   }
   Level& C = L_[l + 1];
+  const bool timed = l == 0;
+  Clock::time_point t0{};
+  if (timed) t0 = Clock::now();
+  auto lap = [&](double& total) {
+    if (!timed) return;
+    const auto t1 = Clock::now();
+    total += std::chrono::duration<double>(t1 - t0).count();
+    t0 = t1;
+  };
   std::fill(x, x + N, 0.0);
   with_sizes(bs, m_, [&](auto Bc, auto Mc) {
     constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
     constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
-    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
     double* r = L.r.data();
     const Index nc = C.A.rows;
+    const bool fused = o_.smoothing_sweeps == 1 && L.clean.size() == static_cast<std::size_t>(n);
+    if (fused) {
+      gs_forward_from_zero_and_residual<B, T>(L.A, L.diag, L.dinv, L.clean, L.colour_ptr, L.colour_rows, L.part_ptr,
+                                              L.part_rows, b, x, r, par);
+      lap(t_.apply_fine_smooth);
+    } else {
+      for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+      lap(t_.apply_fine_smooth);
+    }
 #pragma omp parallel if (par)
     {
+      if (!fused) {
 #pragma omp for schedule(static)
-      for (Index i = 0; i < n; ++i) {
-        row_residual<B>(L.A, b, x, i, r + static_cast<std::size_t>(B) * i);
+        for (Index i = 0; i < n; ++i) {
+          row_residual<B, T>(L.A, b, x, i, r + static_cast<std::size_t>(B) * i);
+        }
       }
 #pragma omp for schedule(static)
       for (Index I = 0; I < nc; ++I) {
         double* bi = C.b.data() + static_cast<std::size_t>(M) * I;
         std::fill(bi, bi + M, 0.0);
         for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k)
-          gemv_add<M, B>(L.R.v.data() + PB * k, r + static_cast<std::size_t>(B) * L.R.ci[k], bi);
+          gemv_add<M, B>(values<T>(L.R) + PB * k, r + static_cast<std::size_t>(B) * L.R.ci[k], bi);
       }
     }
-    cycle(l + 1, C.b.data(), C.x.data());
+    lap(t_.apply_fine_transfer);
+    cycle<T>(l + 1, C.b.data(), C.x.data());
+    lap(t_.apply_coarse);
 #pragma omp parallel for schedule(static) if (par)
     for (Index i = 0; i < n; ++i)
       for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k)
-        gemv_add<B, M>(L.P.v.data() + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
+        gemv_add<B, M>(values<T>(L.P) + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
                        x + static_cast<std::size_t>(B) * i);
-    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+    lap(t_.apply_fine_transfer);
+    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+    lap(t_.apply_fine_smooth);
   });
 }
 
 void SaAmg::apply(const double* r, double* z) {
   if (!built_) throw std::logic_error("sa_amg: apply() before a successful setup()");
-  cycle(0, r, z);
+  const auto t0 = Clock::now();
+  if (o_.float_storage)
+    cycle<float>(0, r, z);
+  else
+    cycle<double>(0, r, z);
+  t_.apply += since(t0);
+  ++t_.applies;
 }
 
 }  // namespace loom::amg

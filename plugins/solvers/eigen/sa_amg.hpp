@@ -42,7 +42,16 @@ struct SaAmgOptions {
   /// between only level 0 (A~ and its diagonal blocks) follows the new matrix. Any k keeps the
   /// V-cycle SPD (NUMERICS.md 3.6); a changed S always refreshes everything.
   int hierarchy_refresh_steps = 1;
+  /// Levels (from the finest) that aggregate on the distance-2 strength graph (aggregates of
+  /// about 19 instead of 7 vertices on a triangle grid): a coarser, sparser next level, so a
+  /// cheaper V-cycle and Galerkin product for possibly more iterations (NUMERICS.md 3.6).
+  int aggressive_levels = 0;
   double prolongator_damping = 4.0 / 3.0;  ///< omega = damping / lambda_max(D^-1 A)
+  /// The V-cycle reads float copies of the level matrices and transfer operators (set-up and
+  /// all arithmetic stay double): half the memory traffic of the bandwidth-bound V-cycle. The
+  /// V-cycle is still exactly symmetric (the smoother and residual use the same rounded
+  /// matrix, R is the exact transpose of P; NUMERICS.md 3.6).
+  bool float_storage = true;
   Index parallel_min_dofs = 6144;  ///< loops run on all OpenMP threads from this many DOFs on
 };
 
@@ -52,10 +61,26 @@ struct BlockMatrix {
   int br = 3, bc = 3;
   std::vector<Index> rp, ci;
   std::vector<double> v;
+  std::vector<float> f;  ///< float copy of v read by the V-cycle (SaAmgOptions::float_storage)
   std::size_t bsize() const { return static_cast<std::size_t>(br) * bc; }
   Index nnz() const { return static_cast<Index>(ci.size()); }
   double* block(Index k) { return v.data() + bsize() * static_cast<std::size_t>(k); }
   const double* block(Index k) const { return v.data() + bsize() * static_cast<std::size_t>(k); }
+};
+
+/// Seconds spent in the preconditioner, cumulative since construction (steady clock; a few
+/// clock reads per setup and per V-cycle). `apply_fine_*` split level 0's share of the
+/// V-cycles: smoothing sweeps vs residual + restriction + prolongation; `apply_coarse` is
+/// everything below level 0 (coarser smoothing and the coarsest solve).
+struct SaAmgTimings {
+  double setup = 0;            ///< setup(): level-0 copy, diagonal inverses, P, Galerkin, factor
+  double setup_galerkin = 0;   ///< of which Galerkin products (A P, P^T A P)
+  double setup_prolongator = 0;  ///< of which tentative + smoothed prolongators (when rebuilt)
+  double apply = 0;            ///< apply(): whole V-cycles
+  double apply_fine_smooth = 0;  ///< (with smoothing_sweeps 1 it includes the residual fused into the first sweep)
+  double apply_fine_transfer = 0;
+  double apply_coarse = 0;
+  long setups = 0, applies = 0;
 };
 
 struct LevelInfo {
@@ -87,6 +112,7 @@ class SaAmg {
   int prolongator_builds() const { return prolongator_builds_; }
   int hierarchy_builds() const { return hierarchy_builds_; }
   const SaAmgOptions& options() const { return o_; }
+  const SaAmgTimings& timings() const { return t_; }
 
  private:
   struct Level {
@@ -95,6 +121,7 @@ class SaAmg {
     std::vector<double> dinv;         // b*b per row: inverse of the diagonal block
     std::vector<Index> colour_ptr, colour_rows;  // boundary rows (coupled to another part) by colour
     std::vector<Index> part_ptr, part_rows;      // interior rows of each part, increasing
+    std::vector<std::uint8_t> clean;  // interior row with no boundary neighbour (fused residual)
     std::vector<Index> agg;           // aggregate of each row, -1 when in none
     std::vector<Index> member_ptr, members;  // rows of each aggregate
     std::vector<double> B;            // near-null space on this level: b x m per row
@@ -102,6 +129,7 @@ class SaAmg {
     std::vector<std::uint8_t> dead;   // per scalar DOF of this level: a zero column of P above
     BlockMatrix P, R, AP;             // to/from the next level: P (b x m), R = P^T, A P
     std::vector<Index> r_from_p;      // block of P transposed into each block of R
+    std::vector<Index> trans;         // position of the transposed block (j, i) of each block (i, j) of A
     std::vector<double> x, b, r;      // work vectors
     std::vector<double> ev;           // last power-iteration vector of D^-1 A (warm start)
   };
@@ -118,12 +146,15 @@ class SaAmg {
   void aggregate(std::size_t l);
   void colour(std::size_t l);
   void build_patterns(std::size_t l);
+  template <class T>
   void cycle(std::size_t l, const double* b, double* x);
+  void sync_float(bool level0_only);
   bool filter_changed(const Filter& S) const;
   void remember_filter(const Filter& S);
   bool parallel(const Level& L) const { return static_cast<Index>(L.A.rows) * L.A.br >= o_.parallel_min_dofs; }
 
   SaAmgOptions o_;
+  SaAmgTimings t_;
   bool built_ = false;
   const BsrPattern* pattern_ = nullptr;
   Index pattern_nnz_ = -1;
