@@ -174,8 +174,12 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
     double depth = 0;
     for (std::size_t ci = 0; ci < cols.size(); ++ci) {
       const Collider& c = cols[ci];
-      const Collider::Contact now = c.query(frames0_[ci], x);
-      const Collider::Contact next = c.query(frames1_[ci], xp);
+      // Only distances <= 0 make a contact: ask with a cutoff (exact below it, a lower bound
+      // above; a mesh skips its far parts), and again without it for the start distance of a
+      // vertex predicted to land, whose target velocity needs it exactly.
+      Collider::Contact now = c.query(frames0_[ci], x, kQueryCutoff);
+      const Collider::Contact next = c.query(frames1_[ci], xp, kQueryCutoff);
+      if (next.distance <= 0 && now.distance >= kQueryCutoff) now = c.query(frames0_[ci], x);
       const double d = std::min(now.distance, next.distance);
       if (d <= 0 && (!best || d < depth)) {
         best = &c;
@@ -298,7 +302,7 @@ void BaraffWitkin::project_positions(Scene& scene, double t) {
     if (s.pinned[i]) continue;
     double* x = &s.x[3 * static_cast<std::size_t>(i)];
     for (std::size_t ci = 0; ci < cols.size(); ++ci) {
-      const Collider::Contact q = cols[ci].query(frames1_[ci], x);
+      const Collider::Contact q = cols[ci].query(frames1_[ci], x, 0.0);  // exact where < 0
       if (q.distance < 0)
         for (int k = 0; k < 3; ++k) x[k] -= q.distance * q.normal[k];
     }

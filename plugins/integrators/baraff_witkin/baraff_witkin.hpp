@@ -91,6 +91,8 @@ class BaraffWitkin final : public Integrator {
   /// first condition keeps a vertex sliding over a curved surface in contact: a step along
   /// the tangent plane ends it a little outside a convex surface.)
   static constexpr double kContactTolerance = 1e-9;
+  /// Collider queries in set_constraints: exact below this distance (m), a lower bound above.
+  static constexpr double kQueryCutoff = 1e-6;
 
   // One contact per vertex (the deepest collider): Baraff & Witkin's 2-DOF constraint.
   struct Contact {
