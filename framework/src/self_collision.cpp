@@ -429,6 +429,8 @@ constexpr double kCcdSeparation = 0.1;       ///< CCD impulses leave this gap, t
 // (implicit ones) rebuild every step or two with boxes a few displacements wide.
 constexpr double kReachMin = 0.5;
 constexpr double kReachSteps = 16.0;
+// Traversal tasks of a parallel rebuild (fixed, so the pairs' order does not depend on the threads).
+constexpr std::size_t kTraversalTasks = 64;
 
 }  // namespace
 
@@ -692,77 +694,76 @@ void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
   }
   bvh_.refit(tlo_.data(), thi_.data(), 0.0);
 
-  // Traversal: independent node pairs shared out among the threads, each filling its own lists
-  // (kept between calls: no allocation once they have grown), then merged and sorted so that
-  // the response visits the pairs in the same order whatever the thread count.
+  // Traversal: a fixed number of independent node pairs (tasks) shared out among the threads,
+  // each task filling its own lists (kept between calls: no allocation once they have grown),
+  // then joined in task order. The tasks do not depend on the thread count, so neither does
+  // the order in which the response visits the pairs, and no sort is needed.
   const int nth = par ? std::max(1, omp_get_max_threads()) : 1;
-  if (static_cast<int>(tvt_.size()) < nth) {
-    tvt_.resize(nth);
-    tee_.resize(nth);
-    tstack_.resize(nth);
+  bvh_.split(par ? kTraversalTasks : 1, tasks_);
+  const std::size_t ntasks = tasks_.size();
+  if (task_vt_.size() < ntasks) {
+    task_vt_.resize(ntasks);
+    task_ee_.resize(ntasks);
   }
-  for (int t = 0; t < nth; ++t) {
-    tvt_[t].clear();
-    tee_[t].clear();
-  }
-  bvh_.split(nth > 1 ? 32 * static_cast<std::size_t>(nth) : 1, tasks_);
+  if (static_cast<int>(tstack_.size()) < nth) tstack_.resize(nth);
   auto overlap = [](const double* alo, const double* ahi, const double* blo, const double* bhi) {
     return alo[0] <= bhi[0] && blo[0] <= ahi[0] && alo[1] <= bhi[1] && blo[1] <= ahi[1] && alo[2] <= bhi[2] &&
            blo[2] <= ahi[2];
   };
-  const std::size_t ntasks = tasks_.size();
 #pragma omp parallel num_threads(nth) if (nth > 1)
   {
     const int me = omp_get_thread_num();
-    std::vector<Pair>& vt = tvt_[me];
-    std::vector<Pair>& ee = tee_[me];
-    auto vert_tri = [&](Index v, Index t) {
-      const Index* tv = &tris_[3 * t];
-      if (v == tv[0] || v == tv[1] || v == tv[2]) return;
-      if (!overlap(&vlo_[3 * v], &vhi_[3 * v], &tlo_[3 * t], &thi_[3 * t])) return;
-      double dist = 0;
-      if (exact) {
-        double w[3];
-        dist = selfcol::point_triangle_distance(&x0[3 * v], &x0[3 * tv[0]], &x0[3 * tv[1]], &x0[3 * tv[2]], w);
-        if (!(dist < gap + reach_[v] + treach_[t])) return;
-      }
-      vt.push_back({v, t, dist});
-    };
-    auto emit = [&](Index A, Index B) {
-      for (Index v : own_verts_[A])
-        if (v >= 0) vert_tri(v, B);
-      for (Index v : own_verts_[B])
-        if (v >= 0) vert_tri(v, A);
-      for (Index e : own_edges_[A]) {
-        if (e < 0) continue;
-        const auto& E = edges_[e];
-        for (Index f : own_edges_[B]) {
-          if (f < 0) continue;
-          const auto& F = edges_[f];
-          if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
-          if (!overlap(&elo_[3 * e], &ehi_[3 * e], &elo_[3 * f], &ehi_[3 * f])) continue;
-          double dist = 0;
-          if (exact) {
-            double ss, tt;
-            dist = selfcol::segment_segment_distance(&x0[3 * E[0]], &x0[3 * E[1]], &x0[3 * F[0]], &x0[3 * F[1]], ss, tt);
-            if (!(dist < gap + ereach_[e] + ereach_[f])) continue;
-          }
-          ee.push_back({std::min(e, f), std::max(e, f), dist});
-        }
-      }
-    };
 #pragma omp for schedule(dynamic, 1)
-    for (std::size_t q = 0; q < ntasks; ++q) bvh_.pairs_from(tasks_[q], emit, tstack_[me]);
+    for (std::size_t q = 0; q < ntasks; ++q) {
+      std::vector<Pair>& vt = task_vt_[q];
+      std::vector<Pair>& ee = task_ee_[q];
+      vt.clear();
+      ee.clear();
+      auto vert_tri = [&](Index v, Index t) {
+        const Index* tv = &tris_[3 * t];
+        if (v == tv[0] || v == tv[1] || v == tv[2]) return;
+        if (!overlap(&vlo_[3 * v], &vhi_[3 * v], &tlo_[3 * t], &thi_[3 * t])) return;
+        double dist = 0;
+        if (exact) {
+          double w[3];
+          dist = selfcol::point_triangle_distance(&x0[3 * v], &x0[3 * tv[0]], &x0[3 * tv[1]], &x0[3 * tv[2]], w);
+          if (!(dist < gap + reach_[v] + treach_[t])) return;
+        }
+        vt.push_back({v, t, dist});
+      };
+      auto emit = [&](Index A, Index B) {
+        for (Index v : own_verts_[A])
+          if (v >= 0) vert_tri(v, B);
+        for (Index v : own_verts_[B])
+          if (v >= 0) vert_tri(v, A);
+        for (Index e : own_edges_[A]) {
+          // B's box holds its edges' boxes: an edge of A clear of it meets none of them.
+          if (e < 0 || !overlap(&elo_[3 * e], &ehi_[3 * e], &tlo_[3 * B], &thi_[3 * B])) continue;
+          const auto& E = edges_[e];
+          for (Index f : own_edges_[B]) {
+            if (f < 0) continue;
+            const auto& F = edges_[f];
+            if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+            if (!overlap(&elo_[3 * e], &ehi_[3 * e], &elo_[3 * f], &ehi_[3 * f])) continue;
+            double dist = 0;
+            if (exact) {
+              double ss, tt;
+              dist = selfcol::segment_segment_distance(&x0[3 * E[0]], &x0[3 * E[1]], &x0[3 * F[0]], &x0[3 * F[1]], ss, tt);
+              if (!(dist < gap + ereach_[e] + ereach_[f])) continue;
+            }
+            ee.push_back({std::min(e, f), std::max(e, f), dist});
+          }
+        }
+      };
+      bvh_.pairs_from(tasks_[q], emit, tstack_[me]);
+    }
   }
   vt_.clear();
   ee_.clear();
-  for (int t = 0; t < nth; ++t) {
-    vt_.insert(vt_.end(), tvt_[t].begin(), tvt_[t].end());
-    ee_.insert(ee_.end(), tee_[t].begin(), tee_[t].end());
+  for (std::size_t q = 0; q < ntasks; ++q) {
+    vt_.insert(vt_.end(), task_vt_[q].begin(), task_vt_[q].end());
+    ee_.insert(ee_.end(), task_ee_[q].begin(), task_ee_[q].end());
   }
-  auto by_ab = [](const Pair& p, const Pair& q) { return p.a < q.a || (p.a == q.a && p.b < q.b); };
-  std::sort(vt_.begin(), vt_.end(), by_ab);
-  std::sort(ee_.begin(), ee_.end(), by_ab);
   std::fill(moved_.begin(), moved_.end(), 0.0);
   have_candidates_ = true;
   stats_.rebuilt = true;
@@ -859,6 +860,7 @@ void SelfCollision::refresh(const double* x0) {
                  for (int i = 0; i < nmv; ++i) try_vt(mine_v[i], B);
                  for (int i = 0; i < nme; ++i) {
                    const Index e = mine_e[i];
+                   if (!overlap(&elo_[3 * e], &ehi_[3 * e], &tlo_[3 * B], &thi_[3 * B])) continue;
                    const auto& E = edges_[e];
                    for (const Index f : own_edges_[B]) {
                      if (f < 0 || (eflag_[f] && f <= e)) continue;

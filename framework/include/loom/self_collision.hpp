@@ -283,7 +283,7 @@ class SelfCollision {
   std::vector<double> treach_, ereach_;          ///< per triangle / edge: the largest reach_ of its vertices
   std::vector<double> elo_, ehi_;                ///< edge boxes
   std::vector<std::array<Index, 2>> tasks_;      ///< parallel traversal tasks (TriangleBvh::split)
-  std::vector<std::vector<Pair>> tvt_, tee_;     ///< per-thread pairs found by the traversal
+  std::vector<std::vector<Pair>> task_vt_, task_ee_;  ///< per-task pairs found by the traversal
   std::vector<std::vector<std::array<Index, 2>>> tstack_;  ///< per-thread traversal stacks
   std::vector<Index> vt_off_, vt_adj_, ve_off_, ve_adj_;   ///< vertex -> incident triangles / edges (CSR)
   std::vector<Index> refresh_v_, refresh_t_, refresh_e_;   ///< refresh(): the vertices and their elements
