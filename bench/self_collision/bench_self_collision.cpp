@@ -6,11 +6,21 @@
 // `rebuilds` is the fraction of steps whose lists changed either way, `full_rebuilds` per step,
 // `refreshed` vertices per step), narrow phase (proximity distances) and response (repulsion,
 // CCD passes, fail-safe; it includes refreshes that responses cause).
-//   LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
-// Thickness: a quarter of the edge length, 0.25 / (N - 1) m. The cloth is first draped with
-// baraff_witkin and self-collision (0.35 s: it has landed and folds start; at 0.2 s a smoke run
-// at 64^2 saw no contact yet); every run starts from that state. `impulses` counts the contact
-// impulses per step, to show that contacts were active. The slope of cost against vertex count is read from the N = 64..256 rows.
+// Run (one line), then read the table, the phases and the log-log slope of cost against vertices:
+//   LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_Step
+//       --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
+//       --benchmark_out=sc.json --benchmark_out_format=json
+//   scripts/self_collision_cost.py sc.json
+// Thickness: a quarter of the edge length, 0.25 / (N - 1) m. The material has the shipped
+// draped-ball scenes' damping (0.0005 N s/m). The cloth is first draped with symplectic_euler
+// without self_collision for 0.35 s (it has landed and folds start; 7 000 steps at 128^2); every
+// run of both integrators starts from that state. An earlier version draped with baraff_witkin
+// (175 steps of 2 ms): at 128^2 that state was crumpled (1 % of the edges below 77 % of their
+// length, the shortest at 16 %, against 95-105 % at 64^2): symplectic Euler with self_collision
+// then held 320 000 pairs in its lists and made ~22 000 contact impulses per step, and with
+// self_collision it also left vertices up to 3 mm inside the ball, which symplectic Euler's
+// collider projection turned into kicks of 135 m/s. `impulses` counts the contact impulses per
+// step, to show how many contacts were active.
 #include <benchmark/benchmark.h>
 #include <omp.h>
 
@@ -30,16 +40,19 @@
 
 namespace {
 
+constexpr double kDrapeTime = 0.35;  // s
+double se_dt(int n) { return 5.0e-5 * 127.0 / (n - 1); }
+
 std::string scene(int n, const std::string& integrator, bool self) {
   std::string s = "mesh: {grid: {nx: " + std::to_string(n) + ", ny: " + std::to_string(n) +
                   ", width: 1.0, height: 1.0, plane: xz}}\n" + R"(
-material: {type: mass_spring, stencil: structural_shear_bend, stiffness: {structural: 200, shear: 200, bend: 20}, density: 0.1}
+material: {type: mass_spring, stencil: structural_shear_bend, stiffness: {structural: 200, shear: 200, bend: 20}, density: 0.1, damping: 0.0005}
 solver: {type: eigen_pcg, eigen_pcg: {tolerance: 1.0e-5}}
 colliders: [{type: sphere, center: [0.5, -0.35, -0.5], radius: 0.3, thickness: 0.004, friction: 0.5,
              motion: {type: rotate, axis: [0, 1, 0], angular_velocity: 2.0}}]
 )";
   // symplectic_euler: dt = 5e-5 is stable at 128 (scenes/draped_ball_symplectic_euler.yaml); it scales with the edge.
-  const double dt_se = 5.0e-5 * 127.0 / (n - 1);
+  const double dt_se = se_dt(n);
   s += integrator == "symplectic_euler" ? "integrator: {type: symplectic_euler, dt: " + std::to_string(dt_se) + "}\n"
                                         : "integrator: {type: baraff_witkin, dt: 2.0e-3}\n";
   if (self) s += "self_collision: {thickness: " + std::to_string(0.25 / (n - 1)) + ", friction: 0.3}\n";
@@ -55,8 +68,8 @@ loom::PluginLoader& loader() {
   return l;
 }
 
-// The draping takes minutes at 256^2; LOOM_BENCH_DRAPE_CACHE=DIR keeps the draped positions
-// and velocities there (draped_N.bin) for later runs of this benchmark.
+// The draping takes a while at 256^2; LOOM_BENCH_DRAPE_CACHE=DIR keeps the draped positions
+// and velocities there (draped_se_N.bin) for later runs of this benchmark.
 bool read_cache(const std::string& path, loom::State& s) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return false;
@@ -76,12 +89,13 @@ const loom::State& draped(int n) {
   static std::map<int, std::unique_ptr<loom::Simulation>> sims;
   auto& sim = sims[n];
   if (!sim) {
-    sim = loom::Simulation::from_string(scene(n, "baraff_witkin", true), "bench.yaml", ".", {}, loader());
+    sim = loom::Simulation::from_string(scene(n, "symplectic_euler", false), "bench.yaml", ".", {}, loader());
     const char* dir = std::getenv("LOOM_BENCH_DRAPE_CACHE");
-    const std::string path = dir ? std::string(dir) + "/draped_" + std::to_string(n) + ".bin" : "";
+    const std::string path = dir ? std::string(dir) + "/draped_se_" + std::to_string(n) + ".bin" : "";
     auto& s = sim->scene().state;
     if (path.empty() || !read_cache(path, s)) {
-      for (int k = 0; k < 175; ++k) sim->step();
+      const int steps = static_cast<int>(std::lround(kDrapeTime / se_dt(n)));
+      for (int k = 0; k < steps; ++k) sim->step();
       if (!path.empty()) {
         std::ofstream out(path, std::ios::binary);
         out.write(reinterpret_cast<const char*>(s.x.data()), static_cast<std::streamsize>(s.x.size() * sizeof(double)));
