@@ -4,7 +4,7 @@
   LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_Step \
       --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
       --benchmark_out=sc.json --benchmark_out_format=json
-  scripts/self_collision_cost.py sc.json
+  scripts/self_collision_cost.py sc.json [more.json ...]   (several runs' files are merged)
 
 For each integrator and grid N (N^2 vertices) it prints the step without self-collision, the step
 with it, their difference, the three phases the self-collision code times itself (broad, narrow,
@@ -20,9 +20,11 @@ import re
 import sys
 
 
-def load(path):
-    with open(path) as f:
-        data = json.load(f)
+def load(paths):
+    data = {"benchmarks": []}
+    for path in paths:
+        with open(path) as f:
+            data["benchmarks"] += json.load(f)["benchmarks"]
     rows = {}
     have_median = any(b.get("aggregate_name") == "median" for b in data["benchmarks"])
     for b in data["benchmarks"]:
@@ -58,9 +60,9 @@ def slope(points):
 
 
 def main():
-    if len(sys.argv) != 2:
+    if len(sys.argv) < 2:
         sys.exit(__doc__)
-    rows = load(sys.argv[1])
+    rows = load(sys.argv[1:])
     integrators = sorted({k[0] for k in rows})
     ok = True
     for integ in integrators:

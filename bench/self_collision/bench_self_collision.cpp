@@ -7,10 +7,12 @@
 // `refreshed` vertices per step), narrow phase (proximity distances) and response (repulsion,
 // CCD passes, fail-safe; it includes refreshes that responses cause).
 // Run (one line), then read the table, the phases and the log-log slope of cost against vertices:
-//   LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_Step
-//       --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
-//       --benchmark_out=sc.json --benchmark_out_format=json
-//   scripts/self_collision_cost.py sc.json
+//   export LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape
+//   build/bin/bench_self_collision --benchmark_filter=BM_Step/symplectic_euler --benchmark_repetitions=3
+//       --benchmark_report_aggregates_only=true --benchmark_out=sc_se.json --benchmark_out_format=json
+//   build/bin/bench_self_collision --benchmark_filter=BM_Step/baraff_witkin
+//       --benchmark_out=sc_bw.json --benchmark_out_format=json
+//   scripts/self_collision_cost.py sc_se.json sc_bw.json
 // Thickness: a quarter of the edge length, 0.25 / (N - 1) m. The material has the shipped
 // draped-ball scenes' damping (0.0005 N s/m). The cloth is first draped with symplectic_euler
 // without self_collision for 0.35 s (it has landed and folds start; 7 000 steps at 128^2); every
@@ -286,7 +288,9 @@ void args(benchmark::internal::Benchmark* b) {
   const char* env = std::getenv("LOOM_BENCH_THREADS");
   const int threads = env ? std::max(1, std::atoi(env)) : 2;
   for (int n : {64, 128, 256}) b->Args({n, threads});
-  b->Unit(benchmark::kMillisecond);
+  // 2 s per row: rebuilds come every 10-15 explicit steps, so the default 0.5 s (about 40
+  // steps at 128^2 with self-collision) sampled them poorly.
+  b->MinTime(2.0)->Unit(benchmark::kMillisecond);
 }
 
 BENCHMARK_CAPTURE(BM_Step, symplectic_euler_without, std::string("symplectic_euler"), false)->Apply(args);
