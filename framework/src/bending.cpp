@@ -1,5 +1,6 @@
 #include "loom/bending.hpp"
 
+#include "loom/colouring.hpp"
 #include "loom/device_material.hpp"
 
 #include <omp.h>
@@ -143,32 +144,16 @@ HingeSet::HingeSet(const Mesh& mesh, const BendingOptions& opt) : opt_(opt) {
     rest[h].theta0 = theta;
   }
 
-  // Greedy vertex colouring: hinges of one colour share no vertex.
-  std::vector<std::uint64_t> used(n_, 0);
-  std::vector<int> colour(nh);
-  int ncol = 0;
-  for (Index h = 0; h < nh; ++h) {
-    const auto& v = hinges[h];
-    const std::uint64_t busy = used[v[0]] | used[v[1]] | used[v[2]] | used[v[3]];
-    int c = 0;
-    while (c < 64 && ((busy >> c) & 1u)) ++c;
-    if (c == 64)
-      throw InputError("bending: mesh " + mesh.source + " has a vertex in more than 63 hinges; bending supports "
-                       "vertex valences up to about 30. Fix: remesh to lower valence.");
-    colour[h] = c;
-    ncol = std::max(ncol, c + 1);
-    for (int a = 0; a < 4; ++a) used[v[a]] |= std::uint64_t(1) << c;
-  }
-  colour_start_.assign(ncol + 1, 0);
-  for (Index h = 0; h < nh; ++h) ++colour_start_[colour[h] + 1];
-  for (int c = 0; c < ncol; ++c) colour_start_[c + 1] += colour_start_[c];
-  std::vector<Index> pos(colour_start_.begin(), colour_start_.end() - 1);
+  // Greedy vertex colouring (loom/colouring.hpp): hinges of one colour share no vertex.
+  const Colouring col = greedy_colouring(nh, n_, [&](Index h, auto&& visit) {
+    for (int a = 0; a < 4; ++a) visit(hinges[h][a]);
+  });
+  colour_start_ = col.start;
   hinge_.resize(nh);
   rest_.resize(nh);
-  for (Index h = 0; h < nh; ++h) {
-    const Index q = pos[colour[h]]++;
-    hinge_[q] = hinges[h];
-    rest_[q] = rest[h];
+  for (Index q = 0; q < nh; ++q) {
+    hinge_[q] = hinges[col.order[q]];
+    rest_[q] = rest[col.order[q]];
   }
 }
 

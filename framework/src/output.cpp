@@ -263,11 +263,4 @@ std::vector<std::string> run_files_in(const std::string& dir) {
   return out;
 }
 
-bool is_output_rank() {
-  for (const char* var : {"OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK"}) {
-    if (const char* v = std::getenv(var)) return std::atoi(v) == 0;
-  }
-  return true;
-}
-
 }  // namespace loom

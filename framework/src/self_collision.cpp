@@ -1,4 +1,5 @@
 #include "loom/self_collision.hpp"
+#include "loom/clock.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -408,9 +409,6 @@ void TriangleBvh::split(std::size_t target, std::vector<std::array<Index, 2>>& t
 // ---------------------------------------------------------------------------------------------
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 std::string fmt(double v) {
   std::ostringstream os;

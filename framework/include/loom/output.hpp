@@ -1,6 +1,8 @@
 // Output writers: OBJ frames (written atomically) and the per-frame stats CSV.
 #pragma once
 
+#include "loom/launcher.hpp"
+
 #include <cstdio>
 #include <span>
 #include <string>
@@ -75,7 +77,6 @@ int remove_stale_temporaries(const std::string& dir);
 /// velocity.pc2, run.pvd, rest.obj, restart.bin, scene.yaml), sorted.
 std::vector<std::string> run_files_in(const std::string& dir);
 
-/// False on MPI ranks other than 0 (OMPI_COMM_WORLD_RANK / PMI_RANK), which write nothing.
-bool is_output_rank();
+/// is_output_rank(): false on MPI ranks other than 0, which write nothing (loom/launcher.hpp).
 
 }  // namespace loom

@@ -6,19 +6,13 @@
 #include <cmath>
 #include <cstdio>
 
+#include "loom/clock.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/kernels/bw_assembly.hpp"
 #include "loom/solver_common.hpp"
 #include "loom/state.hpp"
 
 namespace loom {
-
-namespace {
-using Clock = std::chrono::steady_clock;
-double seconds_between(Clock::time_point a, Clock::time_point b) {
-  return std::chrono::duration<double>(b - a).count();
-}
-}  // namespace
 
 const ParamSpec& baraff_witkin_spec() {
   static const ParamSpec spec = [] {

@@ -1,5 +1,6 @@
 #include "gnatv_material.hpp"
 
+#include "loom/colouring.hpp"
 #include "loom/device_material.hpp"
 
 #include <algorithm>
@@ -182,36 +183,12 @@ void GnatvMaterial::setup(const Mesh& mesh) {
   // after the other. Storage is sorted by colour, then chunk.
   const Index chunk = std::clamp<Index>((nt + 127) / 128, 8, 256);
   const Index nchunks = (nt + chunk - 1) / chunk;
-  std::vector<std::vector<Index>> vchunks(n_);  // chunks touching each vertex (built once)
-  for (Index t = 0; t < nt; ++t)
-    for (int k = 0; k < 3; ++k) {
-      auto& l = vchunks[mesh.triangles[3 * t + k]];
-      const Index ch = t / chunk;
-      if (l.empty() || l.back() != ch) l.push_back(ch);
-    }
-  std::vector<int> colour(nchunks, -1);
-  std::vector<char> used;
-  int ncol = 0;
-  for (Index ch = 0; ch < nchunks; ++ch) {
-    used.assign(static_cast<std::size_t>(ncol) + 1, 0);
-    const Index t1 = std::min(nt, (ch + 1) * chunk);
-    for (Index t = ch * chunk; t < t1; ++t)
-      for (int k = 0; k < 3; ++k)
-        for (Index other : vchunks[mesh.triangles[3 * t + k]])
-          if (colour[other] >= 0) used[colour[other]] = 1;
-    int c = 0;
-    while (used[c]) ++c;
-    colour[ch] = c;
-    ncol = std::max(ncol, c + 1);
-  }
-  colour_start_.assign(ncol + 1, 0);
-  for (Index ch = 0; ch < nchunks; ++ch) ++colour_start_[colour[ch] + 1];
-  for (int c = 0; c < ncol; ++c) colour_start_[c + 1] += colour_start_[c];
-  std::vector<Index> order(nchunks);  // chunks sorted by colour (stable)
-  {
-    std::vector<Index> fill(colour_start_.begin(), colour_start_.end() - 1);
-    for (Index ch = 0; ch < nchunks; ++ch) order[fill[colour[ch]]++] = ch;
-  }
+  const Colouring col = greedy_colouring(nchunks, n_, [&](Index ch, auto&& visit) {  // loom/colouring.hpp
+    for (Index t = ch * chunk; t < std::min(nt, (ch + 1) * chunk); ++t)
+      for (int k = 0; k < 3; ++k) visit(mesh.triangles[3 * t + k]);
+  });
+  colour_start_ = col.start;
+  const std::vector<Index>& order = col.order;  // chunks sorted by colour (stable)
   chunk_start_.assign(nchunks + 1, 0);
   tri_.resize(nt);
   rest_.resize(nt);

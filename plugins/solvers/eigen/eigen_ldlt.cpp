@@ -1,4 +1,5 @@
 #include "eigen_ldlt.hpp"
+#include "loom/clock.hpp"
 
 #include <chrono>
 #include <cmath>
@@ -7,10 +8,6 @@
 namespace loom {
 
 namespace {
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 }  // namespace
 
 const ParamSpec& ldlt_spec() {

@@ -13,16 +13,13 @@
 #include <utility>
 
 #include "block_row.hpp"
+#include "loom/clock.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/solver_common.hpp"
 
 namespace loom {
 
 namespace {
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 std::string format(const char* fmt, double a, double b = 0, double c = 0) {
   char buf[512];
   std::snprintf(buf, sizeof buf, fmt, a, b, c);

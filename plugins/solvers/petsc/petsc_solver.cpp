@@ -14,6 +14,7 @@
 #include <sstream>
 #include <vector>
 
+#include "loom/clock.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/solver_common.hpp"
 
@@ -21,10 +22,6 @@ namespace loom {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 std::string petsc_error_text(PetscErrorCode ierr) {
   const char* generic = nullptr;
@@ -116,13 +113,6 @@ void petsc_ensure_initialized() {
   PetscPushErrorHandler(PetscReturnErrorHandler, nullptr);
   g_we_initialized = true;
   std::atexit(finalize_petsc_at_exit);
-}
-
-int launcher_rank() {
-  for (const char* var : {"OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK", "MV2_COMM_WORLD_RANK"}) {
-    if (const char* v = std::getenv(var)) return std::atoi(v);
-  }
-  return 0;
 }
 
 const ParamSpec& PetscSolverOptions::spec() {

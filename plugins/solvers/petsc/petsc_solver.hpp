@@ -9,6 +9,7 @@
 #include <memory>
 #include <string>
 
+#include "loom/launcher.hpp"  // launcher_rank(): the one MPI-rank rule
 #include "loom/linear_solver.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
@@ -71,9 +72,4 @@ class PetscSolver final : public LinearSolver {
 /// Initialise PETSc (and MPI, when not yet initialised) once per process; finalised at exit.
 /// Safe to call more than once. Throws SolverError when PETSc cannot start.
 void petsc_ensure_initialized();
-/// Rank of this process in MPI_COMM_WORLD from the launcher's environment
-/// (OMPI_COMM_WORLD_RANK, PMI_RANK, PMIX_RANK), 0 when not launched by mpirun. Does not
-/// need MPI. Only rank 0 should write output.
-int launcher_rank();
-
 }  // namespace loom

@@ -12,6 +12,7 @@
 
 #include <cholmod.h>
 
+#include "loom/clock.hpp"
 #include "loom/solver_common.hpp"
 
 extern "C" {
@@ -27,10 +28,6 @@ namespace loom {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // Vector loops below this length run on one thread: a parallel region costs more than it
 // saves, and far more when the machine is oversubscribed (a descheduled thread stalls the

@@ -1,6 +1,6 @@
 // 3x3 block helpers for the block-sparse (BSR) matrices of the implicit step and the
 // linear solvers. Header-only, host+device (LOOM_HD), templated on the scalar so that a
-// future CUDA backend runs the same math. Blocks are row-major arrays of 9 scalars,
+// CUDA backend (plugins/backends/cuda) runs the same math. Blocks are row-major arrays of 9 scalars,
 // vectors arrays of 3.
 #pragma once
 

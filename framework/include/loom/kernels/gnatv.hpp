@@ -1,6 +1,6 @@
 // GNATV triangle element (Volino et al. 2009, corrected as in NUMERICS.md section 2):
 // per-triangle rest data, strain, energy, force and force Jacobian. Header-only and
-// LOOM_HD so the CPU and a future CUDA backend share the math. Templated on the scalar T
+// LOOM_HD so the CPU and the CUDA backend (plugins/backends/cuda) share the math. Templated on the scalar T
 // of the computation (double, float, or a complex-step/dual type in tests) and on the
 // storage type R of the rest data and curves.
 #pragma once

@@ -1,5 +1,5 @@
 // Per-spring math (Hooke spring with optional axial damper), shared by the CPU plugins
-// and the future CUDA backend. Header-only, host+device (LOOM_HD), templated on the scalar.
+// and the CUDA backend (plugins/backends/cuda). Header-only, host+device (LOOM_HD), templated on the scalar.
 //
 // Conventions (NUMERICS.md): spring (i, j), d = x_j - x_i, l = |d|, n = d / l,
 // delta = l - l0, delta_dot = n . (v_j - v_i).
