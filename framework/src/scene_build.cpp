@@ -1,0 +1,345 @@
+// The stages of Simulation::build (scene_build.hpp): each reads one part of the scene file.
+#include "scene_build.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <iostream>
+
+#include "loom/bending.hpp"
+#include "loom/fabric_library.hpp"
+#include "loom/memory_estimate.hpp"
+#include "loom/param_spec.hpp"
+#include "loom/pins.hpp"
+#include "loom/text.hpp"
+
+namespace fs = std::filesystem;
+
+namespace loom::scene_build {
+
+namespace {
+
+// A vector of 3 finite numbers (initial_velocity, gravity); `what` starts the messages.
+std::vector<double> finite3(const Params& p, const std::string& what, const std::string& example) {
+  const auto v = p.as_doubles();
+  if (v.size() != 3) p.fail(what + "needs 3 components, " + example + ".");
+  for (double c : v)
+    if (!std::isfinite(c)) p.fail(what + "components must be finite numbers.");
+  return v;
+}
+
+}  // namespace
+
+void apply_overrides(Params& root, const std::vector<std::string>& overrides) {
+  for (const auto& o : overrides) {
+    const auto eq = o.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw InputError("--set " + o + ": expected key=value, e.g. --set integrator.dt=0.0005");
+    root.set_path(o.substr(0, eq), o.substr(eq + 1));
+  }
+}
+
+std::string memory_line(const Params& root, long long vertices) {
+  MemoryCombo combo;
+  combo.vertices = vertices;
+  auto scalar = [](const Params& p) { return p.valid() && p.is_scalar() ? p.as_string() : std::string(); };
+  const Params integ = root.child("integrator");
+  if (integ.is_map()) combo.integrator = scalar(integ.child("type"));
+  const Params solver = root.child("solver");
+  if (solver.valid()) {
+    Params type = solver.is_map() ? solver.child("type") : solver;
+    combo.solver = type.is_sequence() && type.size() > 0 ? scalar(type.at(0)) : scalar(type);
+    if (solver.is_map() && solver.child("eigen_pcg").is_map())
+      combo.sa_amg = scalar(solver.child("eigen_pcg").child("preconditioner")) == "sa_amg";
+  }
+  const Params mat = root.child("material");
+  combo.bending = mat.is_map() && (mat.has("bending") || mat.has("fabric"));
+  combo.self_collision = root.has("self_collision");
+  const MemoryEstimate est = estimate_run_memory(combo);
+  const auto machine = machine_memory_bytes();
+  std::string line = "memory:     about " + format_bytes(est.bytes) + " at the peak (" + est.basis + ", " +
+                     std::to_string(vertices) + " vertices)" +
+                     (machine ? "; this machine has " + format_bytes(*machine) : std::string("; machine memory unknown"));
+  if (machine && est.bytes > *machine)
+    root.child("mesh").fail("this run needs about " + format_bytes(est.bytes) + " of memory (" + est.basis + ", " +
+                            std::to_string(vertices) + " vertices), more than this machine's " +
+                            format_bytes(*machine) + ". Fix: use a coarser mesh (fewer vertices), an iterative "
+                            "solver instead of a direct one, or a machine with more memory.");
+  return line;
+}
+
+Mesh mesh(const Params& root, const std::string& base_dir, const std::function<void(long long)>& before_allocating) {
+  Mesh m;
+  Params mesh = root.child("mesh");
+  if (!mesh.valid()) root.fail("missing 'mesh' section. Fix: add mesh: {grid: {nx: 32, ny: 32, width: 1, height: 1}} or mesh: {obj: file.obj}.");
+  if (!mesh.is_map()) mesh.fail("must be a mapping with 'grid' or 'obj'.");
+  const bool has_grid = mesh.has("grid"), has_obj = mesh.has("obj");
+  if (has_grid == has_obj) mesh.fail("give exactly one of 'grid' or 'obj'.");
+  if (has_grid) {
+    Params g = mesh.child("grid");
+    if (!g.is_map()) g.fail("must be a mapping like {nx: 32, ny: 32, width: 1.0, height: 1.0}.");
+    const auto nx = g.require_int("nx"), ny = g.require_int("ny");
+    if (nx < 2 || ny < 2 || nx > 20000 || ny > 20000) g.fail("nx and ny must be in [2, 20000] (got " + std::to_string(nx) + " x " + std::to_string(ny) + ").");
+    const double w = g.get_positive("width", 1.0), h = g.get_positive("height", 1.0);
+    const std::string plane = g.get_choice("plane", "xy", {"xy", "xz"});
+    const std::string diag = g.get_choice("diagonals", "alternate", {"alternate", "uniform"});
+    g.check_unused();
+    before_allocating(static_cast<long long>(nx) * ny);  // before the grid allocates anything
+    m = make_grid(static_cast<Index>(nx), static_cast<Index>(ny), w, h,
+                  plane == "xy" ? GridPlane::XY : GridPlane::XZ, diag == "alternate");
+  } else {
+    Params o = mesh.child("obj");
+    const std::string file = resolve_path(base_dir, o.as_string());
+    if (!fs::exists(file)) o.fail("OBJ file '" + file + "' not found. Fix: paths are relative to the scene file's folder.");
+    m = read_obj(file);
+    before_allocating(static_cast<long long>(m.num_vertices()));
+    const double scale = mesh.get_positive("scale", 1.0);
+    for (double& c : m.positions) c *= scale;
+  }
+  mesh.check_unused();
+  return m;
+}
+
+std::string material(const Params& root, Scene& sc, PluginLoader& loader) {
+  Params mat = root.child("material");
+  if (!mat.is_map()) root.fail("missing 'material' section. Fix: add material: {type: mass_spring, ...}.");
+  const std::string material_name = mat.require_string("type");
+  try {
+    loader.ensure(PluginKind::Material, material_name);
+  } catch (const InputError& e) {
+    mat.child("type").fail(e.what());
+  }
+  try {
+    loader.ensure_backend(sc.backend);
+  } catch (const InputError& e) {
+    root.child("backend").fail(e.what());
+  }
+  // A material describes the cloth (masses, elements, curves); execution backends read that
+  // description, so a material without a backend-specific version is used as is.
+  const bool material_on_backend = loader.registry().has(PluginKind::Material, material_name, sc.backend);
+  const Params fabric_bending = apply_fabric(mat, material_name);  // measured-fabric library (loom/fabric_library.hpp)
+  const Params bending = mat.has("bending") ? mat.child("bending") : fabric_bending;  // hinge bending (loom/bending.hpp)
+  sc.material = loader.registry().make_material(material_name, material_on_backend ? sc.backend : "cpu", mat, sc.mesh);
+  sc.material = add_bending(std::move(sc.material), bending, sc.mesh, sc.backend);
+  return material_name;
+}
+
+void state(const Params& root, Scene& sc, const std::string& material_name) {
+  const Params mat = root.child("material");
+  State& st = sc.state;
+  const Index n = sc.mesh.num_vertices();
+  st.resize(n);
+  st.x = sc.mesh.positions;
+  sc.material->compute_masses(st.mass);
+  for (Index i = 0; i < n; ++i)
+    if (!(st.mass[i] > 0) || !std::isfinite(st.mass[i]))
+      mat.fail("material '" + material_name + "' gave vertex " + std::to_string(i) + " the mass " + fmt(st.mass[i]) +
+               "; masses must be finite and > 0. Fix: check density / vertex_mass, and that every vertex belongs to a triangle.");
+  st.update_inverse_masses();
+
+  // ---- initial shape: positions scaled about the centroid (rest shape unchanged) ----
+  Params iscale = root.child("initial_scale");
+  if (iscale.valid()) {
+    const double f = iscale.as_double();
+    if (!(f > 0) || !std::isfinite(f)) iscale.fail("must be a finite number > 0 (e.g. 0.5 starts the cloth compressed).");
+    double c[3] = {0, 0, 0};
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) c[k] += st.x[3 * i + k] / n;
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) st.x[3 * i + k] = c[k] + f * (st.x[3 * i + k] - c[k]);
+  }
+
+  // ---- initial velocity ----
+  Params v0 = root.child("initial_velocity");
+  if (v0.valid()) {
+    const auto v = finite3(v0, "", "e.g. [0, -5, 0] (m/s)");
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) st.v[3 * i + k] = v[k];
+  }
+
+  // ---- gravity ----
+  Params grav = root.child("gravity");
+  if (grav.valid()) {
+    const auto g = finite3(grav, "gravity ", "e.g. [0, -9.81, 0]");
+    sc.gravity = {g[0], g[1], g[2]};
+  }
+}
+
+void selections(const Params& root, Scene& sc) {
+  State& st = sc.state;
+  // Optional per-vertex mass factors (hard cases: heavy vertices against a light cloth).
+  Params mscale = root.child("mass_scale");
+  if (mscale.valid()) {
+    if (!mscale.is_sequence()) mscale.fail("must be a list like [{vertices: [0, 5], factor: 1.0e6}].");
+    for (std::size_t k = 0; k < mscale.size(); ++k) {
+      Params e = mscale.at(k);
+      if (!e.is_map()) e.fail("an entry is {vertices: [...], factor: f}, {group: name, factor: f} or {box: {min: [..], max: [..]}, factor: f}.");
+      const double factor = e.get_positive("factor", 1.0);
+      const std::vector<Index> vs = select_vertices(sc.mesh, e);
+      e.check_unused();
+      for (Index i : vs) {
+        st.mass[i] *= factor;
+        if (!std::isfinite(st.mass[i]))
+          e.child("factor").fail("makes the mass of vertex " + std::to_string(i) + " overflow to " + fmt(st.mass[i]) +
+                                 " (factors of entries that select it multiply). Fix: use a smaller factor.");
+      }
+    }
+  }
+  st.update_inverse_masses();
+
+  // pins (framework/src/pins.cpp: groups, regions, prescribed motion)
+  sc.pins = PinSet::parse(root.child("pins"), sc.mesh, st);
+}
+
+void colliders(const Params& root, Scene& sc, const std::string& base_dir) {
+  const State& st = sc.state;
+  const Index n = st.size();
+  sc.colliders = ColliderSet::parse(root.child("colliders"), base_dir);
+  {
+    // A contact offset larger than the whole cloth is a unit slip (it would throw the cloth
+    // that far on the first contact): refuse it, naming the collider.
+    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], st.x[3 * i + k]);
+        hi[k] = std::max(hi[k], st.x[3 * i + k]);
+      }
+    const double size = std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                                  (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    const Params list = root.child("colliders");
+    for (std::size_t c = 0; c < sc.colliders.size(); ++c)
+      if (sc.colliders.colliders()[c].thickness > size)
+        list.at(c).child("thickness").fail("the contact offset " + fmt(sc.colliders.colliders()[c].thickness) +
+                                           " m is larger than the whole cloth (" + fmt(size) +
+                                           " m across). Fix: give the thickness in metres (a few millimetres is usual).");
+  }
+  sc.self_collision = SelfCollision::parse(root.child("self_collision"), sc.mesh, st.x);
+}
+
+IntegratorChoice integrator(const Params& root, Scene& sc, PluginLoader& loader, const std::string& material_name) {
+  IntegratorChoice c;
+  Params integ = root.child("integrator");
+  if (!integ.is_map()) root.fail("missing 'integrator' section. Fix: add integrator: {type: symplectic_euler, dt: 0.001, substeps: 10}.");
+  const ParamReader integ_keys(integ, integrator_section_spec());  // the framework's keys (param_spec.cpp)
+  c.name = integ_keys.text("type");
+  c.dt = integ_keys.number("dt");
+  std::int64_t substeps = integ.get("substeps", static_cast<std::int64_t>(1));
+  if (integ.has("frame_time")) {
+    // The frame time fixes the output rate; substeps follow dt (so --set integrator.dt=...
+    // keeps the frames' spacing).
+    if (integ.has("substeps"))
+      integ.child("substeps").fail("give either frame_time or substeps, not both (frame_time sets substeps = frame_time / dt).");
+    const double ft = integ_keys.number("frame_time");
+    const double ratio = ft / c.dt;
+    substeps = std::llround(ratio);
+    if (substeps < 1 || std::abs(ratio - static_cast<double>(substeps)) > 1e-6 * ratio)
+      integ.child("frame_time").fail("frame_time " + fmt(ft) + " s is not a whole number of steps of dt = " + fmt(c.dt) +
+                                     " s (ratio " + fmt(ratio) + "). Fix: choose dt that divides frame_time.");
+  }
+  if (substeps < 1 || substeps > 100000000)
+    integ.child("substeps").fail("must be an integer >= 1 and <= 1e8 (steps per frame).");
+  c.substeps = static_cast<int>(substeps);
+  try {
+    loader.ensure(PluginKind::Integrator, c.name);
+  } catch (const InputError& e) {
+    integ.child("type").fail(e.what());
+  }
+  c.integrator = loader.registry().make_integrator(c.name, sc.backend, integ);
+  const IntegratorNeeds needs = c.integrator->needs();
+  if (needs.springs && !sc.material->springs())
+    integ.fail("integrator '" + c.name + "' works per spring, but material '" + material_name +
+               "' has no springs. Fix: use material type mass_spring, or an integrator that works with any material "
+               "(symplectic_euler, rk4, baraff_witkin).");
+  if (needs.jacobian && !sc.material->has_jacobian())
+    integ.fail("integrator '" + c.name + "' needs force Jacobians, which material '" + material_name +
+               "' does not provide. Fix: use an explicit integrator (symplectic_euler, rk4) with this material.");
+  return c;
+}
+
+std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const IntegratorNeeds& needs,
+                   const std::string& integrator_name, bool notes) {
+  Params solver = root.child("solver");
+  if (needs.linear_solver) {
+    if (!solver.valid())
+      root.fail("integrator '" + integrator_name + "' is implicit and needs a linear solver. Fix: add "
+                "solver: {type: eigen_pcg} (or a list: solver: {type: [cholmod, eigen_ldlt]}).");
+    std::vector<std::string> names;
+    Params type = solver.is_map() ? solver.child("type") : solver;
+    if (type.is_scalar()) names.push_back(type.as_string());
+    else if (type.is_sequence())
+      for (std::size_t k = 0; k < type.size(); ++k) names.push_back(type.at(k).as_string());
+    else
+      (solver.is_map() ? solver : root).fail("solver needs 'type': a solver name or a list of names (first available is used).");
+    if (names.empty()) type.fail("the solver list is empty.");
+    std::string chosen;
+    std::vector<std::string> skipped;
+    for (const auto& nm : names) {
+      if (loader.available(PluginKind::Solver, nm)) { chosen = nm; break; }
+      skipped.push_back(nm);
+    }
+    if (chosen.empty()) {
+      const auto avail = loader.names(PluginKind::Solver);
+      const std::string hint = names.size() == 1 ? closest_match(names[0], avail) : "";
+      type.fail("none of the solvers [" + join(names) + "] is available in this build" +
+                (hint.empty() ? "" : " (did you mean '" + hint + "'?)") + ". Available: " +
+                (avail.empty() ? "none" : join(avail)) + ".");
+    }
+    if (!skipped.empty() && is_output_rank() && notes)
+      std::cerr << "loom: solver " << join(skipped) << " not available in this build; using " << chosen << "\n";
+    loader.ensure(PluginKind::Solver, chosen);
+    Params sp = solver.is_map() ? solver.child(chosen) : Params();
+    if (solver.is_map()) {
+      // Parameter blocks of other solvers may stay in the file (so that --set solver.type=...
+      // can switch between them); a block for a name that is no solver at all is an error.
+      for (const auto& nm : names) solver.mark_used(nm);
+      for (const auto& k : solver.keys())
+        if (k != "type" && loader.available(PluginKind::Solver, k)) solver.mark_used(k);
+      solver.check_unused(loader.names(PluginKind::Solver));
+    }
+    sc.solver = loader.registry().make_solver(chosen, sc.backend, sp);
+    return chosen;
+  } else if (solver.valid()) {
+    if (solver.is_map())
+      for (const auto& k : solver.keys()) solver.mark_used(k);
+    if (is_output_rank() && notes)
+      std::cerr << "loom: note: the 'solver' section is ignored: integrator '" << integrator_name
+                << "' is explicit and solves no linear system.\n";
+  }
+  return "";
+}
+
+void output_and_guards(const Params& root, int& frames, OutputOptions& output_options, GuardOptions& guard_options) {
+  frames = root.get("frames", 60);
+  if (frames < 0) root.child("frames").fail("must be >= 0.");
+  Params out = root.child("output");
+  if (out.valid()) {
+    if (!out.is_map()) out.fail("must be a mapping like {dir: out/run, obj: true, stats: true}.");
+    output_options.dir = out.get("dir", std::string());
+    output_options.obj = out.get("obj", true);
+    output_options.stats = out.get("stats", true);
+    output_options.every = out.get("every", 1);
+    if (output_options.every < 1) out.child("every").fail("must be >= 1 (write every n-th frame).");
+    output_options.pc2 = out.get("pc2", false);
+    output_options.uvs = out.get("uvs", false);
+    output_options.normals = out.get("normals", false);
+    output_options.lossless = out.get("lossless", false);
+    output_options.vtk = out.get("vtk", false);
+    output_options.velocities = out.get("velocities", false);
+    output_options.restart = out.get("restart", true);
+    if (output_options.velocities && !output_options.vtk && !output_options.pc2)
+      out.child("velocities").fail("velocities are written into the ParaView frames (vtk: true) and/or velocity.pc2 "
+                                   "beside run.pc2 (pc2: true). Fix: turn one of them on.");
+    out.check_unused();
+  }
+  Params guard = root.child("guard");
+  if (guard.valid()) {
+    if (!guard.is_map()) guard.fail("must be a mapping like {max_velocity: 1000, max_strain: 10}.");
+    guard_options.max_velocity = guard.get_positive("max_velocity", guard_options.max_velocity);
+    guard_options.max_strain = guard.get_positive("max_strain", guard_options.max_strain);
+    guard_options.check_every = guard.get("check_every", 1);
+    if (guard_options.check_every < 1) guard.child("check_every").fail("must be >= 1.");
+    guard.check_unused();
+  }
+}
+
+}  // namespace loom::scene_build
