@@ -62,8 +62,8 @@ usage:
   loom plugins [--params NAME [--markdown]]
       List the plugins on the plugin path (kind, name, backend, version, description).
       --params NAME: the keys plugin NAME accepts (type, default, range, units, backends,
-      help), the framework's keys of its section first; --markdown: as the table of
-      docs/plugins/*.md.
+      help), the framework's keys of its section first; NAME may also be a framework section
+      (scene, mesh, output, guard, self_collision, ...); --markdown: as the tables of docs/.
   loom --help | --version
 
 options:
@@ -285,7 +285,8 @@ int main(int argc, char** argv) {
         loom::cli::plot_stability(opt.out_dir, args.quiet);
         return 0;
       }
-      const auto rows = loom::run_study(opt);
+      const auto result = loom::run_study(opt);
+      const auto& rows = result.rows;
       if (tty) std::printf("\n");
       int bad = 0;
       for (const auto& r : rows) bad += r.status != "ok";
@@ -294,6 +295,10 @@ int main(int argc, char** argv) {
         std::printf("loom: study done in %.1f s: %zu rows (%d not ok: diverged/failed/timeout); wrote %s/study.csv\n",
                     std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), rows.size(), bad,
                     opt.out_dir.c_str());
+      if (!args.quiet)
+        std::printf("loom: the reference changes by %.3g (RMS, x cloth size) when its step is halved: smaller errors "
+                    "are not resolved (%s/reference.txt)\n", result.reference.largest_rms_change, opt.out_dir.c_str());
+      loom::cli::plot_study(opt.out_dir, args.quiet);
       return 0;
     }
     loom::Registry registry;

@@ -64,21 +64,37 @@ int plot_command(const std::string& run_dir, const std::string& out_png, bool qu
   return 0;
 }
 
-void plot_stability(const std::string& dir, bool quiet) {
-  const std::string csv = (fs::path(dir) / "stability.csv").string();
-  const std::string png = (fs::path(dir) / "stability.png").string();
-  const std::string script = find_script("plot_stability.py");
+namespace {
+
+// scripts/SCRIPT on DIR/CSV -> DIR/PNG; without python3 + matplotlib a note says so (the CSV is
+// the result, the plot a convenience).
+void plot_csv(const std::string& dir, const char* csv_name, const char* png_name, const char* script_name,
+              const char* what, bool quiet) {
+  const std::string csv = (fs::path(dir) / csv_name).string();
+  const std::string png = (fs::path(dir) / png_name).string();
+  const std::string script = find_script(script_name);
   SpawnResult r;
   if (!script.empty() && program_on_path("python3")) r = run_program({"python3", script, csv, png}, /*quiet=*/false);
   if (r.ok()) {
     if (!quiet) std::printf("loom: wrote %s\n", png.c_str());
     return;
   }
-  std::fprintf(stderr, "loom: note: no stability plot (%s). %s.\n",
+  const std::string missing = std::string("python3 or scripts/") + script_name + " not found";
+  std::fprintf(stderr, "loom: note: no %s plot (%s). %s.\n", what,
                r.started && r.exit_code == kNoMatplotlib ? "python3 cannot import matplotlib"
                : r.started                               ? r.error.c_str()
-                                                         : "python3 or scripts/plot_stability.py not found",
+                                                         : missing.c_str(),
                kInstallFix);
+}
+
+}  // namespace
+
+void plot_stability(const std::string& dir, bool quiet) {
+  plot_csv(dir, "stability.csv", "stability.png", "plot_stability.py", "stability", quiet);
+}
+
+void plot_study(const std::string& dir, bool quiet) {
+  plot_csv(dir, "study.csv", "study.png", "plot_study.py", "study", quiet);
 }
 
 void print_study_table(const std::vector<StudyRow>& rows) {

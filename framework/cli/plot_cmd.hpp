@@ -17,6 +17,9 @@ int plot_command(const std::string& run_dir, const std::string& out_png, bool qu
 /// matplotlib, a note says so (the CSV is the result; the plot is a convenience).
 void plot_stability(const std::string& dir, bool quiet);
 
+/// scripts/plot_study.py on DIR/study.csv -> DIR/study.png (a note when python3/matplotlib is missing).
+void plot_study(const std::string& dir, bool quiet);
+
 /// The study's results as a table on stdout, one row per combo, step and time.
 void print_study_table(const std::vector<StudyRow>& rows);
 

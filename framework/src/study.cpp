@@ -1,5 +1,4 @@
 #include "loom/study.hpp"
-#include "loom/spawn.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -9,21 +8,17 @@
 #include <fstream>
 #include <memory>
 #include <sstream>
-#include <unistd.h>
 
 #include "loom/output.hpp"
 #include "loom/simulation.hpp"
+#include "loom/text.hpp"
+#include "loom/clock.hpp"
 
 namespace fs = std::filesystem;
 
 namespace loom {
 
 namespace {
-
-struct Combo {
-  std::string name;
-  std::vector<std::string> sets;  // "key=value"
-};
 
 struct Snapshot {
   std::vector<double> x;
@@ -39,13 +34,6 @@ struct RunResult {
   std::vector<double> wall;         // integrator seconds at each time
   std::vector<long long> force_evals, linear_iters, steps;
 };
-
-std::string fmt(double v) {
-  std::ostringstream os;
-  os.precision(6);
-  os << v;
-  return os.str();
-}
 
 // A value as one line of YAML (lists and maps in flow form), for key=value overrides.
 std::string yaml_scalar(const Params& p) {
@@ -90,7 +78,7 @@ class Runner {
     all.push_back("integrator.dt=" + fmt_exact(h));
     std::unique_ptr<Simulation> sim = make(all);
     const std::vector<double> x0 = sim->scene().state.x;
-    const auto t0 = std::chrono::steady_clock::now();
+    const auto t0 = Clock::now();
     long long done = 0;
     for (double t : times_) {
       const long long target = std::llround(t / h);
@@ -100,8 +88,7 @@ class Runner {
       try {
         for (; done < target; ++done) {
           sim->step();
-          if ((done & 63) == 0 &&
-              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > max_seconds_) {
+          if ((done & 63) == 0 && seconds_since(t0) > max_seconds_) {
             r.status = "timeout";
             r.note = "stopped after " + fmt(max_seconds_) + " s at t = " + fmt(sim->scene().state.time);
             return r;
@@ -190,94 +177,138 @@ std::string csv_escape(const std::string& s) {
   return o + "\"";
 }
 
-std::string find_plot_script() {
-  std::vector<std::string> candidates = {std::string(LOOM_SOURCE_SCRIPTS_DIR) + "/plot_study.py"};
-  char buf[4096];
-  const ssize_t n = ::readlink("/proc/self/exe", buf, sizeof(buf) - 1);
-  if (n > 0) {
-    buf[n] = 0;
-    candidates.push_back((fs::path(buf).parent_path().parent_path() / "share/loom/scripts/plot_study.py").string());
+
+// A combo list entry: {name, set: {dotted.key: value, ...}}.
+StudyCombo parse_combo(const Params& c) {
+  if (!c.is_map()) c.fail("a combo is {name: ..., set: {dotted.key: value, ...}}.");
+  StudyCombo combo;
+  combo.where = c;
+  combo.name = c.require_string("name");
+  Params s = c.child("set");
+  if (s.valid()) {
+    if (!s.is_map()) s.fail("'set' is a mapping of dotted keys to values, e.g. {integrator.type: rk4}.");
+    for (const auto& key : s.keys()) combo.sets.push_back(key + "=" + yaml_scalar(s.child(key)));
   }
-  for (const auto& c : candidates)
-    if (fs::exists(c)) return c;
-  return {};
+  c.check_unused();
+  return combo;
 }
 
 }  // namespace
 
-std::vector<StudyRow> run_study(const StudyOptions& opt) {
-  Simulation::set_notes(false);
-  Params study = Params::from_file(opt.study);
+// ---------------------------------------------------------------- parse
+
+StudyPlan parse_study(const std::string& study_file) {
+  StudyPlan plan;
+  plan.file = study_file;
+  Params study = Params::from_file(study_file);
   if (!study.is_map()) study.fail("a study file is a mapping with times, steps, combos (and reference).");
   study.child("description");
   study.child("stability");  // read by loom study --stability
   // times
   Params tp = study.child("times");
   if (!tp.valid()) study.fail("missing 'times': the simulated times (s) at which errors are measured, e.g. [0.1, 0.25].");
-  std::vector<double> times = tp.as_doubles();
-  if (times.empty()) tp.fail("give at least one time.");
-  for (double t : times)
+  plan.times = tp.as_doubles();
+  if (plan.times.empty()) tp.fail("give at least one time.");
+  for (double t : plan.times)
     if (!(t > 0) || !std::isfinite(t)) tp.fail("times must be finite and > 0.");
-  if (!std::is_sorted(times.begin(), times.end())) tp.fail("times must increase.");
+  if (!std::is_sorted(plan.times.begin(), plan.times.end())) tp.fail("times must increase.");
   // steps
   Params sp = study.child("steps");
   if (!sp.is_map()) study.fail("missing 'steps': {h0: 2.0e-3, levels: 5} (h = h0 / 2^k, k = 0 .. levels-1).");
-  const double h0 = sp.get_positive("h0", 1e-3);
-  const int levels = sp.get("levels", 4);
-  if (levels < 1 || levels > 20) sp.child("levels").fail("levels must be in [1, 20].");
+  plan.h0 = sp.get_positive("h0", 1e-3);
+  plan.levels = sp.get("levels", 4);
+  if (plan.levels < 1 || plan.levels > 20) sp.child("levels").fail("levels must be in [1, 20].");
   sp.check_unused();
   // reference
   Params rp = study.child("reference");
-  std::vector<std::string> ref_sets = {"integrator.type=rk4"};
-  double h_ref = h0 / std::pow(2.0, levels + 4);
+  plan.h_ref = plan.h0 / std::pow(2.0, plan.levels + 4);
   if (rp.valid()) {
     if (!rp.is_map()) rp.fail("reference is a mapping like {integrator: rk4, dt: 6.25e-6}.");
-    ref_sets = {"integrator.type=" + rp.get("integrator", std::string("rk4"))};
-    h_ref = rp.get_positive("dt", h_ref);
+    plan.reference_sets = {"integrator.type=" + rp.get("integrator", std::string("rk4"))};
+    plan.h_ref = rp.get_positive("dt", plan.h_ref);
     Params rs = rp.child("set");
     if (rs.valid()) {
       if (!rs.is_map()) rs.fail("'set' is a mapping of dotted keys to values.");
-      for (const auto& k : rs.keys()) ref_sets.push_back(k + "=" + yaml_scalar(rs.child(k)));
+      for (const auto& k : rs.keys()) plan.reference_sets.push_back(k + "=" + yaml_scalar(rs.child(k)));
     }
     rp.check_unused();
   }
-  const double max_seconds = study.get_positive("max_seconds_per_run", 300.0);
-  const double max_strain = study.get_positive("max_strain", 1.0);
+  plan.reference_where = rp.valid() ? rp : study;
+  plan.max_seconds = study.get_positive("max_seconds_per_run", 300.0);
+  plan.max_strain = study.get_positive("max_strain", 1.0);
   // combos
   Params cp = study.child("combos");
   if (!cp.is_sequence() || cp.size() == 0)
     study.fail("missing 'combos': a list of {name, set: {integrator.type: ..., ...}}.");
-  std::vector<Combo> combos;
-  for (std::size_t k = 0; k < cp.size(); ++k) {
-    Params c = cp.at(k);
-    if (!c.is_map()) c.fail("a combo is {name: ..., set: {dotted.key: value, ...}}.");
-    Combo combo;
-    combo.name = c.require_string("name");
-    Params s = c.child("set");
-    if (s.valid()) {
-      if (!s.is_map()) s.fail("'set' is a mapping of dotted keys to values, e.g. {integrator.type: rk4}.");
-      for (const auto& key : s.keys()) combo.sets.push_back(key + "=" + yaml_scalar(s.child(key)));
-    }
-    c.check_unused();
-    combos.push_back(combo);
-  }
+  for (std::size_t k = 0; k < cp.size(); ++k) plan.combos.push_back(parse_combo(cp.at(k)));
+  plan.combos_where = cp;
   study.check_unused();
+  return plan;
+}
 
-  // Check every combo builds before spending time on the reference.
-  Runner runner(opt.scene, times, max_seconds);
-  for (std::size_t k = 0; k < combos.size(); ++k) {
+StabilityPlan parse_stability(const std::string& study_file) {
+  StabilityPlan plan;
+  plan.file = study_file;
+  Params study = Params::from_file(study_file);
+  if (!study.is_map()) study.fail("a study file is a mapping with a 'stability' section (and the work-precision part).");
+  // The work-precision part's sections are declared keys of the file (parse_study checks
+  // them); anything else at the top level is a typo.
+  for (const char* k : {"description", "times", "steps", "reference", "combos", "max_seconds_per_run", "max_strain"})
+    study.child(k);
+  Params st = study.child("stability");
+  if (!st.is_map())
+    study.fail("no 'stability' section. Fix: add stability: {combos: [...], sweep: {key: material.stiffness, "
+               "values: [2e3, 2e5]}, horizon: 0.5, h_min: 1e-7, h_max: 0.05}.");
+  study.check_unused();
+  plan.horizon = st.get_positive("horizon", 0.5);
+  plan.h_min = st.get_positive("h_min", 1e-7);
+  plan.h_max = st.get_positive("h_max", 0.05);
+  if (!(plan.h_min < plan.h_max)) st.fail("h_min must be smaller than h_max.");
+  plan.bisections = st.get("bisections", 10);
+  if (plan.bisections < 1 || plan.bisections > 40) st.child("bisections").fail("bisections must be in [1, 40].");
+  plan.max_strain = st.get_positive("max_strain", 1.0);
+  plan.max_seconds = st.get_positive("max_seconds_per_run", 60.0);
+  Params cp = st.child("combos");
+  if (!cp.is_sequence() || cp.size() == 0) st.fail("missing 'combos': a list of {name, set: {integrator.type: ...}}.");
+  for (std::size_t k = 0; k < cp.size(); ++k) plan.combos.push_back(parse_combo(cp.at(k)));
+  Params sw = st.child("sweep");
+  if (sw.valid()) {
+    plan.key = sw.require_string("key");
+    Params vs = sw.child("values");
+    if (!vs.is_sequence() || vs.size() == 0) sw.fail("'values' is a non-empty list.");
+    plan.values.clear();
+    for (std::size_t k = 0; k < vs.size(); ++k) plan.values.push_back(yaml_scalar(vs.at(k)));
+    sw.check_unused();
+  }
+  st.check_unused();
+  return plan;
+}
+
+// ---------------------------------------------------------------- run
+
+void check_study_combos(const StudyPlan& plan, const std::string& scene) {
+  Simulation::set_notes(false);
+  Runner runner(scene, plan.times, plan.max_seconds);
+  for (const StudyCombo& c : plan.combos) {
     try {
-      runner.make(combos[k].sets);
+      runner.make(c.sets);
     } catch (const InputError& e) {
-      cp.at(k).fail(std::string("combo '") + combos[k].name + "' does not build: " + e.what());
+      c.where.fail(std::string("combo '") + c.name + "' does not build: " + e.what());
     }
   }
+}
 
-  prepare_output_dir(opt.out_dir);
-  const std::size_t total_runs = 2 + combos.size() * static_cast<std::size_t>(levels);
+StudyResult measure_study(const StudyPlan& plan, const std::string& scene,
+                          const std::function<void(const std::string&, double)>& progress_fn,
+                          const std::function<void(const ReferenceCheck&)>& on_reference,
+                          const std::function<void(const StudyRow&)>& on_row) {
+  Simulation::set_notes(false);
+  const std::vector<double>& times = plan.times;
+  Runner runner(scene, times, plan.max_seconds);
+  const std::size_t total_runs = 2 + plan.combos.size() * static_cast<std::size_t>(plan.levels);
   std::size_t runs_done = 0;
   auto progress = [&](const std::string& what) {
-    if (opt.progress) opt.progress(what, static_cast<double>(runs_done) / total_runs);
+    if (progress_fn) progress_fn(what, static_cast<double>(runs_done) / total_runs);
   };
 
   double e_start = 0, scale = 1, size = 1;
@@ -285,39 +316,37 @@ std::vector<StudyRow> run_study(const StudyOptions& opt) {
   runner.measure_start(e_start, scale, size, pinned);
 
   // Reference, verified by halving its step.
-  progress("reference h = " + fmt(h_ref));
-  RunResult ref = runner.run(ref_sets, h_ref, rp.valid() ? rp : study);
+  StudyResult result;
+  ReferenceCheck& check = result.reference;
+  check.integrator = plan.reference_sets[0];
+  check.h = plan.h_ref;
+  check.size = size;
+  check.times = times;
+  progress("reference h = " + fmt(plan.h_ref));
+  RunResult ref = runner.run(plan.reference_sets, plan.h_ref, plan.reference_where);
   ++runs_done;
-  if (ref.status != "ok") throw InputError(opt.study + ": the reference run did not finish (" + ref.status + "): " + ref.note +
-                                           " Fix: choose a smaller reference.dt.");
-  progress("reference check h = " + fmt(h_ref / 2));
-  RunResult ref2 = runner.run(ref_sets, h_ref / 2, rp.valid() ? rp : study);
+  if (ref.status != "ok")
+    throw InputError(plan.file + ": the reference run did not finish (" + ref.status + "): " + ref.note +
+                     " Fix: choose a smaller reference.dt.");
+  progress("reference check h = " + fmt(plan.h_ref / 2));
+  RunResult ref2 = runner.run(plan.reference_sets, plan.h_ref / 2, plan.reference_where);
   ++runs_done;
-  if (ref2.status != "ok") throw InputError(opt.study + ": the halved reference run did not finish: " + ref2.note);
-  double ref_change = 0;
-  {
-    std::ofstream rf(fs::path(opt.out_dir) / "reference.txt");
-    rf << "reference: " << ref_sets[0] << " h = " << h_ref << " s, checked against h/2\n";
-    for (std::size_t k = 0; k < times.size(); ++k) {
-      double rms, mx;
-      errors_against(ref.snaps[k], ref2.snaps[k], pinned, size, rms, mx);
-      ref_change = std::max(ref_change, rms);
-      rf << "t = " << times[k] << " s: RMS change on halving = " << rms << " (max " << mx << ") x cloth size " << size
-         << " m\n";
-    }
+  if (ref2.status != "ok") throw InputError(plan.file + ": the halved reference run did not finish: " + ref2.note);
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    double rms, mx;
+    errors_against(ref.snaps[k], ref2.snaps[k], pinned, size, rms, mx);
+    check.rms_change.push_back(rms);
+    check.max_change.push_back(mx);
+    check.largest_rms_change = std::max(check.largest_rms_change, rms);
   }
+  if (on_reference) on_reference(check);
 
-  std::vector<StudyRow> rows;
-  std::ofstream csv(fs::path(opt.out_dir) / "study.csv");
-  csv << "combo,h,time,status,rms_error,max_error,observed_order,energy_drift,sag,sag_error,wall_seconds,"
-         "wall_per_sim_second,force_evaluations,linear_iterations,steps,note\n";
-  csv.precision(8);
-  for (const Combo& combo : combos) {
+  for (const StudyCombo& combo : plan.combos) {
     std::vector<double> prev_err(times.size(), 0.0);
-    for (int lvl = 0; lvl < levels; ++lvl) {
-      const double h = h0 / std::pow(2.0, lvl);
+    for (int lvl = 0; lvl < plan.levels; ++lvl) {
+      const double h = plan.h0 / std::pow(2.0, lvl);
       progress(combo.name + ", h = " + fmt(h));
-      RunResult r = runner.run(combo.sets, h, cp);
+      RunResult r = runner.run(combo.sets, h, plan.combos_where);
       ++runs_done;
       for (std::size_t k = 0; k < times.size(); ++k) {
         StudyRow row;
@@ -329,7 +358,7 @@ std::vector<StudyRow> run_study(const StudyOptions& opt) {
           // Bounded but blown up: more energy than the cloth could get by falling its own size,
           // or strain beyond the study's bound. Marked, not dropped.
           const double drift = (r.snaps[k].energy - e_start) / scale;
-          if (drift > 1.0 || r.snaps[k].strain > max_strain) {
+          if (drift > 1.0 || r.snaps[k].strain > plan.max_strain) {
             row.status = "unstable";
             row.note = "energy drift " + fmt(drift) + " (M g L), max strain " + fmt(r.snaps[k].strain);
           }
@@ -349,158 +378,191 @@ std::vector<StudyRow> run_study(const StudyOptions& opt) {
           row.note = r.note;
           prev_err[k] = 0;
         }
-        csv << csv_escape(row.combo) << ',' << row.h << ',' << row.time << ',' << row.status << ',' << row.rms_error << ','
-            << row.max_error << ',' << row.observed_order << ',' << row.energy_drift << ',' << row.sag << ','
-            << row.sag_error << ',' << row.wall_seconds << ',' << row.wall_per_sim_second << ',' << row.force_evaluations
-            << ',' << row.linear_iterations << ',' << row.steps << ',' << csv_escape(row.note) << '\n';
-        csv.flush();
-        rows.push_back(row);
+        if (on_row) on_row(row);
+        result.rows.push_back(row);
       }
     }
   }
   progress("done");
-  csv.close();
-  if (opt.plot) {
-    const std::string script = find_plot_script();
-    if (!script.empty()) {
-      const SpawnResult r = run_program({"python3", script, (fs::path(opt.out_dir) / "study.csv").string(),
-                                         (fs::path(opt.out_dir) / "study.png").string()});
-      if (!r.ok())
-        std::fprintf(stderr, "loom: note: no plot (%s; python3 with matplotlib is needed: apt-get install python3-matplotlib)\n",
-                     r.error.c_str());
-    }
-  }
-  (void)ref_change;
-  return rows;
+  return result;
 }
 
-std::vector<StabilityRow> run_stability(const StudyOptions& opt) {
-  Simulation::set_notes(false);
-  Params study = Params::from_file(opt.study);
-  for (const auto& k : study.keys()) study.mark_used(k);
-  Params st = study.child("stability");
-  if (!st.is_map())
-    study.fail("no 'stability' section. Fix: add stability: {combos: [...], sweep: {key: material.stiffness, "
-               "values: [2e3, 2e5]}, horizon: 0.5, h_min: 1e-7, h_max: 0.05}.");
-  const double horizon = st.get_positive("horizon", 0.5);
-  const double h_min = st.get_positive("h_min", 1e-7);
-  const double h_max = st.get_positive("h_max", 0.05);
-  if (!(h_min < h_max)) st.fail("h_min must be smaller than h_max.");
-  const int bisections = st.get("bisections", 10);
-  if (bisections < 1 || bisections > 40) st.child("bisections").fail("bisections must be in [1, 40].");
-  const double max_strain = st.get_positive("max_strain", 1.0);
-  const double max_seconds = st.get_positive("max_seconds_per_run", 60.0);
-  std::vector<Combo> combos;
-  Params cp = st.child("combos");
-  if (!cp.is_sequence() || cp.size() == 0) st.fail("missing 'combos': a list of {name, set: {integrator.type: ...}}.");
-  for (std::size_t k = 0; k < cp.size(); ++k) {
-    Params c = cp.at(k);
-    Combo combo;
-    combo.name = c.require_string("name");
-    Params s = c.child("set");
-    if (s.valid())
-      for (const auto& key : s.keys()) combo.sets.push_back(key + "=" + yaml_scalar(s.child(key)));
-    c.check_unused();
-    combos.push_back(combo);
-  }
-  std::string key;
-  std::vector<std::string> values{""};
-  Params sw = st.child("sweep");
-  if (sw.valid()) {
-    key = sw.require_string("key");
-    Params vs = sw.child("values");
-    if (!vs.is_sequence() || vs.size() == 0) sw.fail("'values' is a non-empty list.");
-    values.clear();
-    for (std::size_t k = 0; k < vs.size(); ++k) values.push_back(yaml_scalar(vs.at(k)));
-    sw.check_unused();
-  }
-  st.check_unused();
+namespace {
 
-  Registry registry;
-  PluginLoader loader(registry);
-  prepare_output_dir(opt.out_dir);
-  std::ofstream csv(fs::path(opt.out_dir) / "stability.csv");
-  csv << "combo,key,value,h_stable,h_unstable,runs,failure\n";
-  csv.precision(6);
-  std::vector<StabilityRow> rows;
-  const std::size_t total = combos.size() * values.size();
-  std::size_t done = 0;
-
-  // true = stable to the horizon
-  auto try_step = [&](const std::vector<std::string>& sets, double h, std::string& why) {
-    std::vector<std::string> all = sets;
-    all.push_back("integrator.dt=" + Runner::fmt_exact(h));
-    Simulation sim(opt.scene, all, loader);
-    const long long n = static_cast<long long>(std::ceil(horizon / h));
-    const auto t0 = std::chrono::steady_clock::now();
-    try {
-      for (long long k = 0; k < n; ++k) {
-        sim.step();
-        if ((k & 255) == 255 || k == n - 1) {
-          const double s = sim.scene().material->max_strain(sim.scene().state.x);
-          if (!(s <= max_strain)) {
-            why = "strain " + fmt(s) + " > " + fmt(max_strain) + " at t = " + fmt(sim.scene().state.time);
-            return false;
-          }
-          if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > max_seconds) {
-            why = "timeout";
-            return true;  // did not fail within the time budget: count as stable, noted
-          }
+// One run of the stability atlas: stable to the horizon, unstable, or out of time (which
+// decides nothing).
+StepOutcome try_step(const StabilityPlan& plan, const std::string& scene, PluginLoader& loader,
+                     const std::vector<std::string>& sets, double h, std::string& why) {
+  std::vector<std::string> all = sets;
+  all.push_back("integrator.dt=" + Runner::fmt_exact(h));
+  Simulation sim(scene, all, loader);
+  const long long n = static_cast<long long>(std::ceil(plan.horizon / h));
+  const auto t0 = Clock::now();
+  try {
+    for (long long k = 0; k < n; ++k) {
+      sim.step();
+      if ((k & 255) == 255 || k == n - 1) {
+        const double s = sim.scene().material->max_strain(sim.scene().state.x);
+        if (!(s <= plan.max_strain)) {
+          why = "strain " + fmt(s) + " > " + fmt(plan.max_strain) + " at t = " + fmt(sim.scene().state.time);
+          return StepOutcome::Unstable;
+        }
+        if (k < n - 1 && seconds_since(t0) > plan.max_seconds) {
+          why = "timeout at h = " + fmt(h) + " (t = " + fmt(sim.scene().state.time) + " s of " + fmt(plan.horizon) +
+                " s after max_seconds_per_run = " + fmt(plan.max_seconds) + " s)";
+          return StepOutcome::TimedOut;
         }
       }
-    } catch (const DivergenceError&) {
-      why = "diverged";
-      return false;
-    } catch (const SolverError&) {
-      why = "solver failed";
-      return false;
     }
-    return true;
-  };
+  } catch (const DivergenceError&) {
+    why = "diverged";
+    return StepOutcome::Unstable;
+  } catch (const SolverError&) {
+    why = "solver failed";
+    return StepOutcome::Unstable;
+  }
+  return StepOutcome::Stable;
+}
 
-  for (const Combo& combo : combos) {
-    for (const std::string& value : values) {
-      if (opt.progress) opt.progress(combo.name + (key.empty() ? "" : ", " + key + " = " + value), double(done) / total);
+}  // namespace
+
+std::vector<StabilityRow> measure_stability(const StabilityPlan& plan, const std::string& scene,
+                                            const std::function<void(const std::string&, double)>& progress,
+                                            const std::function<void(const StabilityRow&)>& on_row) {
+  Simulation::set_notes(false);
+  Registry registry;
+  PluginLoader loader(registry);
+  std::vector<StabilityRow> rows;
+  const std::size_t total = plan.combos.size() * plan.values.size();
+  std::size_t done = 0;
+  for (const StudyCombo& combo : plan.combos) {
+    for (const std::string& value : plan.values) {
+      if (progress) progress(combo.name + (plan.key.empty() ? "" : ", " + plan.key + " = " + value), double(done) / total);
       std::vector<std::string> sets = combo.sets;
-      if (!key.empty()) sets.push_back(key + "=" + value);
+      if (!plan.key.empty()) sets.push_back(plan.key + "=" + value);
       StabilityRow row;
       row.combo = combo.name;
-      row.key = key;
+      row.key = plan.key;
       row.value = value;
       std::string why;
-      double lo = h_min, hi = h_max;
-      ++row.runs;
-      if (try_step(sets, h_max, why)) {
-        row.h_stable = h_max;
-      } else {
+      // A timed-out run ends the search: the row keeps what was decided before it.
+      auto timed_out = [&](StepOutcome o) {
+        if (o != StepOutcome::TimedOut) return false;
+        row.status = "timeout";
         row.failure = why;
+        return true;
+      };
+      double lo = plan.h_min, hi = plan.h_max;
+      ++row.runs;
+      const StepOutcome at_max = try_step(plan, scene, loader, sets, plan.h_max, why);
+      if (at_max == StepOutcome::Stable) {
+        row.h_stable = plan.h_max;
+      } else if (!timed_out(at_max)) {
+        row.failure = why;
+        row.h_unstable = plan.h_max;
         ++row.runs;
-        if (!try_step(sets, h_min, why)) {
-          row.h_unstable = h_min;
+        const StepOutcome at_min = try_step(plan, scene, loader, sets, plan.h_min, why);
+        if (at_min == StepOutcome::Unstable) {
+          row.h_unstable = plan.h_min;
           row.failure = why;
-        } else {
-          for (int b = 0; b < bisections; ++b) {
+        } else if (!timed_out(at_min)) {
+          row.h_stable = lo;
+          for (int b = 0; b < plan.bisections; ++b) {
             const double mid = std::sqrt(lo * hi);
             ++row.runs;
-            if (try_step(sets, mid, why)) lo = mid;
-            else {
+            const StepOutcome o = try_step(plan, scene, loader, sets, mid, why);
+            if (timed_out(o)) break;
+            if (o == StepOutcome::Stable) {
+              lo = mid;
+            } else {
               hi = mid;
               row.failure = why;
             }
+            row.h_stable = lo;
+            row.h_unstable = hi;
           }
           row.h_stable = lo;
           row.h_unstable = hi;
         }
       }
-      csv << csv_escape(row.combo) << ',' << row.key << ',' << csv_escape(row.value) << ',' << row.h_stable << ','
-          << row.h_unstable << ',' << row.runs << ',' << csv_escape(row.failure) << '\n';
-      csv.flush();
+      if (on_row) on_row(row);
       rows.push_back(row);
       ++done;
     }
   }
-  if (opt.progress) opt.progress("done", 1.0);
+  if (progress) progress("done", 1.0);
   return rows;
+}
+
+// ---------------------------------------------------------------- report
+
+struct StudyReport::Impl {
+  std::string dir;
+  std::ofstream csv;
+};
+
+StudyReport::StudyReport(const std::string& out_dir) : impl_(std::make_unique<Impl>()) {
+  impl_->dir = out_dir;
+  impl_->csv.open(fs::path(out_dir) / "study.csv");
+  impl_->csv << "combo,h,time,status,rms_error,max_error,observed_order,energy_drift,sag,sag_error,wall_seconds,"
+                "wall_per_sim_second,force_evaluations,linear_iterations,steps,note\n";
+  impl_->csv.precision(8);
+}
+StudyReport::~StudyReport() = default;
+
+void StudyReport::reference(const ReferenceCheck& ref) {
+  std::ofstream rf(fs::path(impl_->dir) / "reference.txt");
+  rf << "reference: " << ref.integrator << " h = " << ref.h << " s, checked against h/2\n";
+  for (std::size_t k = 0; k < ref.rms_change.size(); ++k)
+    rf << "t = " << ref.times[k] << " s: RMS change on halving = " << ref.rms_change[k] << " (max " << ref.max_change[k]
+       << ") x cloth size " << ref.size << " m\n";
+  rf << "largest RMS change on halving = " << ref.largest_rms_change
+     << " x cloth size: combo errors below about this are not resolved by the reference\n";
+}
+
+void StudyReport::row(const StudyRow& row) {
+  auto& csv = impl_->csv;
+  csv << csv_escape(row.combo) << ',' << row.h << ',' << row.time << ',' << row.status << ',' << row.rms_error << ','
+      << row.max_error << ',' << row.observed_order << ',' << row.energy_drift << ',' << row.sag << ','
+      << row.sag_error << ',' << row.wall_seconds << ',' << row.wall_per_sim_second << ',' << row.force_evaluations
+      << ',' << row.linear_iterations << ',' << row.steps << ',' << csv_escape(row.note) << '\n';
+  csv.flush();
+}
+
+struct StabilityReport::Impl {
+  std::ofstream csv;
+};
+
+StabilityReport::StabilityReport(const std::string& out_dir) : impl_(std::make_unique<Impl>()) {
+  impl_->csv.open(fs::path(out_dir) / "stability.csv");
+  impl_->csv << "combo,key,value,h_stable,h_unstable,runs,failure,status\n";
+  impl_->csv.precision(6);
+}
+StabilityReport::~StabilityReport() = default;
+
+void StabilityReport::row(const StabilityRow& row) {
+  impl_->csv << csv_escape(row.combo) << ',' << row.key << ',' << csv_escape(row.value) << ',' << row.h_stable << ','
+             << row.h_unstable << ',' << row.runs << ',' << csv_escape(row.failure) << ',' << row.status << '\n';
+  impl_->csv.flush();
+}
+
+// ---------------------------------------------------------------- parse, run, report
+
+StudyResult run_study(const StudyOptions& opt) {
+  const StudyPlan plan = parse_study(opt.study);
+  check_study_combos(plan, opt.scene);  // before spending time on the reference
+  prepare_output_dir(opt.out_dir);
+  StudyReport report(opt.out_dir);
+  return measure_study(
+      plan, opt.scene, opt.progress, [&](const ReferenceCheck& ref) { report.reference(ref); },
+      [&](const StudyRow& row) { report.row(row); });
+}
+
+std::vector<StabilityRow> run_stability(const StudyOptions& opt) {
+  const StabilityPlan plan = parse_stability(opt.study);
+  prepare_output_dir(opt.out_dir);
+  StabilityReport report(opt.out_dir);
+  return measure_stability(plan, opt.scene, opt.progress, [&](const StabilityRow& row) { report.row(row); });
 }
 
 }  // namespace loom

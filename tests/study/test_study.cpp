@@ -55,13 +55,19 @@ std::vector<std::map<std::string, std::string>> read_csv(const fs::path& p) {
   return rows;
 }
 
-}  // namespace
-
-TEST(Study, MeasuresOrdersAgainstTheReferenceAndMarksUnstableRuns) {
-  const fs::path dir = fs::temp_directory_path() / "loom_test_study";
+// An empty folder under the temporary directory with the test scene in it.
+fs::path fresh_dir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / name;
   fs::remove_all(dir);
   fs::create_directories(dir);
   std::ofstream(dir / "scene.yaml") << kScene;
+  return dir;
+}
+
+}  // namespace
+
+TEST(Study, MeasuresOrdersAgainstTheReferenceAndMarksUnstableRuns) {
+  const fs::path dir = fresh_dir("loom_test_study");
   std::ofstream(dir / "study.yaml") << R"(times: [0.05]
 steps: {h0: 2.0e-3, levels: 3}
 reference: {integrator: rk4, dt: 1.25e-5}
@@ -90,10 +96,7 @@ combos:
 }
 
 TEST(Study, StabilityBisectionBracketsTheLimit) {
-  const fs::path dir = fs::temp_directory_path() / "loom_test_stability";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  std::ofstream(dir / "scene.yaml") << kScene;
+  const fs::path dir = fresh_dir("loom_test_stability");
   std::ofstream(dir / "study.yaml") << R"(stability:
   horizon: 0.2
   h_min: 1.0e-5
@@ -116,10 +119,7 @@ TEST(Study, StabilityBisectionBracketsTheLimit) {
 }
 
 TEST(Study, BadStudyFileIsAClearError) {
-  const fs::path dir = fs::temp_directory_path() / "loom_test_study_bad";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  std::ofstream(dir / "scene.yaml") << kScene;
+  const fs::path dir = fresh_dir("loom_test_study_bad");
   std::ofstream(dir / "study.yaml") << "times: [0.05]\nsteps: {h0: 3.0e-3, levels: 2}\ncombos: [{name: SE}]\n";
   std::string out;
   EXPECT_EQ(run("study " + (dir / "scene.yaml").string() + " " + (dir / "study.yaml").string() + " --out " +
@@ -160,4 +160,76 @@ combos:
   EXPECT_FALSE(fs::exists(marker)) << "a folder name ran a shell command";
   // The plot itself is drawn when python3 with matplotlib is installed (scripts/setup.sh installs it).
   EXPECT_TRUE(fs::exists(dir / "out" / "study.png")) << out;
+}
+
+// run_stability used to mark every key of the study file used: a typo at the top level passed
+// silently. Now only the declared sections are accepted.
+TEST(Study, StabilityRefusesAMisspelledTopLevelKey) {
+  const fs::path dir = fresh_dir("loom_test_stability_typo");
+  std::ofstream(dir / "study.yaml") << R"(times: [0.05]
+stability:
+  horizon: 0.01
+  combos: [{name: SE, set: {integrator.type: symplectic_euler}}]
+stabilty_note: a typo of a key nobody reads
+)";
+  std::string out;
+  EXPECT_EQ(run("study " + (dir / "scene.yaml").string() + " " + (dir / "study.yaml").string() + " --stability --out " +
+                    (dir / "out").string(), out), 2) << out;
+  EXPECT_NE(out.find("stabilty_note"), std::string::npos) << out;
+  EXPECT_NE(out.find("study.yaml:5"), std::string::npos) << out;
+}
+
+// A run that reaches max_seconds_per_run before failing or reaching the horizon decides
+// nothing: it is reported as a timeout, not counted as stable (it used to give h_stable = h_max).
+TEST(Study, StabilityRunThatTimesOutIsNotCountedStable) {
+  const fs::path dir = fresh_dir("loom_test_stability_timeout");
+  // 1000 steps at h_max; the clock is checked every 256 steps, and 1 ns has passed by then.
+  std::ofstream(dir / "study.yaml") << R"(stability:
+  horizon: 1.0
+  h_min: 1.0e-4
+  h_max: 1.0e-3
+  max_seconds_per_run: 1.0e-9
+  combos: [{name: SE, set: {integrator.type: symplectic_euler}}]
+)";
+  std::string out;
+  ASSERT_EQ(run("study " + (dir / "scene.yaml").string() + " " + (dir / "study.yaml").string() + " --stability --out " +
+                    (dir / "out").string(), out), 0) << out;
+  const auto rows = read_csv(dir / "out" / "stability.csv");
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_EQ(rows[0].at("status"), "timeout");
+  EXPECT_EQ(std::stod(rows[0].at("h_stable")), 0.0) << "a timed-out run was counted as stable";
+  EXPECT_EQ(rows[0].at("runs"), "1");
+  EXPECT_NE(rows[0].at("failure").find("timeout at h = 0.001"), std::string::npos) << rows[0].at("failure");
+}
+
+// The reference's change on halving is reported (reference.txt's last line and the CLI's
+// summary), as the largest of the per-time changes reference.txt lists.
+TEST(Study, ReferenceChangeOnHalvingIsReported) {
+  const fs::path dir = fresh_dir("loom_test_study_reference");
+  std::ofstream(dir / "study.yaml") << R"(times: [0.02, 0.04]
+steps: {h0: 2.0e-3, levels: 1}
+reference: {integrator: symplectic_euler, dt: 1.0e-4}
+combos: [{name: SE, set: {integrator.type: symplectic_euler}}]
+)";
+  std::string out;
+  ASSERT_EQ(run("study " + (dir / "scene.yaml").string() + " " + (dir / "study.yaml").string() + " --out " +
+                    (dir / "out").string(), out), 0) << out;
+  std::ifstream ref(dir / "out" / "reference.txt");
+  double largest_listed = 0, reported = -1;
+  int per_time = 0;
+  for (std::string line; std::getline(ref, line);) {
+    const std::string a = "RMS change on halving = ", b = "largest RMS change on halving = ";
+    if (line.rfind(b, 0) == 0) {
+      reported = std::stod(line.substr(b.size()));
+    } else if (const auto p = line.find(a); p != std::string::npos) {
+      largest_listed = std::max(largest_listed, std::stod(line.substr(p + a.size())));
+      ++per_time;
+    }
+  }
+  EXPECT_EQ(per_time, 2);
+  // A first-order reference at 1e-4 moves by O(h) on halving: not zero, and far from O(1).
+  EXPECT_GT(largest_listed, 0.0);
+  EXPECT_LT(largest_listed, 1e-2);
+  EXPECT_NEAR(reported, largest_listed, 1e-6 * largest_listed);
+  EXPECT_NE(out.find("the reference changes by"), std::string::npos) << out;
 }
