@@ -1,4 +1,5 @@
 #include "loom/registry.hpp"
+#include "loom/section_specs.hpp"
 
 #include <algorithm>
 
@@ -53,26 +54,26 @@ Params view(const Params& p, const std::shared_ptr<const ParamSpec>& spec) {
 void Registry::add_material(PluginInfo info, MaterialFactory f) {
   info.kind = PluginKind::Material;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, effective_spec(info), std::move(f), {}, {}, {}};
+  Entry e{info, effective_spec(info), std::move(f)};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 void Registry::add_integrator(PluginInfo info, IntegratorFactory f) {
   info.kind = PluginKind::Integrator;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, effective_spec(info), {}, std::move(f), {}, {}};
+  Entry e{info, effective_spec(info), std::move(f)};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 void Registry::add_solver(PluginInfo info, SolverFactory f) {
   info.kind = PluginKind::Solver;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, effective_spec(info), {}, {}, std::move(f), {}};
+  Entry e{info, effective_spec(info), std::move(f)};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 
 void Registry::add_renderer(PluginInfo info, RendererFactory f) {
   info.kind = PluginKind::Renderer;
   if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, effective_spec(info), {}, {}, {}, std::move(f)};
+  Entry e{info, effective_spec(info), std::move(f)};
   entries_[key(info.kind, info.name, info.backend)] = std::move(e);
 }
 
@@ -110,7 +111,7 @@ std::unique_ptr<Material> Registry::make_material(const std::string& name, const
                                                   const Params& params, const Mesh& mesh) const {
   const Entry& e = find(PluginKind::Material, name, backend);
   const Params p = view(params, e.spec);
-  auto m = e.material(p, mesh);
+  auto m = std::get<MaterialFactory>(e.factory)(p, mesh);
   p.check_unused(section_keys(PluginKind::Material));
   return m;
 }
@@ -118,7 +119,7 @@ std::unique_ptr<Integrator> Registry::make_integrator(const std::string& name, c
                                                       const Params& params) const {
   const Entry& e = find(PluginKind::Integrator, name, backend);
   const Params p = view(params, e.spec);
-  auto m = e.integrator(p);
+  auto m = std::get<IntegratorFactory>(e.factory)(p);
   p.check_unused(section_keys(PluginKind::Integrator));
   return m;
 }
@@ -126,7 +127,7 @@ std::unique_ptr<LinearSolver> Registry::make_solver(const std::string& name, con
                                                     const Params& params) const {
   const Entry& e = find(PluginKind::Solver, name, backend);
   const Params p = view(params, e.spec);
-  auto m = e.solver(p);
+  auto m = std::get<SolverFactory>(e.factory)(p);
   p.check_unused();
   return m;
 }
@@ -135,7 +136,7 @@ std::unique_ptr<Renderer> Registry::make_renderer(const std::string& name, const
                                                   const std::string& base_dir) const {
   const Entry& e = find(PluginKind::Renderer, name, "cpu");
   const Params p = view(params, e.spec);
-  auto r = e.renderer(p, base_dir);
+  auto r = std::get<RendererFactory>(e.factory)(p, base_dir);
   p.check_unused(section_keys(PluginKind::Renderer));
   return r;
 }
@@ -172,14 +173,22 @@ std::string params_table(const Registry& registry, const std::string& name, bool
     if (!markdown) out += "\n";
   }
   if (!out.empty()) return out;
+  // The framework's own sections (loom/section_specs.hpp) when no plugin has the name.
+  if (const ParamSpec* sec = framework_section_spec(name)) {
+    if (!markdown) out += name + " (framework section): " + sec->summary() + "\n\n";
+    out += sec->table(markdown);
+    if (!markdown) out += "\n";
+    return out;
+  }
   for (const auto& i : registry.list()) names.push_back(i.name);
+  for (const auto& [n, spec] : framework_section_specs()) names.push_back(n);
   std::sort(names.begin(), names.end());
   names.erase(std::unique(names.begin(), names.end()), names.end());
   const std::string hint = closest_match(name, names);
   std::string list;
   for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
   throw InputError("no plugin named '" + name + "'" + (hint.empty() ? "" : " (did you mean '" + hint + "'?)") +
-                   ". Plugins: " + list + ".");
+                   ". Plugins and framework sections: " + list + ".");
 }
 
 }  // namespace loom

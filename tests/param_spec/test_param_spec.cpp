@@ -18,6 +18,8 @@
 #include "loom/mesh.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/registry.hpp"
+#include "loom/section_specs.hpp"
+#include "loom/simulation.hpp"
 
 namespace fs = std::filesystem;
 using loom::InputError;
@@ -312,6 +314,7 @@ TEST(PluginSpecs, DocsShowTheGeneratedTables) {
   for (const auto& e : fs::directory_iterator(fs::path(LOOM_SOURCE_DIR) / "docs" / "plugins"))
     if (e.path().extension() == ".md") files.push_back(e.path());
   files.push_back(fs::path(LOOM_SOURCE_DIR) / "docs" / "RENDERING.md");
+  files.push_back(fs::path(LOOM_SOURCE_DIR) / "docs" / "SCENE.md");  // the framework's own sections
   for (const auto& f : files) {
     std::ifstream in(f);
     std::stringstream ss;
@@ -336,7 +339,73 @@ TEST(PluginSpecs, DocsShowTheGeneratedTables) {
         << where[name] << ": the table of " << name << " differs from the spec. Fix: replace it with the output of "
         << "`loom plugins --params " << name << " --markdown`";
   }
+  // The framework's own sections (loom/section_specs.hpp), in docs/SCENE.md.
+  for (const auto& [name, spec] : loom::framework_section_specs()) {
+    names.insert(name);
+    ASSERT_EQ(blocks.count(name), 1u) << "no <!-- loom-params: " << name << " --> block for the framework section";
+    EXPECT_EQ(blocks[name], loom::params_table(l.reg, name, true))
+        << where[name] << ": the table of section " << name << " differs from its spec. Fix: run "
+        << "scripts/update_param_docs.py";
+  }
   // Blocks of plugins this build lacks (e.g. cusparse_pcg without nvcc) are not checked here.
   for (const auto& [name, text] : blocks)
     if (!names.count(name)) std::cout << "note: " << name << " (" << where[name] << ") is not in this build\n";
+}
+
+// The framework's own sections (loom/section_specs.hpp): every declared key of output, guard,
+// mesh (grid and obj forms) and self_collision, given alone at its default or a value in its
+// range, is accepted by the scene builder, and an undeclared key is refused; so the printed spec
+// and the stage that reads the section (framework/src/scene_build.cpp) agree.
+TEST(SectionSpecs, EveryDeclaredKeyIsReadAndNoOtherKey) {
+  auto& l = plugins();
+  if (!l.reg.has(loom::PluginKind::Material, "mass_spring") || !l.reg.has(loom::PluginKind::Integrator, "symplectic_euler"))
+    GTEST_SKIP() << "needs the mass_spring and symplectic_euler plugins";
+  const fs::path obj = fs::temp_directory_path() / "loom_section_specs_square.obj";
+  std::ofstream(obj) << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n";
+  loom::Simulation::set_notes(false);
+  auto build = [&](const std::string& yaml) -> std::string {
+    try {
+      loom::Simulation::from_string(yaml, "scene.yaml", LOOM_SOURCE_DIR, {}, *l.loader);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  const std::string rest = "material: {type: mass_spring}\nintegrator: {type: symplectic_euler, dt: 0.001}\n";
+  const std::string grid = "mesh: {grid: {nx: 4, ny: 4}}\n";
+  struct Section {
+    const loom::ParamSpec* spec;
+    std::function<std::string(const std::string&)> scene;  // the scene with "key: value" in the section
+  };
+  const std::vector<Section> sections = {
+      {&loom::output_section_spec(), [&](const std::string& kv) { return grid + rest + "output: {" + kv + "}\n"; }},
+      {&loom::guard_section_spec(), [&](const std::string& kv) { return grid + rest + "guard: {" + kv + "}\n"; }},
+      {&loom::self_collision_section_spec(),
+       [&](const std::string& kv) {
+         // thickness is required and has no default: 0.01 m, below the 4 x 4 grid's spacing
+         return grid + rest + "self_collision: {" + (kv.rfind("thickness:", 0) == 0 ? "thickness: 0.01" : "thickness: 0.01, " + kv) + "}\n";
+       }},
+      {loom::mesh_section_spec().decls()[0].fields.get(),  // mesh.grid
+       [&](const std::string& kv) {
+         std::string keys = kv;
+         if (kv.rfind("nx:", 0) != 0) keys = "nx: 4, " + keys;
+         if (kv.rfind("ny:", 0) != 0) keys = "ny: 4, " + keys;
+         return "mesh: {grid: {" + keys + "}}\n" + rest;
+       }},
+      {&loom::mesh_section_spec(),
+       [&](const std::string& kv) {
+         if (kv.rfind("grid:", 0) == 0) return grid + rest;
+         if (kv.rfind("obj:", 0) == 0) return "mesh: {obj: " + obj.string() + "}\n" + rest;
+         return "mesh: {obj: " + obj.string() + ", " + kv + "}\n" + rest;
+       }},
+  };
+  for (const Section& sec : sections) {
+    ASSERT_NE(sec.spec, nullptr);
+    for (const auto& d : sec.spec->decls()) {
+      const std::string kv = d.name + ": " + value_for(d);
+      EXPECT_EQ(build(sec.scene(kv)), "") << sec.spec->name() << "." << d.name << ":\n" << sec.scene(kv);
+    }
+    const std::string err = build(sec.scene("definitely_not_a_key: 1"));
+    EXPECT_NE(err.find("definitely_not_a_key"), std::string::npos) << sec.spec->name() << ": " << err;
+  }
 }

@@ -12,6 +12,7 @@
 #include <memory>
 #include <string>
 #include <tuple>
+#include <variant>
 #include <vector>
 
 #include "loom/common.hpp"
@@ -82,10 +83,8 @@ class Registry {
   struct Entry {
     PluginInfo info;
     std::shared_ptr<const ParamSpec> spec;  ///< section keys + the plugin's (nullptr: none declared)
-    MaterialFactory material;
-    IntegratorFactory integrator;
-    SolverFactory solver;
-    RendererFactory renderer;
+    /// The one factory of the entry's kind (info.kind).
+    std::variant<MaterialFactory, IntegratorFactory, SolverFactory, RendererFactory> factory;
   };
   const Entry& find(PluginKind kind, const std::string& name, const std::string& backend) const;
   std::map<std::tuple<int, std::string, std::string>, Entry> entries_;
