@@ -5,7 +5,7 @@ Every block
     <!-- loom-params: NAME -->
     ...
     <!-- /loom-params -->
-in docs/plugins/*.md, docs/RENDERING.md and docs/SCENE.md (the framework's own sections) is replaced by the output of
+in docs/plugins/*.md, docs/RENDERING.md and docs/SCENE_KEYS.md (the framework's own sections) is replaced by the output of
 `loom plugins --params NAME --markdown` (tests/param_spec checks that they match).
 
 usage: scripts/update_param_docs.py [LOOM_BINARY]   (default: build/bin/loom)
@@ -17,7 +17,7 @@ import sys
 
 root = pathlib.Path(__file__).resolve().parent.parent
 loom = sys.argv[1] if len(sys.argv) > 1 else str(root / "build" / "bin" / "loom")
-files = sorted((root / "docs" / "plugins").glob("*.md")) + [root / "docs" / "RENDERING.md", root / "docs" / "SCENE.md"]
+files = sorted((root / "docs" / "plugins").glob("*.md")) + [root / "docs" / "RENDERING.md", root / "docs" / "SCENE_KEYS.md"]
 block = re.compile(r"(<!-- loom-params: ([a-z0-9_]+) -->\n)(.*?)(<!-- /loom-params -->)", re.S)
 
 changed = 0

@@ -16,7 +16,7 @@ const ParamSpec& scene_section_spec() {
     s.integer("frames", 60).range(ParamRange::closed(0, 1e9)).framework().help("output frames to simulate");
     s.vec3("gravity", {0.0, -9.81, 0.0}).units("m/s^2").framework().help("gravitational acceleration");
     s.list("pins").framework().help(
-        "pinned vertices: group names, {vertices: [...]}, {box: {min, max}}, with optional motion (docs/README scene keys)");
+        "pinned vertices: group names, {vertices: [...]}, {box: {min, max}}, with optional motion (docs/SCENES.md)");
     s.list("mass_scale").framework().help("per-vertex mass factors: [{vertices | group | box, factor: f}]");
     s.number("initial_scale", 1.0).range(ParamRange::positive()).framework().help(
         "start with positions scaled about the centroid (rest shape unchanged)");

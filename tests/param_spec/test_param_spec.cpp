@@ -314,7 +314,7 @@ TEST(PluginSpecs, DocsShowTheGeneratedTables) {
   for (const auto& e : fs::directory_iterator(fs::path(LOOM_SOURCE_DIR) / "docs" / "plugins"))
     if (e.path().extension() == ".md") files.push_back(e.path());
   files.push_back(fs::path(LOOM_SOURCE_DIR) / "docs" / "RENDERING.md");
-  files.push_back(fs::path(LOOM_SOURCE_DIR) / "docs" / "SCENE.md");  // the framework's own sections
+  files.push_back(fs::path(LOOM_SOURCE_DIR) / "docs" / "SCENE_KEYS.md");  // the framework's own sections
   for (const auto& f : files) {
     std::ifstream in(f);
     std::stringstream ss;
@@ -339,7 +339,7 @@ TEST(PluginSpecs, DocsShowTheGeneratedTables) {
         << where[name] << ": the table of " << name << " differs from the spec. Fix: replace it with the output of "
         << "`loom plugins --params " << name << " --markdown`";
   }
-  // The framework's own sections (loom/section_specs.hpp), in docs/SCENE.md.
+  // The framework's own sections (loom/section_specs.hpp), in docs/SCENE_KEYS.md.
   for (const auto& [name, spec] : loom::framework_section_specs()) {
     names.insert(name);
     ASSERT_EQ(blocks.count(name), 1u) << "no <!-- loom-params: " << name << " --> block for the framework section";

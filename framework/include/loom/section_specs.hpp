@@ -1,6 +1,6 @@
 // Declared keys of the framework's own scene sections (mesh, output, guard, self_collision and
 // the scene's top level), in the same ParamSpec form as the plugins' (loom/param_spec.hpp), so
-// that `loom plugins --params output` prints them and docs/SCENE.md carries generated tables.
+// that `loom plugins --params output` prints them and docs/SCENE_KEYS.md carries generated tables.
 // The scene builder's stages (framework/src/scene_build.cpp) read these keys; tests/param_spec
 // builds a scene with every declared key and checks that an undeclared one is refused, so the
 // two cannot drift apart.
