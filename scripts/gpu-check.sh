@@ -63,8 +63,8 @@ for scene in scenes/*.yaml; do
   extra_gpu=()
   extra_cpu=()
   if grep -q 'type: baraff_witkin' "$scene"; then  # both solves tight, so they agree to rounding
-    extra_gpu=(--set solver.type=cusparse_pcg --set solver.cusparse_pcg.tolerance=1e-13
-               --set solver.cusparse_pcg.max_iterations=20000)
+    extra_gpu=(--set solver.type=filtered_pcg --set solver.filtered_pcg.tolerance=1e-13
+               --set solver.filtered_pcg.max_iterations=20000)
     extra_cpu=(--set solver.type=eigen_ldlt)
   fi
   timeout "$per_scene" bash "$bundle/run.sh" loom run "$scene" --out "$d/gpu" --set backend=cuda "${common[@]}" "${extra_gpu[@]}" > "$d/gpu.log" 2>&1

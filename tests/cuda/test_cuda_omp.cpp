@@ -424,7 +424,7 @@ TEST(CudaBw, NeedsTheDeviceSolver) {
     di->prepare(*sc, 1e-3);
     FAIL() << "expected InputError";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("cusparse_pcg"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("filtered_pcg"), std::string::npos) << e.what();
   }
 }
 #endif
@@ -452,20 +452,20 @@ TEST(CudaPins, MovingPinsAreRefusedWithTheFix) {
   }
 }
 
-// The parameter specs: cusparse_pcg's table in docs/plugins/cuda.md is the one its spec
-// generates (`loom plugins --params cusparse_pcg --markdown` on a CUDA build), and the device
+// The parameter specs: filtered_pcg's device table in docs/plugins/cuda.md is the one its spec
+// generates (`loom plugins --params filtered_pcg --markdown` on a CUDA build), and the device
 // integrators read the cpu plugins' keys through the cpu plugins' specs.
-TEST(CudaParams, DocsShowTheCusparsePcgTable) {
+TEST(CudaParams, DocsShowTheDeviceFilteredPcgTable) {
   std::ifstream in(std::string(LOOM_SOURCE_DIR) + "/docs/plugins/cuda.md");
   std::stringstream ss;
   ss << in.rdbuf();
   const std::string text = ss.str();
-  const std::string open = "<!-- loom-params: cusparse_pcg -->\n";
+  const std::string open = "<!-- loom-params: filtered_pcg cuda -->\n";
   const auto b = text.find(open);
   ASSERT_NE(b, std::string::npos);
   const auto e = text.find("<!-- /loom-params -->", b);
   ASSERT_NE(e, std::string::npos);
-  EXPECT_EQ(text.substr(b + open.size(), e - b - open.size()), lc::cusparse_pcg_spec().table(true))
+  EXPECT_EQ(text.substr(b + open.size(), e - b - open.size()), lc::filtered_pcg_cuda_spec().table(true))
       << "Fix: replace the table in docs/plugins/cuda.md with the expected text above";
 }
 

@@ -221,6 +221,7 @@ std::string value_for(const loom::ParamDecl& d) {
 // Keys that another key must enable (the plugin says so when it is missing).
 const std::map<std::string, std::string> kCompanions = {
     {"eigen_pcg.sa_amg", "preconditioner: sa_amg\n"},
+    {"filtered_pcg.sa_amg", "preconditioner: sa_amg\n"},
 };
 
 std::string required_keys(const loom::PluginInfo& info) {

@@ -14,6 +14,9 @@
 //     failure (factorize() false, or converged = false, with a message) or return an answer
 //     whose residual really meets the tolerance; what each solver did is printed.
 // A solver module without an entry in the table runs with its defaults and tolerance 1e-5.
+// Device solvers (filtered_pcg on backend cuda) are skipped here (no GPU is assumed): the
+// same checks run for the device filtered_pcg on Thrust's OpenMP system in
+// tests/cuda/test_cuda_pcg.cpp, with the CPU and device iterates compared.
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
@@ -48,7 +51,7 @@ void PrintTo(const Config& c, std::ostream* os) { *os << c.solver << "/" << c.la
 // Configurations per solver name: each preconditioner / variant with its stated tolerance.
 std::vector<Config> configs_for(const std::string& name) {
   const std::string it = "tolerance: 1.0e-10, max_iterations: 20000";
-  if (name == "eigen_pcg")
+  if (name == "filtered_pcg" || name == "eigen_pcg")  // eigen_pcg: the deprecated name of filtered_pcg
     return {{name, "block_jacobi", "{preconditioner: block_jacobi, " + it + "}", 1e-10},
             {name, "jacobi", "{preconditioner: jacobi, " + it + "}", 1e-10},
             {name, "sa_amg", "{preconditioner: sa_amg, " + it + ", sa_amg: {coarse_dofs: 24}}", 1e-10},
@@ -222,7 +225,7 @@ INSTANTIATE_TEST_SUITE_P(EverySolver, Conformance, ::testing::ValuesIn(all_confi
 // The suite must have found the solvers this build always has.
 TEST(ConformanceSuite, FindsTheBuiltSolvers) {
   const auto names = loader().names(loom::PluginKind::Solver);
-  for (const char* expected : {"eigen_pcg", "eigen_ldlt"})
+  for (const char* expected : {"filtered_pcg", "eigen_pcg", "eigen_ldlt"})
     EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
 }
 

@@ -446,10 +446,11 @@ class CudaBw final : public Integrator {
       throw InputError(scene.source + ": baraff_witkin needs a material with force Jacobians (mass_spring, gnatv)");
     const auto* solver = dynamic_cast<const CusparsePcg*>(scene.solver.get());
     if (!solver)
-      throw InputError(scene.source + ": baraff_witkin on backend cuda solves on the device with cusparse_pcg, but the "
+      throw InputError(scene.source + ": baraff_witkin on backend cuda solves on the device with filtered_pcg, but the "
                        "scene's solver is '" + (scene.solver ? scene.solver->name() : std::string("none")) +
-                       "'. Fix: set solver: {type: cusparse_pcg} (or backend: cpu for the CPU solvers).");
+                       "'. Fix: set solver: {type: filtered_pcg} (or backend: cpu for the CPU solvers).");
     pcg_ = DevicePcg<T>(solver->options());
+    pcg_.set_name(solver->name());
     State& s = scene.state;
     const Index n = s.size();
     std::vector<std::array<Index, 2>> pairs;
@@ -509,7 +510,7 @@ class CudaBw final : public Integrator {
     const auto t1 = Clock::now();
     st.assemble_seconds += std::chrono::duration<double>(t1 - t0).count();
     rep = SolveReport{};
-    const bool ok = pcg_.factorize(A_, rep);
+    const bool ok = pcg_.factorize(A_, S_, rep);
     if (ok) {
       if (!opt_.warm_start) fill(dv_, T(0));
       const double fs = rep.factorize_seconds;

@@ -4,28 +4,42 @@
 #include <cmath>
 #include <cstdio>
 
+#include "loom/filtered_pcg.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 
 namespace loom::cuda {
 
-const ParamSpec& cusparse_pcg_spec() {
-  static const ParamSpec spec = [] {
-    const PcgOptions d;
-    ParamSpec s("cusparse_pcg", "modified (filtered) PCG on the GPU");
-    s.number("tolerance", d.tolerance).range(ParamRange::closed(1e-16, 0.5)).help(
-        "on sqrt(r.P^-1 r / b.P^-1 b) of the filtered residual");
-    s.integer("max_iterations", d.max_iterations).range(ParamRange::at_least(1)).help(
-        "iterations before the solve counts as failed");
-    s.choice("preconditioner", "block_jacobi", {"none", "jacobi", "block_jacobi"}).help("diagonal preconditioner");
-    return s;
-  }();
+namespace {
+// The keys filtered_pcg declares on the cpu (plugins/solvers/eigen/eigen_pcg.cpp), with the
+// same defaults and meaning; sa_amg and parallel_min_rows are cpu only.
+ParamSpec make_device_pcg_spec(const char* name, const char* summary) {
+  const PcgOptions d;
+  ParamSpec s(name, summary);
+  s.number("tolerance", d.tolerance).range(ParamRange::closed(1e-16, 0.5)).help(
+      "true relative residual of the filtered system: |S(b - A dv)| <= tolerance |S(b - A z)|");
+  s.integer("max_iterations", d.max_iterations).range(ParamRange::closed(1, 1e8)).help(
+      "iterations before the solve counts as failed");
+  s.choice("preconditioner", "block_jacobi", {"none", "jacobi", "block_jacobi"}).help(
+      "filtered (block) diagonal preconditioner S M^-1 S");
+  return s;
+}
+}  // namespace
+
+const ParamSpec& filtered_pcg_cuda_spec() {
+  static const ParamSpec spec =
+      make_device_pcg_spec("filtered_pcg", "modified (filtered) PCG of Baraff-Witkin on the GPU, one loop for every backend");
   return spec;
 }
 
-PcgOptions parse_pcg_options(const Params& p) {
+const ParamSpec& cusparse_pcg_spec() {
+  static const ParamSpec spec = make_device_pcg_spec("cusparse_pcg", "deprecated name of filtered_pcg on backend cuda");
+  return spec;
+}
+
+PcgOptions parse_pcg_options(const Params& p, const ParamSpec& spec) {
   PcgOptions o;
   if (!p.valid()) return o;
-  const ParamReader r(p, cusparse_pcg_spec());
+  const ParamReader r(p, spec);
   o.tolerance = r.number("tolerance");
   o.max_iterations = r.int32("max_iterations");
   const std::string pc = r.text("preconditioner");
@@ -51,20 +65,32 @@ void DeviceFilter<T>::upload(const Filter& S) {
 }
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
+struct IsConstrained {
+  LOOM_HD bool operator()(unsigned char f) const { return f < 3; }
+};
+}  // namespace
 
 template <class T>
-struct FilterConstrained {  // y <- S y on the constrained vertices
-  const Index* cons;
-  const unsigned char* free;
-  const T* proj;
-  T* y;
-  LOOM_HD void operator()(Index k) const {
-    const Index i = cons[k];
-    kernels::filter_vec3(static_cast<int>(free[i]), proj + 9LL * i, y + 3LL * i);
-  }
-};
+void DeviceFilter<T>::resize(Index nv) {
+  n = nv;
+  free.assign(static_cast<std::size_t>(nv), static_cast<unsigned char>(3));
+  proj.assign(9 * static_cast<std::size_t>(nv), T(0));
+  constrained.assign(static_cast<std::size_t>(nv), Index(0));
+  num_constrained = 0;
+}
+
+template <class T>
+void DeviceFilter<T>::rebuild_constrained() {
+  if (n == 0) return;
+  if (constrained.size() != static_cast<std::size_t>(n)) constrained.resize(static_cast<std::size_t>(n));
+  const auto end = thrust::copy_if(thrust::device, thrust::counting_iterator<Index>(0), thrust::counting_iterator<Index>(n),
+                                   free.begin(), constrained.begin(), IsConstrained{});
+  num_constrained = static_cast<Index>(end - constrained.begin());
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
 
 template <class T>
 struct AddPrescribed {  // dv <- S dv + z on the constrained vertices (free ones keep their guess)
@@ -84,36 +110,50 @@ struct AddPrescribed {  // dv <- S dv + z on the constrained vertices (free ones
 };
 
 template <class T>
-struct Preconditioner {  // Pm^-1 blocks; returns 1 for a vertex whose (block) diagonal is not SPD
+struct Preconditioner {  // P_i = S_i M_i^-1 S_i as on the CPU; returns 1 for a vertex whose (block) diagonal is not SPD
   const Index* diag;
   const T* A;
+  const unsigned char* free;
+  const T* proj;
   int kind;  // 0 none, 1 jacobi, 2 block
   T* pinv;
   LOOM_HD int operator()(Index i) const {
     const T* D = A + 9LL * diag[i];
+    const T* Si = proj + 9LL * i;
+    const int f = static_cast<int>(free[i]);
     T* P = pinv + 9LL * i;
     for (int e = 0; e < 9; ++e) P[e] = T(0);
+    if (f == 0) return 0;
+    T M[9] = {T(0), T(0), T(0), T(0), T(0), T(0), T(0), T(0), T(0)};
+    int bad = 0;
     if (kind == 0) {
-      P[0] = P[4] = P[8] = T(1);
-      return 0;
+      M[0] = M[4] = M[8] = T(1);
+    } else if (kind == 1) {
+      for (int a = 0; a < 3; ++a) {
+        if (!(D[4 * a] > T(0))) bad = 1;
+        M[4 * a] = T(1) / D[4 * a];
+      }
+    } else {
+      // The projected diagonal block S_i D S_i + (I - S_i), as solver::projected_block.
+      T B[9];
+      if (f == 3) {
+        for (int e = 0; e < 9; ++e) B[e] = D[e];
+      } else {
+        T tmp[9];
+        kernels::mat3_mul_mat(Si, D, tmp);
+        kernels::mat3_mul_mat(tmp, Si, B);
+        for (int a = 0; a < 3; ++a)
+          for (int b = 0; b < 3; ++b) B[3 * a + b] += (a == b ? T(1) : T(0)) - Si[3 * a + b];
+      }
+      if (!kernels::mat3_spd_inverse(B, M)) bad = 1;
     }
-    if (kind == 1) {
-      if (!(D[0] > T(0)) || !(D[4] > T(0)) || !(D[8] > T(0))) return 1;
-      P[0] = T(1) / D[0];
-      P[4] = T(1) / D[4];
-      P[8] = T(1) / D[8];
-      return 0;
+    if (f == 3) {
+      for (int e = 0; e < 9; ++e) P[e] = M[e];
+    } else {
+      kernels::mat3_project(Si, M, Si, P);
     }
-    return kernels::mat3_spd_inverse(D, P) ? 0 : 1;
+    return bad;
   }
-};
-
-template <class T>
-struct Residual {  // r <- b - t (filter applied separately)
-  const T* b;
-  const T* t;
-  T* r;
-  LOOM_HD void operator()(Index d) const { r[d] = b[d] - t[d]; }
 };
 
 template <class T>
@@ -128,36 +168,56 @@ struct PrecondDot {  // s_i = Pinv_i r_i; returns r_i . s_i
 };
 
 template <class T>
-struct Update {  // dv += alpha c; r -= alpha q; s = Pinv r; returns r . s
-  const T* pinv;
+struct Update {  // dv += alpha c; r -= alpha q; returns r . r
   const T* c;
   const T* q;
   T alpha;
   T* dv;
   T* r;
-  T* s;
   LOOM_HD T operator()(Index i) const {
     const long long o = 3LL * i;
     for (int a = 0; a < 3; ++a) {
       dv[o + a] += alpha * c[o + a];
       r[o + a] -= alpha * q[o + a];
     }
-    kernels::mat3_mul(pinv + 9LL * i, r + o, s + o);
-    return kernels::dot3(r + o, s + o);
+    return kernels::dot3(r + o, r + o);
   }
 };
 
 template <class T>
-struct Direction {  // c <- S (s + beta c)
-  const unsigned char* free;
-  const T* proj;
+struct Xpby {  // c <- s + beta c (s is in range(S), so c stays there)
   const T* s;
   T beta;
   T* c;
-  LOOM_HD void operator()(Index i) const {
+  LOOM_HD void operator()(Index d) const { c[d] = s[d] + beta * c[d]; }
+};
+
+template <class T>
+struct RowResidual {  // out_i = S_i (b_i - out_i) with out = A x on entry; returns |out_i|^2
+  const unsigned char* free;
+  const T* proj;
+  const T* b;
+  T* out;
+  LOOM_HD T operator()(Index i) const {
     const long long o = 3LL * i;
-    for (int a = 0; a < 3; ++a) c[o + a] = s[o + a] + beta * c[o + a];
-    kernels::filter_vec3(static_cast<int>(free[i]), proj + 9LL * i, c + o);
+    for (int a = 0; a < 3; ++a) out[o + a] = b[o + a] - out[o + a];
+    const int f = static_cast<int>(free[i]);
+    if (f != 3) kernels::filter_vec3(f, proj + 9LL * i, out + o);
+    return kernels::dot3(out + o, out + o);
+  }
+};
+
+template <class T>
+struct FilteredDot {  // q_i <- S_i q_i; returns c_i . q_i
+  const unsigned char* free;
+  const T* proj;
+  const T* c;
+  T* q;
+  LOOM_HD T operator()(Index i) const {
+    const long long o = 3LL * i;
+    const int f = static_cast<int>(free[i]);
+    if (f != 3) kernels::filter_vec3(f, proj + 9LL * i, q + o);
+    return kernels::dot3(c + o, q + o);
   }
 };
 
@@ -168,20 +228,40 @@ struct Copy {
   LOOM_HD void operator()(Index d) const { b[d] = a[d]; }
 };
 
+/// The device operations of the filtered PCG (loom/filtered_pcg.hpp).
 template <class T>
-void filter(const DeviceFilter<T>& S, DVec<T>& y) {
-  parallel_for(S.num_constrained, FilterConstrained<T>{raw(S.constrained), raw(S.free), raw(S.proj), raw(y)});
-}
+struct DevicePcgOps {
+  using Real = T;
+  using Vec = DVec<T>;
+  const DeviceBsr<T>& A;
+  const DeviceFilter<T>& S;
+  const DVec<T>& b;
+  const DVec<T>& z;
+  const DVec<T>& pinv;
+  Index n;
 
-/// out = S (b - A x); returns |out|^2.
-template <class T>
-T filtered_residual(const DeviceBsr<T>& A, const DeviceFilter<T>& S, const DVec<T>& b, const DVec<T>& x, DVec<T>& tmp,
-                    DVec<T>& out) {
-  A.multiply(raw(x), raw(tmp));
-  parallel_for(static_cast<Index>(out.size()), Residual<T>{raw(b), raw(tmp), raw(out)});
-  filter(S, out);
-  return dot(out, out);
-}
+  T residual(const Vec& x, Vec& out) const {
+    A.multiply(raw(x), raw(out));
+    return reduce_sum<T>(n, RowResidual<T>{raw(S.free), raw(S.proj), raw(b), raw(out)});
+  }
+  T apply_operator(const Vec& c, Vec& q) const {
+    A.multiply(raw(c), raw(q));
+    return reduce_sum<T>(n, FilteredDot<T>{raw(S.free), raw(S.proj), raw(c), raw(q)});
+  }
+  T precondition(const Vec& r, Vec& s) const { return reduce_sum<T>(n, PrecondDot<T>{raw(pinv), raw(r), raw(s)}); }
+  T update(T alpha, const Vec& c, const Vec& q, Vec& x, Vec& r) const {
+    return reduce_sum<T>(n, Update<T>{raw(c), raw(q), alpha, raw(x), raw(r)});
+  }
+  void xpby(const Vec& s, T beta, Vec& c) const { parallel_for(3 * n, Xpby<T>{raw(s), beta, raw(c)}); }
+  void start(Vec& dv) const {
+    parallel_for(S.num_constrained, AddPrescribed<T>{raw(S.constrained), raw(S.free), raw(S.proj), raw(z), raw(dv)});
+  }
+  void assign_prescribed(Vec& dv) const {
+    fill(dv, T(0));
+    start(dv);
+  }
+  void copy(const Vec& a, Vec& c) const { parallel_for(3 * n, Copy<T>{raw(a), raw(c)}); }
+};
 
 }  // namespace
 
@@ -194,24 +274,25 @@ void DevicePcg<T>::analyze(Index n) {
   c_.assign(N, T(0));
   q_.assign(N, T(0));
   s_.assign(N, T(0));
-  t_.assign(N, T(0));
 }
 
 template <class T>
-bool DevicePcg<T>::factorize(const DeviceBsr<T>& A, SolveReport& report) {
+bool DevicePcg<T>::factorize(const DeviceBsr<T>& A, const DeviceFilter<T>& S, SolveReport& report) {
   const auto t0 = Clock::now();
   if (A.n != n_) analyze(A.n);
   const int kind = opt_.preconditioner == PcgOptions::Preconditioner::None     ? 0
                    : opt_.preconditioner == PcgOptions::Preconditioner::Jacobi ? 1
                                                                                : 2;
-  const int bad = reduce_sum<int>(n_, Preconditioner<T>{raw(A.diag), raw(A.values), kind, raw(pinv_)});
+  const int bad = reduce_sum<int>(
+      n_, Preconditioner<T>{raw(A.diag), raw(A.values), raw(S.free), raw(S.proj), kind, raw(pinv_)});
   report.factorize_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   if (bad > 0) {
     report.converged = false;
-    report.message = "cusparse_pcg: " + std::to_string(bad) +
-                     " diagonal blocks of the system are not positive definite, so A is not SPD (the "
-                     "preconditioner needs them). Fix: clamp compressed springs / project the Jacobian to PSD, or "
-                     "reduce dt.";
+    report.message = name_ + ": " + std::to_string(bad) +
+                     " diagonal blocks of the system are not positive definite, so the system matrix is not positive "
+                     "definite on the free DOFs (compressed elements without the Jacobian clamp, or a step too large "
+                     "for the material); reduce integrator.dt, enable the material's Jacobian clamp, or set "
+                     "integrator.on_solver_failure: halve_step";
     return false;
   }
   return true;
@@ -221,57 +302,14 @@ template <class T>
 SolveReport DevicePcg<T>::solve(const DeviceBsr<T>& A, const DeviceFilter<T>& S, const DVec<T>& b, const DVec<T>& z,
                                 DVec<T>& dv) {
   const auto t0 = Clock::now();
-  SolveReport rep;
   if (A.n != n_) analyze(A.n);
-  const Index n = n_;
-  const Index N = 3 * n;
-  // dv <- S dv + z (warm start on the free DOFs, prescribed values on the constrained ones).
-  parallel_for(S.num_constrained, AddPrescribed<T>{raw(S.constrained), raw(S.free), raw(S.proj), raw(z), raw(dv)});
-  // bh = S (b - A z) (in c_ for now); delta0 = bh . Pm^-1 bh.
-  const T bh2 = filtered_residual(A, S, b, z, t_, c_);
-  const T delta0 = reduce_sum<T>(n, PrecondDot<T>{raw(pinv_), raw(c_), raw(s_)});
-  filtered_residual(A, S, b, dv, t_, r_);
-  T delta = reduce_sum<T>(n, PrecondDot<T>{raw(pinv_), raw(r_), raw(s_)});
-  parallel_for(n, Direction<T>{raw(S.free), raw(S.proj), raw(s_), T(0), raw(c_)});
-  const T eps2 = static_cast<T>(opt_.tolerance * opt_.tolerance);
-  int it = 0;
-  bool ok = true;
-  while (delta > eps2 * delta0 && it < opt_.max_iterations) {
-    A.multiply(raw(c_), raw(q_));
-    filter(S, q_);
-    const T cq = dot(c_, q_);
-    if (!(cq > T(0))) {
-      ok = false;
-      char buf[200];
-      std::snprintf(buf, sizeof buf,
-                    "cusparse_pcg: c^T A c = %.3g is not positive at iteration %d: A is not positive definite on the "
-                    "free DOFs. Fix: clamp compressed springs / PSD projection, or reduce dt.",
-                    static_cast<double>(cq), it);
-      rep.message = buf;
-      break;
-    }
-    const T alpha = delta / cq;
-    const T dnew = reduce_sum<T>(n, Update<T>{raw(pinv_), raw(c_), raw(q_), alpha, raw(dv), raw(r_), raw(s_)});
-    const T beta = dnew / delta;
-    delta = dnew;
-    parallel_for(n, Direction<T>{raw(S.free), raw(S.proj), raw(s_), beta, raw(c_)});
-    ++it;
-  }
-  rep.iterations = it;
-  // True relative residual |S(b - A dv)| / |S(b - A z)|.
-  const T rr = filtered_residual(A, S, b, dv, t_, q_);
-  rep.residual = bh2 > T(0) ? std::sqrt(static_cast<double>(rr) / static_cast<double>(bh2))
-                            : std::sqrt(static_cast<double>(rr));
-  rep.converged = ok && delta <= eps2 * delta0;
-  if (ok && !rep.converged) {
-    char buf[200];
-    std::snprintf(buf, sizeof buf,
-                  "cusparse_pcg: not converged after %d iterations (relative residual %.3g, tolerance %.3g). Fix: "
-                  "raise max_iterations, relax tolerance or reduce dt.",
-                  it, rep.residual, opt_.tolerance);
-    rep.message = buf;
-  }
-  (void)N;
+  DevicePcgOps<T> ops{A, S, b, z, pinv_, n_};
+  static_assert(pcg::FilteredPcgOps<DevicePcgOps<T>>);
+  pcg::Settings set;
+  set.tolerance = opt_.tolerance;
+  set.max_iterations = opt_.max_iterations;
+  set.name = name_.c_str();
+  SolveReport rep = pcg::solve(ops, set, dv, r_, c_, q_, s_);
   rep.solve_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   return rep;
 }
@@ -291,7 +329,7 @@ bool CusparsePcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& re
   if (A_.n != A.rows() || A_.nnzb != A.pattern().nnz_blocks()) analyze_pattern(A, S);
   cuda::upload(A.values(), A_.values);
   S_.upload(S);
-  return pcg_.factorize(A_, report);
+  return pcg_.factorize(A_, S_, report);
 }
 
 SolveReport CusparsePcg::solve(const BsrMatrix&, const Filter&, std::span<const double> b, std::span<const double> z,

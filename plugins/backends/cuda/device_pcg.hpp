@@ -1,14 +1,14 @@
-// Modified (filtered) preconditioned CG of NUMERICS.md 3.3 on device vectors: SpMV through the
-// seam (cuSPARSE bsrmv; a Thrust SpMV in the OpenMP test build), dot products as Thrust
-// reductions, the constraint filter S applied vertex by vertex (only constrained vertices).
-//   dv <- S dv + z (warm start) or z;  r <- S(b - A dv);  c <- S Pm^-1 r;  delta <- r.c
-//   delta0 <- bh.Pm^-1 bh with bh = S(b - A z);  loop while delta > tol^2 delta0:
-//   q <- S A c;  alpha <- delta / c.q;  dv += alpha c;  r -= alpha q;  s <- Pm^-1 r;
-//   delta' <- r.s;  c <- S(s + (delta'/delta) c)
-// Pm is diag(A) (jacobi), its 3x3 block diagonal (block_jacobi, default) or I (none).
+// The filtered PCG of loom/filtered_pcg.hpp on device vectors: the one loop of every backend,
+// instantiated here with device operations: SpMV through the seam (cuSPARSE bsrmv; a Thrust
+// SpMV in the OpenMP test build), dot products as Thrust reductions, the constraint filter S
+// applied vertex by vertex (only constrained vertices), and the filtered preconditioner
+// P_i = S_i M_i^-1 S_i with M_i the (projected) block diagonal (block_jacobi, default), the
+// diagonal (jacobi) or I (none), as on the CPU. Stopping rule: the true relative residual
+// |S(b - A dv)| <= tolerance |S(b - A z)| (loom/filtered_pcg.hpp).
 #pragma once
 
 #include <string>
+#include <utility>
 
 #include "device_model.hpp"
 #include "loom/bsr.hpp"
@@ -19,14 +19,16 @@
 namespace loom::cuda {
 
 struct PcgOptions {
-  double tolerance = 1e-6;     ///< on sqrt(r.Pm^-1 r / bh.Pm^-1 bh)
-  int max_iterations = 10000;
+  double tolerance = 1e-5;     ///< true relative residual |S(b - A dv)| / |S(b - A z)| (as on the CPU)
+  int max_iterations = 1000;
   enum class Preconditioner { None, Jacobi, BlockJacobi } preconditioner = Preconditioner::BlockJacobi;
 };
-/// The keys of cusparse_pcg: tolerance, max_iterations, preconditioner (none | jacobi |
-/// block_jacobi), read by parse_pcg_options.
+/// The keys of filtered_pcg on backend cuda: tolerance, max_iterations, preconditioner (none |
+/// jacobi | block_jacobi), declared as in the cpu plugin (same defaults and meaning).
+const ParamSpec& filtered_pcg_cuda_spec();
+/// The same keys under the deprecated name cusparse_pcg.
 const ParamSpec& cusparse_pcg_spec();
-PcgOptions parse_pcg_options(const Params& p);
+PcgOptions parse_pcg_options(const Params& p, const ParamSpec& spec = filtered_pcg_cuda_spec());
 
 /// The constraint filter on the device: free DOF count and projector per vertex, and the
 /// list of constrained vertices.
@@ -37,6 +39,10 @@ struct DeviceFilter {
   DVec<T> proj;
   DVec<Index> constrained;
   void upload(const Filter& S);
+  /// Size the arrays for n vertices, all free (free and proj are then written on the device).
+  void resize(Index n);
+  /// Rebuild the list of constrained vertices (free < 3, increasing) from `free` on the device.
+  void rebuild_constrained();
 };
 
 template <class T>
@@ -46,26 +52,36 @@ class DevicePcg {
   const PcgOptions& options() const { return opt_; }
   /// Allocate work vectors for n block rows.
   void analyze(Index n);
-  /// Build the preconditioner from A's diagonal blocks; false (with a message) when a diagonal
-  /// (block) is not positive definite.
-  bool factorize(const DeviceBsr<T>& A, SolveReport& report);
+  /// Build the filtered preconditioner S_i M_i^-1 S_i from A's diagonal blocks; false (with a
+  /// message) when a diagonal (block) is not positive definite.
+  bool factorize(const DeviceBsr<T>& A, const DeviceFilter<T>& S, SolveReport& report);
   /// Solve on range(S) with (I - S) dv = z; dv holds the warm start on entry.
   SolveReport solve(const DeviceBsr<T>& A, const DeviceFilter<T>& S, const DVec<T>& b, const DVec<T>& z,
                     DVec<T>& dv);
+  /// Prefix of the messages (the plugin's name).
+  void set_name(std::string name) { name_ = std::move(name); }
 
  private:
   PcgOptions opt_;
+  std::string name_ = "filtered_pcg";
   Index n_ = 0;
-  DVec<T> pinv_, r_, c_, q_, s_, t_;
+  DVec<T> pinv_, r_, c_, q_, s_;
 };
 
-/// cusparse_pcg as a LinearSolver (host interface: uploads A, S, b, z, dv per call); the
-/// CUDA baraff_witkin uses its DevicePcg directly on device data.
+/// filtered_pcg on backend cuda as a LinearSolver (host interface: uploads A, S, b, z, dv per
+/// call); the CUDA baraff_witkin uses its DevicePcg directly on device data. `name` is
+/// filtered_pcg or the deprecated cusparse_pcg.
 class CusparsePcg final : public LinearSolver {
  public:
-  explicit CusparsePcg(const Params& p = Params()) : pcg_(parse_pcg_options(p)) {}
-  explicit CusparsePcg(PcgOptions o) : pcg_(o) {}
-  std::string name() const override { return "cusparse_pcg"; }
+  explicit CusparsePcg(const Params& p = Params(), std::string name = "filtered_pcg")
+      : pcg_(parse_pcg_options(p, name == "cusparse_pcg" ? cusparse_pcg_spec() : filtered_pcg_cuda_spec())),
+        name_(std::move(name)) {
+    pcg_.set_name(name_);
+  }
+  explicit CusparsePcg(PcgOptions o, std::string name = "filtered_pcg") : pcg_(o), name_(std::move(name)) {
+    pcg_.set_name(name_);
+  }
+  std::string name() const override { return name_; }
   void analyze_pattern(const BsrMatrix& A, const Filter& S) override;
   bool factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) override;
   SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b, std::span<const double> z,
@@ -74,6 +90,7 @@ class CusparsePcg final : public LinearSolver {
 
  private:
   DevicePcg<double> pcg_;
+  std::string name_;
   DeviceBsr<double> A_;
   DeviceFilter<double> S_;
   DVec<double> b_, z_, dv_;

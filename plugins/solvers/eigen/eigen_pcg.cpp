@@ -14,17 +14,13 @@
 
 #include "block_row.hpp"
 #include "loom/clock.hpp"
+#include "loom/filtered_pcg.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/solver_common.hpp"
 
 namespace loom {
 
 namespace {
-std::string format(const char* fmt, double a, double b = 0, double c = 0) {
-  char buf[512];
-  std::snprintf(buf, sizeof buf, fmt, a, b, c);
-  return buf;
-}
 const char* precond_name(PcgPreconditioner p) {
   switch (p) {
     case PcgPreconditioner::None: return "none";
@@ -36,18 +32,18 @@ const char* precond_name(PcgPreconditioner p) {
 
 }  // namespace
 
-const ParamSpec& pcg_spec() {
-  static const ParamSpec spec = [] {
+namespace {
+ParamSpec make_pcg_spec(const char* name, const char* summary) {
     const PcgOptions d;
     const amg::SaAmgOptions m;
-    ParamSpec s("eigen_pcg", "modified (filtered) PCG of Baraff-Witkin on the 3x3 block matrix");
+    ParamSpec s(name, summary);
     s.number("tolerance", d.tolerance).range(ParamRange::closed(1e-16, 0.5)).help(
-        "relative residual: |S(b - A dv)| <= tolerance |S(b - A z)|");
+        "true relative residual of the filtered system: |S(b - A dv)| <= tolerance |S(b - A z)|");
     s.integer("max_iterations", d.max_iterations).range(ParamRange::closed(1, 1e8)).help(
         "iterations before the solve counts as failed");
     s.choice("preconditioner", precond_name(d.preconditioner), {"none", "jacobi", "block_jacobi", "sa_amg"}).help(
         "sa_amg: smoothed-aggregation multigrid V-cycle (options under sa_amg)");
-    s.integer("parallel_min_rows", d.parallel_min_rows).range(ParamRange::closed(0, 1e9)).units("vertices").help(
+    s.integer("parallel_min_rows", d.parallel_min_rows).range(ParamRange::closed(0, 1e9)).units("vertices").backends({"cpu"}).help(
         "loops run on all OpenMP threads from this many block rows on");
     ParamSpec a("sa_amg");
     a.choice("near_null_space", m.near_null_modes == 6 ? "rigid" : "translations", {"rigid", "translations"}).help(
@@ -69,19 +65,39 @@ const ParamSpec& pcg_spec() {
         "precision of the hierarchy's matrices read by the V-cycle (set-up and sums stay double)");
     a.number("prolongator_damping", m.prolongator_damping).range(ParamRange::closed(0, 1.9)).help(
         "omega = damping / lambda_max(D^-1 A)");
-    s.map("sa_amg", std::move(a)).help("options of preconditioner: sa_amg");
+    s.map("sa_amg", std::move(a)).backends({"cpu"}).help("options of preconditioner: sa_amg");
     return s;
-  }();
+}
+}  // namespace
+
+const ParamSpec& filtered_pcg_spec() {
+  static const ParamSpec spec = make_pcg_spec(
+      "filtered_pcg", "modified (filtered) PCG of Baraff-Witkin on the 3x3 block matrix, one loop for every backend");
   return spec;
 }
 
-PcgOptions parse_pcg_options(const Params& p) {
+const ParamSpec& pcg_spec() {
+  static const ParamSpec spec = make_pcg_spec("eigen_pcg", "deprecated name of filtered_pcg (same keys and behaviour)");
+  return spec;
+}
+
+PcgOptions parse_pcg_options(const Params& p, const ParamSpec& spec, const std::string& backend) {
   PcgOptions o;
   if (!p.valid()) return o;
-  const ParamReader r(p, pcg_spec());
+  const ParamReader r(p, spec);
   o.tolerance = r.number("tolerance");
   o.max_iterations = r.int32("max_iterations");
   const std::string pc = r.text("preconditioner");
+  // cpu only: a device backend leaves these keys unread, so check_unused names the backend
+  // that honours them.
+  if (backend != "cpu") {
+    if (pc == "sa_amg")
+      r.params().child("preconditioner").fail("preconditioner sa_amg runs on backend cpu only; on backend " + backend +
+                                              " use none, jacobi or block_jacobi");
+    o.preconditioner = pc == "none" ? PcgPreconditioner::None
+                       : pc == "jacobi" ? PcgPreconditioner::Jacobi : PcgPreconditioner::BlockJacobi;
+    return o;
+  }
   o.parallel_min_rows = static_cast<Index>(r.integer("parallel_min_rows"));
   o.preconditioner = pc == "none"     ? PcgPreconditioner::None
                      : pc == "jacobi" ? PcgPreconditioner::Jacobi
@@ -108,7 +124,7 @@ PcgOptions parse_pcg_options(const Params& p) {
   return o;
 }
 
-EigenPcg::EigenPcg(PcgOptions options) : options_(options) {}
+EigenPcg::EigenPcg(PcgOptions options, std::string name) : options_(options), name_(std::move(name)) {}
 
 void EigenPcg::set_coordinates(std::span<const double> x) { coords_.assign(x.begin(), x.end()); }
 
@@ -122,7 +138,6 @@ void EigenPcg::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   c_.assign(N, 0.0);
   q_.assign(N, 0.0);
   s_.assign(N, 0.0);
-  partial_.assign(static_cast<std::size_t>(std::max(1, omp_get_max_threads())) + 1, Partial{});
 }
 
 bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) {
@@ -140,7 +155,7 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
     report.factorize_seconds = seconds_since(t0);
     if (!ok) {
       report.converged = false;
-      report.message = "eigen_pcg: " + msg;
+      report.message = name_ + ": " + msg;
     }
     return ok;
   }
@@ -183,7 +198,7 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
   report.factorize_seconds = seconds_since(t0);
   if (bad != INT_MAX) {
     report.converged = false;
-    report.message = "eigen_pcg: the " + std::string(precond_name(pc)) + " preconditioner's diagonal " +
+    report.message = name_ + ": the " + std::string(precond_name(pc)) + " preconditioner's diagonal " +
                      (pc == PcgPreconditioner::BlockJacobi ? "block" : "entry") + " of vertex " +
                      std::to_string(bad) +
                      " is not positive (definite), so the system matrix is not positive definite on the free "
@@ -195,267 +210,129 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
   return true;
 }
 
-int EigenPcg::iterate(const BsrMatrix& A, const Filter& S, std::span<double> dv, double threshold2,
-                      int max_iterations, int& status, double& curvature) {
-  const BsrPattern& P = A.pattern();
-  const Index n = n_;
-  const Index* rp = P.row_ptr.data();
-  const Index* col = P.col.data();
-  const double* val = A.values().data();
-  const double* pinv = pinv_.data();
-  double* r = r_.data();
-  double* c = c_.data();
-  double* q = q_.data();
-  double* s = s_.data();
-  double* x = dv.data();
-  Partial* part = partial_.data();
-  const double rr0 = rr_;
-  int it_out = 0, status_out = 1;
-  double rr_out = rr0, curv_out = 0;
+namespace {
 
-#pragma omp parallel if (n >= options_.parallel_min_rows)
-  {
-    const int t = omp_get_thread_num();
-    const int nt = omp_get_num_threads();
-    // s = P r, c = s, delta = r . s
-    double loc = 0;
-#pragma omp for schedule(static) nowait
+// The CPU operations of the filtered PCG (loom/filtered_pcg.hpp): OpenMP loops over block
+// rows (serial below parallel_min_rows rows), the preconditioner either the stored blocks
+// S_i M_i^-1 S_i or the multigrid V-cycle followed by the filter.
+struct CpuPcgOps {
+  using Real = double;
+  using Vec = std::span<double>;
+  const BsrMatrix& A;
+  const Filter& S;
+  std::span<const double> b, z;
+  const double* pinv;   // 9 per vertex (null with amg)
+  amg::SaAmg* amg;      // the V-cycle (null without)
+  bool par;
+  Index n;
+
+  double residual(const Vec& x, Vec& out) const {
+    const BsrPattern& P = A.pattern();
+    const Index* rp = P.row_ptr.data();
+    const Index* col = P.col.data();
+    const double* val = A.values().data();
+    const double* xp = x.data();
+    double* o = out.data();
+    const double* bp = b.data();
+    double sum = 0;
+#pragma omp parallel for schedule(static) reduction(+ : sum) if (par)
     for (Index i = 0; i < n; ++i) {
-      const std::size_t o = 3 * static_cast<std::size_t>(i);
-      kernels::mat3_mul(pinv + 3 * o, r + o, s + o);
-      c[o] = s[o];
-      c[o + 1] = s[o + 1];
-      c[o + 2] = s[o + 2];
-      loc += kernels::dot3(r + o, s + o);
+      const std::size_t k = 3 * static_cast<std::size_t>(i);
+      double ax[3];  // the shared kernel, as solver::filtered_residual (b = A z gives exactly 0)
+      kernels::bsr_row_multiply(rp, col, val, xp, i, ax);
+      for (int a = 0; a < 3; ++a) o[k + a] = bp[k + a] - ax[a];
+      solver::filter_vertex(S, i, o + k);
+      sum += kernels::dot3(o + k, o + k);
     }
-    part[t].v[0] = loc;
-#pragma omp barrier
-    double delta = 0;
-    for (int k = 0; k < nt; ++k) delta += part[k].v[0];
-    double rr = rr0;
-    int it = 0, st = 1;
-    double curv = 0;
-    for (;;) {
-      if (rr <= threshold2) { st = 0; break; }
-      if (it >= max_iterations) { st = 1; break; }
-      if (!(delta > 0) || !std::isfinite(delta)) { st = 3; curv = delta; break; }
-      // q = S (A c), cq = c . q
-      loc = 0;
-#pragma omp for schedule(static) nowait
-      for (Index i = 0; i < n; ++i) {
-        const std::size_t o = 3 * static_cast<std::size_t>(i);
-        block_row_multiply3(rp, col, val, c, i, q + o);
-        const int f = S.free_dofs(i);
-        if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), q + o);
-        loc += kernels::dot3(c + o, q + o);
-      }
-      part[t].v[1] = loc;
-#pragma omp barrier
-      double cq = 0;
-      for (int k = 0; k < nt; ++k) cq += part[k].v[1];
-      if (!(cq > 0) || !std::isfinite(cq)) { st = 2; curv = cq; break; }
-      const double alpha = delta / cq;
-      double ld = 0, lr = 0;
-#pragma omp for schedule(static) nowait
-      for (Index i = 0; i < n; ++i) {
-        const std::size_t o = 3 * static_cast<std::size_t>(i);
-        for (int a = 0; a < 3; ++a) {
-          x[o + a] += alpha * c[o + a];
-          r[o + a] -= alpha * q[o + a];
-        }
-        kernels::mat3_mul(pinv + 3 * o, r + o, s + o);
-        ld += kernels::dot3(r + o, s + o);
-        lr += kernels::dot3(r + o, r + o);
-      }
-      part[t].v[2] = ld;
-      part[t].v[3] = lr;
-#pragma omp barrier
-      double dnew = 0;
-      rr = 0;
-      for (int k = 0; k < nt; ++k) {
-        dnew += part[k].v[2];
-        rr += part[k].v[3];
-      }
-      const double beta = dnew / delta;
-      delta = dnew;
-#pragma omp for schedule(static)
-      for (Index i = 0; i < n; ++i) {
-        const std::size_t o = 3 * static_cast<std::size_t>(i);
-        c[o] = s[o] + beta * c[o];
-        c[o + 1] = s[o + 1] + beta * c[o + 1];
-        c[o + 2] = s[o + 2] + beta * c[o + 2];
-      }
-      ++it;
-    }
-    if (t == 0) {
-      it_out = it;
-      status_out = st;
-      rr_out = rr;
-      curv_out = curv;
-    }
+    return sum;
   }
-  rr_ = rr_out;
-  status = status_out;
-  curvature = curv_out;
-  return it_out;
-}
-
-int EigenPcg::iterate_amg(const BsrMatrix& A, const Filter& S, std::span<double> dv, double threshold2,
-                          int max_iterations, int& status, double& curvature) {
-  const BsrPattern& P = A.pattern();
-  const Index n = n_;
-  const Index* rp = P.row_ptr.data();
-  const Index* col = P.col.data();
-  const double* val = A.values().data();
-  double* r = r_.data();
-  double* c = c_.data();
-  double* q = q_.data();
-  double* s = s_.data();
-  double* x = dv.data();
-  const bool par = n >= options_.parallel_min_rows;
-  // s = S M r, returns r . s
-  auto precondition = [&]() {
-    amg_->apply(r, s);
-    solver::filter(S, s_);
-    double d = 0;
-#pragma omp parallel for schedule(static) reduction(+ : d) if (par)
-    for (Index i = 0; i < n; ++i) d += kernels::dot3(r + 3 * static_cast<std::size_t>(i), s + 3 * static_cast<std::size_t>(i));
-    return d;
-  };
-  double delta = precondition();
-  const std::size_t N = 3 * static_cast<std::size_t>(n);
-  std::copy(s, s + N, c);
-  double rr = rr_;
-  int it = 0;
-  status = 1;
-  curvature = 0;
-  for (;;) {
-    if (rr <= threshold2) { status = 0; break; }
-    if (it >= max_iterations) { status = 1; break; }
-    if (!(delta > 0) || !std::isfinite(delta)) { status = 3; curvature = delta; break; }
+  double apply_operator(const Vec& c, Vec& q) const {
+    const BsrPattern& P = A.pattern();
+    const Index* rp = P.row_ptr.data();
+    const Index* col = P.col.data();
+    const double* val = A.values().data();
+    const double* cp = c.data();
+    double* qp = q.data();
     double cq = 0;
 #pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
     for (Index i = 0; i < n; ++i) {
       const std::size_t o = 3 * static_cast<std::size_t>(i);
-      block_row_multiply3(rp, col, val, c, i, q + o);
+      block_row_multiply3(rp, col, val, cp, i, qp + o);
       const int f = S.free_dofs(i);
-      if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), q + o);
-      cq += kernels::dot3(c + o, q + o);
+      if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), qp + o);
+      cq += kernels::dot3(cp + o, qp + o);
     }
-    if (!(cq > 0) || !std::isfinite(cq)) { status = 2; curvature = cq; break; }
-    const double alpha = delta / cq;
-    double lr = 0;
-#pragma omp parallel for schedule(static) reduction(+ : lr) if (par)
+    return cq;
+  }
+  double precondition(const Vec& r, Vec& s) const {
+    const double* rp = r.data();
+    double* sp = s.data();
+    double d = 0;
+    if (amg) {
+      amg->apply(rp, sp);
+      solver::filter(S, s);
+#pragma omp parallel for schedule(static) reduction(+ : d) if (par)
+      for (Index i = 0; i < n; ++i) d += kernels::dot3(rp + 3 * static_cast<std::size_t>(i), sp + 3 * static_cast<std::size_t>(i));
+      return d;
+    }
+#pragma omp parallel for schedule(static) reduction(+ : d) if (par)
+    for (Index i = 0; i < n; ++i) {
+      const std::size_t o = 3 * static_cast<std::size_t>(i);
+      kernels::mat3_mul(pinv + 3 * o, rp + o, sp + o);
+      d += kernels::dot3(rp + o, sp + o);
+    }
+    return d;
+  }
+  double update(double alpha, const Vec& c, const Vec& q, Vec& x, Vec& r) const {
+    const double* cp = c.data();
+    const double* qp = q.data();
+    double* xp = x.data();
+    double* rp = r.data();
+    double rr = 0;
+#pragma omp parallel for schedule(static) reduction(+ : rr) if (par)
     for (Index i = 0; i < n; ++i) {
       const std::size_t o = 3 * static_cast<std::size_t>(i);
       for (int a = 0; a < 3; ++a) {
-        x[o + a] += alpha * c[o + a];
-        r[o + a] -= alpha * q[o + a];
+        xp[o + a] += alpha * cp[o + a];
+        rp[o + a] -= alpha * qp[o + a];
       }
-      lr += kernels::dot3(r + o, r + o);
+      rr += kernels::dot3(rp + o, rp + o);
     }
-    rr = lr;
-    const double dnew = precondition();
-    const double beta = dnew / delta;
-    delta = dnew;
-#pragma omp parallel for schedule(static) if (par)
-    for (std::size_t k = 0; k < N; ++k) c[k] = s[k] + beta * c[k];
-    ++it;
+    return rr;
   }
-  rr_ = rr;
-  return it;
-}
+  void xpby(const Vec& s, double beta, Vec& c) const {
+    const double* sp = s.data();
+    double* cp = c.data();
+    const std::size_t N = 3 * static_cast<std::size_t>(n);
+#pragma omp parallel for schedule(static) if (par)
+    for (std::size_t k = 0; k < N; ++k) cp[k] = sp[k] + beta * cp[k];
+  }
+  void start(Vec& dv) const { solver::apply_prescribed(S, z, dv); }
+  void assign_prescribed(Vec& dv) const {
+    std::fill(dv.begin(), dv.end(), 0.0);
+    solver::apply_prescribed(S, z, dv);
+  }
+  void copy(const Vec& a, Vec& b2) const { std::copy(a.begin(), a.end(), b2.begin()); }
+};
+static_assert(pcg::FilteredPcgOps<CpuPcgOps>);
+
+}  // namespace
 
 SolveReport EigenPcg::solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                             std::span<const double> z, std::span<double> dv) {
   const auto t0 = Clock::now();
-  SolveReport rep;
   if (A.rows() != n_) analyze_pattern(A, S);
   const std::size_t N = 3 * static_cast<std::size_t>(n_);
   if (b.size() != N || z.size() != N || dv.size() != N)
-    throw std::invalid_argument("eigen_pcg: vector sizes do not match the matrix");
-
-  // b-hat = S (b - A z): what is left to solve once the prescribed part is in place.
-  double bh2;
-  if (solver::prescribed_is_zero(S, z)) {
-    bh2 = 0;
-    for (std::size_t k = 0; k < N; ++k) r_[k] = b[k];
-    solver::filter(S, r_);
-    for (std::size_t k = 0; k < N; ++k) bh2 += r_[k] * r_[k];
-  } else {
-    bh2 = solver::filtered_residual(A, S, b, z, r_);
-  }
-  const double bh = std::sqrt(bh2);
-  if (!std::isfinite(bh)) {
-    rep.message = "eigen_pcg: the right-hand side is not finite (NaN or Inf in the forces or the matrix)";
-    rep.solve_seconds = seconds_since(t0);
-    return rep;
-  }
-
-  // Ascher-Boxerman start: dv = S dv_guess + z.
-  solver::apply_prescribed(S, z, dv);
-  bool guess_nonzero = false;
-  for (std::size_t k = 0; k < N && !guess_nonzero; ++k) guess_nonzero = dv[k] != z[k];
-  if (bh2 == 0) {
-    std::fill(dv.begin(), dv.end(), 0.0);
-    solver::apply_prescribed(S, z, dv);
-    rep.converged = true;
-    rep.solve_seconds = seconds_since(t0);
-    return rep;
-  }
-  rr_ = bh2;
-  if (guess_nonzero) {
-    const double rw = solver::filtered_residual(A, S, b, dv, q_);
-    if (rw < bh2 && std::isfinite(rw)) {
-      std::swap(r_, q_);
-      rr_ = rw;
-    } else {  // the warm start is worse than none: start from z
-      std::fill(dv.begin(), dv.end(), 0.0);
-      solver::apply_prescribed(S, z, dv);
-    }
-  }
-
-  const double tol = options_.tolerance;
-  const double threshold2 = tol * tol * bh2;
-  int total = 0, status = 1;
-  double curvature = 0, rel = 0;
-  for (int attempt = 0; attempt < 3; ++attempt) {
-    total += options_.preconditioner == PcgPreconditioner::SaAmg
-                 ? iterate_amg(A, S, dv, threshold2, options_.max_iterations - total, status, curvature)
-                 : iterate(A, S, dv, threshold2, options_.max_iterations - total, status, curvature);
-    if (status != 0) break;
-    // The recursive residual has converged; check the true one (and restart from it if
-    // rounding let the two drift apart).
-    const double tr2 = solver::filtered_residual(A, S, b, dv, q_);
-    rel = std::sqrt(tr2) / bh;
-    if (rel <= tol) break;
-    std::swap(r_, q_);
-    rr_ = tr2;
-    status = 1;
-  }
-  if (status != 0) rel = std::sqrt(solver::filtered_residual(A, S, b, dv, q_)) / bh;
-  rep.iterations = total;
-  rep.residual = rel;
-  rep.converged = status == 0 && rel <= tol;
-  if (!rep.converged) {
-    if (status == 2)
-      rep.message = format(
-          "eigen_pcg: non-positive curvature c^T A c = %.3g at iteration %.0f (relative residual %.3g): the "
-          "system matrix is not positive definite on the free DOFs (compressed elements without the Jacobian "
-          "clamp, or a step too large for the material); reduce integrator.dt, enable the material's Jacobian "
-          "clamp, or set integrator.on_solver_failure: halve_step",
-          curvature, total, rel);
-    else if (status == 3)
-      rep.message = format(
-          "eigen_pcg: the preconditioned residual norm r^T P^-1 r = %.3g is not positive at iteration %.0f "
-          "(relative residual %.3g): the preconditioner or the system is not positive definite",
-          curvature, total, rel);
-    else
-      rep.message = format(
-          "eigen_pcg: not converged in %.0f iterations (relative residual %.3g > tolerance %.3g); raise "
-          "max_iterations, reduce integrator.dt, or use eigen_ldlt",
-          total, rel, tol);
-  }
+    throw std::invalid_argument(name_ + ": vector sizes do not match the matrix");
+  const bool use_amg = options_.preconditioner == PcgPreconditioner::SaAmg;
+  CpuPcgOps ops{A, S, b, z, pinv_.data(), use_amg ? amg_.get() : nullptr, n_ >= options_.parallel_min_rows, n_};
+  pcg::Settings set;
+  set.tolerance = options_.tolerance;
+  set.max_iterations = options_.max_iterations;
+  set.name = name_.c_str();
+  std::span<double> r(r_), c(c_), q(q_), s(s_);
+  SolveReport rep = pcg::solve(ops, set, dv, r, c, q, s);
   rep.solve_seconds = seconds_since(t0);
   return rep;
 }

@@ -27,16 +27,21 @@ struct PcgOptions {
   amg::SaAmgOptions amg;       ///< preconditioner: sa_amg (the `sa_amg:` map)
 };
 
-/// The keys of eigen_pcg: tolerance, max_iterations, preconditioner (none | jacobi |
-/// block_jacobi | sa_amg), parallel_min_rows and the sa_amg: map.
+/// The keys of filtered_pcg (cpu and cuda): tolerance, max_iterations, preconditioner (none |
+/// jacobi | block_jacobi | sa_amg), and for cpu parallel_min_rows and the sa_amg: map.
+const ParamSpec& filtered_pcg_spec();
+/// The same keys under the deprecated name eigen_pcg.
 const ParamSpec& pcg_spec();
-/// Reads them through pcg_spec().
-PcgOptions parse_pcg_options(const Params& p);
+/// Reads them through `spec`; `backend` other than cpu leaves the cpu-only keys unread and
+/// refuses preconditioner: sa_amg.
+PcgOptions parse_pcg_options(const Params& p, const ParamSpec& spec = filtered_pcg_spec(),
+                             const std::string& backend = "cpu");
 
 class EigenPcg final : public LinearSolver {
  public:
-  explicit EigenPcg(PcgOptions options = {});
-  std::string name() const override { return "eigen_pcg"; }
+  /// `name`: filtered_pcg, or eigen_pcg (its former, deprecated name).
+  explicit EigenPcg(PcgOptions options = {}, std::string name = "filtered_pcg");
+  std::string name() const override { return name_; }
   void analyze_pattern(const BsrMatrix& A, const Filter& S) override;
   bool factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) override;
   SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
@@ -47,25 +52,13 @@ class EigenPcg final : public LinearSolver {
   amg::SaAmg* amg() { return amg_.get(); }
 
  private:
-  // One PCG run from the current dv and residual r (in range(S)); returns the iterations
-  // taken and sets status: 0 converged, 1 iteration cap, 2 non-positive curvature,
-  // 3 non-positive or non-finite r^T P r.
-  int iterate(const BsrMatrix& A, const Filter& S, std::span<double> dv, double threshold2,
-              int max_iterations, int& status, double& curvature);
-
-  // The same iteration with the V-cycle as preconditioner (s = S M r).
-  int iterate_amg(const BsrMatrix& A, const Filter& S, std::span<double> dv, double threshold2,
-                  int max_iterations, int& status, double& curvature);
-
   PcgOptions options_;
   std::unique_ptr<amg::SaAmg> amg_;
   std::vector<double> coords_;
   Index n_ = 0;
   std::vector<double> pinv_;  // 9 per vertex: S_i P_i^{-1} S_i
   std::vector<double> r_, c_, q_, s_;
-  struct alignas(64) Partial { double v[4]; };
-  std::vector<Partial> partial_;
-  double rr_ = 0;             // |r|^2 of the current residual
+  std::string name_;
 };
 
 }  // namespace loom
