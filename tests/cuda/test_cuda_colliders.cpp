@@ -2,7 +2,7 @@
 // stand-in (and on a GPU as test_cuda_gpu): HO and RK4 runs with contacts against the CPU
 // backend, whose ColliderSet::resolve_contacts runs after each step exactly as
 // Simulation::step calls it; the shipped draped-ball ball (spinning, with friction); moving
-// planes and spheres; the refusals (Baraff-Witkin with colliders, mesh colliders).
+// planes and spheres; the refusal of mesh colliders.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -170,12 +170,7 @@ TEST(CudaColliders, RefusalsNameTheFix) {
       EXPECT_NE(std::string(e.what()).find("Fix:"), std::string::npos) << e.what();
     }
   };
-  // Baraff-Witkin: contacts are constraints of its implicit solve, not on the device.
-  {
-    auto sc = make_scene(shipped_colliders("draped_ball_rk4.yaml"), 5, 0.5, 0.0, -0.5, 0.0);
-    auto di = lc::make_cuda_baraff_witkin(lc::BwOptionsD{}, lc::Precision::Double);
-    expect_refusal(*di, *sc, "integrator rk4 or harmonic_oscillation");
-  }
+  // (Baraff-Witkin with colliders runs on the device: tests/cuda/test_cuda_bw_colliders.cpp.)
   // Mesh colliders: not on the device, for every integrator.
   {
     Collider mesh;

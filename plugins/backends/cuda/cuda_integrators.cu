@@ -78,6 +78,29 @@ struct ContactKernel {
   }
 };
 
+/// The sphere and plane colliders placed at time t, as kernel data (scene order).
+template <class T>
+int fill_contact_shapes(const ColliderSet& set, double t, kernels::ContactShape<T>* out) {
+  const int count = static_cast<int>(set.size());
+  for (int c = 0; c < count; ++c) {
+    const Collider& col = set.colliders()[c];
+    const kernels::ContactShape<double> s = col.contact_shape(col.frame_at(t));
+    kernels::ContactShape<T>& o = out[c];
+    o.sphere = s.sphere;
+    for (int a = 0; a < 3; ++a) {
+      o.center[a] = static_cast<T>(s.center[a]);
+      o.normal[a] = static_cast<T>(s.normal[a]);
+      o.omega[a] = static_cast<T>(s.omega[a]);
+      o.vlin[a] = static_cast<T>(s.vlin[a]);
+    }
+    o.radius = static_cast<T>(s.radius);
+    o.thickness = static_cast<T>(s.thickness);
+    o.mu_static = static_cast<T>(s.mu_static);
+    o.mu_kinetic = static_cast<T>(s.mu_kinetic);
+  }
+  return count;
+}
+
 template <class T>
 class DeviceColliders {
  public:
@@ -89,23 +112,7 @@ class DeviceColliders {
   /// Resolve contacts at time t (the end of a step of size h).
   void resolve(DeviceState<T>& ds, double t, double h) {
     ContactKernel<T> k{};
-    k.count = static_cast<int>(colliders_->size());
-    for (int c = 0; c < k.count; ++c) {
-      const Collider& col = colliders_->colliders()[c];
-      const kernels::ContactShape<double> s = col.contact_shape(col.frame_at(t));
-      kernels::ContactShape<T>& o = k.shapes[c];
-      o.sphere = s.sphere;
-      for (int a = 0; a < 3; ++a) {
-        o.center[a] = static_cast<T>(s.center[a]);
-        o.normal[a] = static_cast<T>(s.normal[a]);
-        o.omega[a] = static_cast<T>(s.omega[a]);
-        o.vlin[a] = static_cast<T>(s.vlin[a]);
-      }
-      o.radius = static_cast<T>(s.radius);
-      o.thickness = static_cast<T>(s.thickness);
-      o.mu_static = static_cast<T>(s.mu_static);
-      o.mu_kinetic = static_cast<T>(s.mu_kinetic);
-    }
+    k.count = fill_contact_shapes(*colliders_, t, k.shapes);
     k.pinned = raw(pinned_);
     k.x = raw(ds.x);
     k.v = raw(ds.v);
@@ -431,15 +438,195 @@ struct BwUpdate {
   }
 };
 
+// ---- Baraff-Witkin contacts on the device: the rules of the CPU plugin (BaraffWitkin::
+// set_constraints, release_pulling_contacts, apply_friction, stop_landed, project_positions in
+// plugins/integrators/baraff_witkin/baraff_witkin.cpp), one thread per vertex, one contact per
+// vertex (the deepest collider), at most kMaxDeviceColliders sphere/plane colliders.
+// Contact flags: 0 none, 1 in contact (friction acts), 2 landing during the step (no friction).
+
+/// Matches BaraffWitkin::kContactTolerance.
+constexpr double kDeviceContactTolerance = 1e-9;
+
+template <class T>
+struct BwConstraintKernel {  // S_i, z_i and the contact of vertex i; returns 1 for a collider contact
+  kernels::ContactShape<T> s0[kMaxDeviceColliders], s1[kMaxDeviceColliders];  // at the step start / end
+  int count;
+  const std::uint8_t* pinned;
+  const std::uint8_t* in_contact;
+  const T *x, *v, *f, *w;
+  T g0, g1, g2, h, tol;
+  unsigned char* free;
+  T* proj;
+  T* z;
+  std::uint8_t* flag;
+  T *normal, *sv, *mus, *muk, *dvn;
+  LOOM_HD int operator()(Index i) const {
+    const long long o = 3LL * i;
+    T* P = proj + 9LL * i;
+    for (int e = 0; e < 9; ++e) P[e] = T(0);
+    flag[i] = 0;
+    if (pinned[i]) {  // fixed pins: dv = -v0 (moving pins are refused on the device)
+      free[i] = 0;
+      for (int k = 0; k < 3; ++k) z[o + k] = -v[o + k];
+      return 0;
+    }
+    free[i] = 3;
+    P[0] = P[4] = P[8] = T(1);
+    z[o] = z[o + 1] = z[o + 2] = T(0);
+    if (count == 0) return 0;
+    const T* xi = x + o;
+    const T* vi = v + o;
+    const T g[3] = {g0, g1, g2};
+    T vp[3], xp[3];
+    for (int k = 0; k < 3; ++k) {
+      vp[k] = vi[k] + h * (w[i] * f[o + k] + g[k]);
+      xp[k] = xi[k] + h * vp[k];
+    }
+    int best = -1;
+    T depth = T(0), bd = T(0), bn[3] = {T(0), T(0), T(0)}, bv[3] = {T(0), T(0), T(0)};
+    for (int c = 0; c < count; ++c) {
+      T n0[3], v0[3], n1[3], v1[3];
+      const T d0 = kernels::contact_query(s0[c], xi, n0, v0);
+      const T d1 = kernels::contact_query(s1[c], xp, n1, v1);
+      const T d = d0 < d1 ? d0 : d1;
+      if (d <= T(0) && (best < 0 || d < depth)) {
+        best = c;
+        const bool next = d1 < d0;
+        for (int k = 0; k < 3; ++k) {
+          bn[k] = next ? n1[k] : n0[k];
+          bv[k] = next ? v1[k] : v0[k];
+        }
+        bd = d0;
+        depth = d;
+      }
+    }
+    if (best < 0) return 0;
+    const T vn = kernels::dot3(vi, bn);
+    const T vpn = kernels::dot3(vp, bn);
+    const T sn = kernels::dot3(bv, bn);
+    const T target = sn - bd / h;  // normal velocity that ends the step on the surface
+    if (vpn > target) return 0;    // does not reach the surface within the step
+    // Filter::constrain_direction on a free vertex: S_i = I - p p^T, p = n / |n|.
+    using std::sqrt;
+    const T len = sqrt(kernels::dot3(bn, bn));
+    T p[3];
+    for (int k = 0; k < 3; ++k) p[k] = bn[k] / len;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) P[3 * r + c] -= p[r] * p[c];
+    free[i] = 2;
+    const T d = target - vn;
+    for (int k = 0; k < 3; ++k) {
+      z[o + k] = d * bn[k];
+      normal[o + k] = bn[k];
+      sv[o + k] = bv[k];
+    }
+    dvn[i] = d;
+    mus[i] = s0[best].mu_static;
+    muk[i] = s0[best].mu_kinetic;
+    flag[i] = (bd > tol && !in_contact[i]) ? 2 : 1;
+    return 1;
+  }
+};
+
+template <class T>
+struct BwReleaseKernel {  // impulse (A dv - b).n of a contact; a pulling one (< 0) is released; returns 1 then
+  const Index *row_ptr, *col;
+  const T *a, *dv, *b, *normal;
+  std::uint8_t* flag;
+  unsigned char* free;
+  T *proj, *z, *impulse;
+  LOOM_HD int operator()(Index i) const {
+    if (!flag[i]) return 0;
+    T r[3] = {T(0), T(0), T(0)};
+    for (Index k = row_ptr[i]; k < row_ptr[i + 1]; ++k) kernels::mat3_mul_add(a + 9LL * k, dv + 3LL * col[k], r);
+    const long long o = 3LL * i;
+    const T imp = (r[0] - b[o]) * normal[o] + (r[1] - b[o + 1]) * normal[o + 1] + (r[2] - b[o + 2]) * normal[o + 2];
+    impulse[i] = imp;
+    if (!(imp < T(0))) return 0;
+    flag[i] = 0;
+    free[i] = 3;
+    T* P = proj + 9LL * i;
+    for (int e = 0; e < 9; ++e) P[e] = (e % 4 == 0) ? T(1) : T(0);
+    z[o] = z[o + 1] = z[o + 2] = T(0);
+    return 1;
+  }
+};
+
+template <class T>
+struct BwFrictionKernel {  // Coulomb friction as a velocity correction (contacts, not landings)
+  const std::uint8_t* flag;
+  const T *v, *w, *normal, *sv, *mus, *muk, *impulse;
+  T* dv;
+  LOOM_HD void operator()(Index i) const {
+    if (flag[i] != 1 || (mus[i] <= T(0) && muk[i] <= T(0))) return;
+    const long long o = 3LL * i;
+    const T imp = impulse[i] > T(0) ? impulse[i] : T(0);
+    const T j = imp * w[i];
+    T vrel[3];
+    for (int k = 0; k < 3; ++k) vrel[k] = v[o + k] + dv[o + k] - sv[o + k];
+    const T vn = kernels::dot3(vrel, normal + o);
+    T vt[3];
+    for (int k = 0; k < 3; ++k) vt[k] = vrel[k] - vn * normal[o + k];
+    using std::sqrt;
+    const T len = sqrt(kernels::dot3(vt, vt));
+    T keep = T(1);
+    if (len <= mus[i] * j) {
+      keep = T(0);
+    } else if (len > T(0)) {
+      const T kk = T(1) - muk[i] * j / len;
+      keep = kk > T(0) ? kk : T(0);
+    }
+    for (int k = 0; k < 3; ++k) dv[o + k] -= (T(1) - keep) * vt[k];
+  }
+};
+
+template <class T>
+struct BwFinishContactsKernel {  // landed vertices stop their approach; in_contact for the next step
+  const std::uint8_t* flag;
+  const T *normal, *sv;
+  T* v;
+  std::uint8_t* in_contact;
+  LOOM_HD void operator()(Index i) const {
+    in_contact[i] = flag[i] ? 1 : 0;
+    if (flag[i] != 2) return;
+    const long long o = 3LL * i;
+    T* vi = v + o;
+    const T rel = (vi[0] - sv[o]) * normal[o] + (vi[1] - sv[o + 1]) * normal[o + 1] + (vi[2] - sv[o + 2]) * normal[o + 2];
+    if (rel < T(0))
+      for (int k = 0; k < 3; ++k) vi[k] -= rel * normal[o + k];
+  }
+};
+
+template <class T>
+struct BwProjectKernel {  // residual penetration after the step: positions onto the offset surfaces
+  kernels::ContactShape<T> s1[kMaxDeviceColliders];
+  int count;
+  const std::uint8_t* pinned;
+  T* x;
+  LOOM_HD void operator()(Index i) const {
+    if (pinned[i]) return;
+    T* xi = x + 3LL * i;
+    for (int c = 0; c < count; ++c) {
+      T n[3], vs[3];
+      const T d = kernels::contact_query(s1[c], xi, n, vs);
+      if (d < T(0))
+        for (int k = 0; k < 3; ++k) xi[k] -= d * n[k];
+    }
+  }
+};
+
 template <class T>
 class CudaBw final : public Integrator {
  public:
   explicit CudaBw(BwOptionsD o) : opt_(o) {}
   std::string name() const override { return "baraff_witkin"; }
   IntegratorNeeds needs() const override { return {false, true, true}; }
+  /// Sphere and plane contacts are constraints of the solve (the framework must not resolve
+  /// them again on the host).
+  bool handles_contacts() const override { return true; }
 
   void prepare(Scene& scene, double h) override {
-    check_device_scene(scene, "baraff_witkin", false);
+    check_device_scene(scene, "baraff_witkin", true);
     if (!(h > 0) || !std::isfinite(h))
       throw InputError("baraff_witkin: the time step must be positive and finite; set integrator.dt");
     if (!scene.material || !scene.material->has_jacobian())
@@ -479,12 +666,27 @@ class CudaBw final : public Integrator {
     cuda::upload(s.pin_list, pins_);
     pcg_.analyze(n);
     ds_.upload(s);
+    // Sphere and plane colliders: contacts are constraints of the solve, as on the CPU.
+    colliders_ = scene.colliders.empty() ? nullptr : &scene.colliders;
+    if (colliders_) {
+      cuda::upload(s.pinned, pinned_);
+      in_contact_.assign(n, 0);
+      flag_.assign(n, 0);
+      cnormal_.assign(N, T(0));
+      csv_.assign(N, T(0));
+      cmus_.assign(n, T(0));
+      cmuk_.assign(n, T(0));
+      cdvn_.assign(n, T(0));
+      cimpulse_.assign(n, T(0));
+      S_.resize(n);
+    }
     last_ = {};
   }
 
   void step(Scene& scene, double h) override {
     if (ds_.n != scene.state.size() || !pattern_) prepare(scene, h);
     StepStats st;
+    t0_ = scene.state.time;
     advance(scene, h, 0, st);
     sync_after_step(ds_, scene.state, opt_.host_sync_every);
     finish_step(scene.state, h);
@@ -506,35 +708,101 @@ class CudaBw final : public Integrator {
                                       static_cast<T>(hd + beta), static_cast<T>(hd * cd), static_cast<T>(alpha),
                                       static_cast<T>(cd), static_cast<T>(scene.gravity[0]),
                                       static_cast<T>(scene.gravity[1]), static_cast<T>(scene.gravity[2])});
-    parallel_for(static_cast<Index>(pins_.size()), PinPrescribed<T>{raw(pins_), raw(ds_.v), raw(z_)});
+    int contacts = 0;
+    if (colliders_) {
+      contacts = set_contact_constraints(scene, hd);
+    } else {
+      parallel_for(static_cast<Index>(pins_.size()), PinPrescribed<T>{raw(pins_), raw(ds_.v), raw(z_)});
+    }
     const auto t1 = Clock::now();
     st.assemble_seconds += std::chrono::duration<double>(t1 - t0).count();
-    rep = SolveReport{};
-    const bool ok = pcg_.factorize(A_, S_, rep);
-    if (ok) {
-      if (!opt_.warm_start) fill(dv_, T(0));
-      const double fs = rep.factorize_seconds;
-      rep = pcg_.solve(A_, S_, b_, z_, dv_);
-      rep.factorize_seconds = fs;
-      st.linear_iterations += rep.iterations;
-      st.linear_residual = rep.residual;
-    }
+    auto solve_once = [&] {
+      rep = SolveReport{};
+      const bool ok = pcg_.factorize(A_, S_, rep);
+      if (ok) {
+        if (!opt_.warm_start) fill(dv_, T(0));
+        const double fs = rep.factorize_seconds;
+        rep = pcg_.solve(A_, S_, b_, z_, dv_);
+        rep.factorize_seconds = fs;
+        st.linear_iterations += rep.iterations;
+        st.linear_residual = rep.residual;
+      }
+      return ok && rep.converged;
+    };
+    bool ok = solve_once();
+    // Contacts whose constraint would pull are released, and the step is solved once more.
+    if (ok && contacts > 0 && release_pulling_contacts()) ok = solve_once();
     st.solve_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
-    if (!ok || !rep.converged) {
+    if (!ok) {
       fill(dv_, T(0));
       return false;
     }
+    if (contacts > 0)
+      parallel_for(ds_.n, BwFrictionKernel<T>{raw(flag_), raw(ds_.v), raw(ds_.w), raw(cnormal_), raw(csv_), raw(cmus_),
+                                              raw(cmuk_), raw(cimpulse_), raw(dv_)});
     parallel_for(3 * ds_.n, BwUpdate<T>{raw(dv_), raw(ds_.x), raw(ds_.v), h});
+    if (colliders_) {
+      parallel_for(ds_.n, BwFinishContactsKernel<T>{raw(flag_), raw(cnormal_), raw(csv_), raw(ds_.v), raw(in_contact_)});
+      BwProjectKernel<T> pk{};
+      pk.count = fill_contact_shapes(*colliders_, t0_ + hd, pk.s1);
+      pk.pinned = raw(pinned_);
+      pk.x = raw(ds_.x);
+      parallel_for(ds_.n, pk);
+    }
+    return true;
+  }
+
+  // The filter, z and the collider contacts of this (sub)step, from the state at its start
+  // t0_ and the explicit prediction to t0_ + h; returns the number of contacts.
+  int set_contact_constraints(const Scene& scene, double hd) {
+    BwConstraintKernel<T> k{};
+    k.count = fill_contact_shapes(*colliders_, t0_, k.s0);
+    fill_contact_shapes(*colliders_, t0_ + hd, k.s1);
+    k.pinned = raw(pinned_);
+    k.in_contact = raw(in_contact_);
+    k.x = raw(ds_.x);
+    k.v = raw(ds_.v);
+    k.f = raw(f_);
+    k.w = raw(ds_.w);
+    k.g0 = static_cast<T>(scene.gravity[0]);
+    k.g1 = static_cast<T>(scene.gravity[1]);
+    k.g2 = static_cast<T>(scene.gravity[2]);
+    k.h = static_cast<T>(hd);
+    k.tol = static_cast<T>(kDeviceContactTolerance);
+    k.free = raw(S_.free);
+    k.proj = raw(S_.proj);
+    k.z = raw(z_);
+    k.flag = raw(flag_);
+    k.normal = raw(cnormal_);
+    k.sv = raw(csv_);
+    k.mus = raw(cmus_);
+    k.muk = raw(cmuk_);
+    k.dvn = raw(cdvn_);
+    const int contacts = reduce_sum<int>(ds_.n, k);
+    S_.rebuild_constrained();
+    return contacts;
+  }
+
+  // Releases the contacts whose impulse (A dv - b).n is negative; true when any was.
+  bool release_pulling_contacts() {
+    const int released = reduce_sum<int>(
+        ds_.n, BwReleaseKernel<T>{raw(A_.row_ptr), raw(A_.col), raw(A_.values), raw(dv_), raw(b_), raw(cnormal_),
+                                  raw(flag_), raw(S_.free), raw(S_.proj), raw(z_), raw(cimpulse_)});
+    if (released == 0) return false;
+    S_.rebuild_constrained();
     return true;
   }
 
   void advance(Scene& scene, double h, int depth, StepStats& st) {
     SolveReport rep;
+    const double t_start = t0_;
     if (attempt(scene, h, st, rep)) return;
     if (opt_.halve_on_failure && depth < opt_.max_halvings) {
       st.retries += 1;
       advance(scene, 0.5 * h, depth + 1, st);
+      t0_ = t_start + 0.5 * h;  // the second half starts where the first ended (colliders)
       advance(scene, 0.5 * h, depth + 1, st);
+      t0_ = t_start;
       return;
     }
     char buf[256];
@@ -555,6 +823,10 @@ class CudaBw final : public Integrator {
   DVec<Index> pins_;
   DeviceFilter<T> S_;
   DevicePcg<T> pcg_;
+  const ColliderSet* colliders_ = nullptr;
+  DVec<std::uint8_t> pinned_, in_contact_, flag_;
+  DVec<T> cnormal_, csv_, cmus_, cmuk_, cdvn_, cimpulse_;
+  double t0_ = 0;  // start time of the (sub)step being solved
   StepStats last_;
 };
 
