@@ -125,6 +125,17 @@ class DeviceColliders {
   DVec<std::uint8_t> pinned_;
 };
 
+/// Device bytes of the state (x, v, masses) plus `vectors` more 3n vectors and the material's
+/// elements (its device description, or a host fallback: then counted as 0).
+template <class T>
+std::size_t explicit_bytes(const Scene& scene, int vectors) {
+  const std::size_t n = static_cast<std::size_t>(scene.state.size());
+  std::size_t elements = 0;
+  if (scene.material)
+    if (const SpringSet* s = scene.material->springs()) elements = static_cast<std::size_t>(s->size()) * (2 * sizeof(Index) + 4 * sizeof(T));
+  return sizeof(T) * (3 * n * (2 + static_cast<std::size_t>(vectors)) + 2 * n) + elements;
+}
+
 /// Reads host_sync_every (>= 1): copy x, v back into scene.state after every n-th step.
 int parse_sync_every(const Params& p) {
   if (!p.valid()) return 1;
@@ -224,6 +235,7 @@ class CudaHo final : public Integrator {
 
   void prepare(Scene& scene, double h) override {
     check_device_scene(scene, "harmonic_oscillation", true);
+    require_device_memory(explicit_bytes<T>(scene, 4), scene.source, "harmonic_oscillation");
     colliders_.prepare(scene);
     const Material* mat = scene.material.get();
     const SpringSet* set = mat ? mat->springs() : nullptr;
@@ -364,6 +376,7 @@ class CudaRk4 final : public Integrator {
   bool handles_contacts() const override { return true; }  // on the device
   void prepare(Scene& scene, double) override {
     check_device_scene(scene, "rk4", true);
+    require_device_memory(explicit_bytes<T>(scene, 9), scene.source, "rk4");
     colliders_.prepare(scene);
     if (!scene.material) throw InputError(scene.source + ": rk4 needs a material; add a 'material:' section");
     model_.build(scene, nullptr);
@@ -646,6 +659,13 @@ class CudaBw final : public Integrator {
       if (pr[0] < 0 || pr[1] < 0 || pr[0] >= n || pr[1] >= n)
         throw InputError("baraff_witkin: material '" + scene.material->name() + "' reported a Jacobian pair outside the mesh");
     pattern_ = std::make_unique<BsrPattern>(BsrPattern::from_pairs(n, pairs));
+    {  // the device arrays below, before any is allocated
+      const std::size_t nb = static_cast<std::size_t>(pattern_->nnz_blocks()), nv = static_cast<std::size_t>(n);
+      const std::size_t bytes = sizeof(T) * (27 * nb + 18 * nv + 3 * nv * 12 + 8 * nv) +
+                                sizeof(Index) * (2 * nb + 3 * nv) + explicit_bytes<T>(scene, 0);
+      require_device_memory(bytes, scene.source, "baraff_witkin (" + std::to_string(n) + " vertices, " +
+                                                     std::to_string(nb) + " matrix blocks)");
+    }
     scene.material->bind_pattern(*pattern_);
     model_.build(scene, pattern_.get());
     A_.set_pattern(*pattern_);

@@ -13,6 +13,8 @@
 #include <thrust/iterator/counting_iterator.h>
 #include <thrust/transform_reduce.h>
 
+#include <new>
+#include <string>
 #include <vector>
 
 #include "loom/common.hpp"
@@ -136,6 +138,48 @@ T dot(const DVec<T>& a, const DVec<T>& b) {
   const Index n = static_cast<Index>(a.size() < b.size() ? a.size() : b.size());
   if (n == 0) return T(0);
   return reduce_sum<T>(n, DotTerm<T>{raw(a), raw(b)});
+}
+
+/// Tests only: caps the device memory the backend believes is free (0 = no cap), to exercise
+/// the out-of-memory path without filling a device.
+inline std::size_t& device_memory_cap() {
+  static std::size_t cap = 0;
+  return cap;
+}
+
+inline std::string mib(std::size_t bytes) {
+  return std::to_string((bytes + (std::size_t(1) << 20) - 1) >> 20) + " MiB";
+}
+
+/// Before a device integrator allocates: throws InputError naming the need, what is free and
+/// the fix when `bytes` (the integrator's estimate of its device arrays) exceed the free device
+/// memory (or the test cap).
+inline void require_device_memory(std::size_t bytes, const std::string& scene_source, const std::string& what) {
+  std::size_t free_bytes = 0, total = 0;
+  std::string why;
+  if (!seam_device_memory(free_bytes, total, why)) return;  // cannot tell: the allocation itself decides
+  if (device_memory_cap() > 0 && device_memory_cap() < free_bytes) free_bytes = device_memory_cap();
+  if (bytes <= free_bytes) return;
+  throw InputError((scene_source.empty() ? std::string() : scene_source + ": ") + "backend cuda: " + what +
+                   " needs about " + mib(bytes) + " of device memory, but only " + mib(free_bytes) + " of " +
+                   mib(total) + " are free. Fix: use a coarser mesh, precision: float (half the memory), "
+                   "or backend: cpu.");
+}
+
+/// v = n copies of T(0), turning an allocation failure (cudaMalloc out of memory; malloc on the
+/// OpenMP system) into InputError with the fix instead of an uncaught thrust::system::detail::bad_alloc.
+template <class T>
+void device_assign(DVec<T>& v, std::size_t n, const std::string& what) {
+  try {
+    v.assign(n, T(0));
+  } catch (const std::bad_alloc&) {
+    std::size_t free_bytes = 0, total = 0;
+    std::string why;
+    const bool known = seam_device_memory(free_bytes, total, why);
+    throw InputError("backend cuda: allocating " + what + " (" + mib(n * sizeof(T)) + ") failed: out of device memory" +
+                     (known ? " (" + mib(free_bytes) + " of " + mib(total) + " free)" : std::string()) +
+                     ". Fix: use a coarser mesh, precision: float (half the memory), or backend: cpu.");
+  }
 }
 
 /// Upload host data (any arithmetic type) into a device vector of T, resizing it.

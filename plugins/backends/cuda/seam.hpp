@@ -4,6 +4,7 @@
 // over the shared LOOM_HD kernels and compiles unchanged for both device systems.
 #pragma once
 
+#include <cstddef>
 #include <string>
 
 #include "loom/common.hpp"
@@ -26,6 +27,10 @@ void seam_bsr_spmv(Index nb, Index nnzb, const Index* row_ptr, const Index* col,
                    const double* x, double* y);
 void seam_bsr_spmv(Index nb, Index nnzb, const Index* row_ptr, const Index* col, const float* values,
                    const float* x, float* y);
+
+/// Free and total device memory in bytes (cudaMemGetInfo; the OpenMP build reports the host's
+/// available and total physical memory). Returns false with the reason when it cannot tell.
+bool seam_device_memory(std::size_t& free_bytes, std::size_t& total_bytes, std::string& error);
 
 /// Wait for the device (timings).
 void seam_synchronize();

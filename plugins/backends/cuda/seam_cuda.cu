@@ -31,6 +31,19 @@ void seam_require_device(const std::string& scene_source) {
                    " (no GPU, or no driver). Fix: set backend: cpu (the same scene runs on the CPU backend).");
 }
 
+bool seam_device_memory(std::size_t& free_bytes, std::size_t& total_bytes, std::string& error) {
+  std::size_t f = 0, t = 0;
+  const cudaError_t e = cudaMemGetInfo(&f, &t);
+  if (e != cudaSuccess) {
+    error = std::string("cudaMemGetInfo failed: ") + cudaGetErrorString(e);
+    return false;
+  }
+  free_bytes = f;
+  total_bytes = t;
+  error.clear();
+  return true;
+}
+
 namespace {
 struct Sparse {
   cusparseHandle_t handle = nullptr;

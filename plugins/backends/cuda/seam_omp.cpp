@@ -1,5 +1,7 @@
 // Seam, Thrust-OpenMP build: the host stands in for the device, a Thrust SpMV stands in
 // for cuSPARSE (same block-row math as the CPU backend: kernels::bsr_row_multiply).
+#include <unistd.h>
+
 #include <thrust/execution_policy.h>
 #include <thrust/for_each.h>
 #include <thrust/iterator/counting_iterator.h>
@@ -17,6 +19,18 @@ int seam_device_count(std::string& error) {
 }
 
 void seam_require_device(const std::string&) {}
+
+bool seam_device_memory(std::size_t& free_bytes, std::size_t& total_bytes, std::string& error) {
+  const long page = sysconf(_SC_PAGESIZE), avail = sysconf(_SC_AVPHYS_PAGES), phys = sysconf(_SC_PHYS_PAGES);
+  if (page <= 0 || avail < 0 || phys <= 0) {
+    error = "sysconf cannot tell the physical memory";
+    return false;
+  }
+  free_bytes = static_cast<std::size_t>(avail) * static_cast<std::size_t>(page);
+  total_bytes = static_cast<std::size_t>(phys) * static_cast<std::size_t>(page);
+  error.clear();
+  return true;
+}
 
 namespace {
 template <class T>
