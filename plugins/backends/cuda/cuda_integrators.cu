@@ -11,6 +11,7 @@
 #include "loom/kernels/contact.hpp"
 #include "loom/kernels/ho.hpp"
 #include "loom/kernels/rk4.hpp"
+#include "bw_step.hpp"
 
 namespace loom::cuda {
 
@@ -715,62 +716,63 @@ class CudaBw final : public Integrator {
   StepStats last_step() const override { return last_; }
 
  private:
-  bool attempt(Scene& scene, double hd, StepStats& st, SolveReport& rep) {
-    const auto t0 = Clock::now();
-    const T h = static_cast<T>(hd);
-    model_.forces(ds_.x, ds_.v, f_);
-    st.force_evaluations += 1;
-    model_.jacobians(ds_.x, ds_.v, dfdx_, &dfdv_);
-    const double alpha = opt_.rayleigh_alpha, beta = opt_.rayleigh_beta, cd = opt_.kang_cho_damping;
-    parallel_for(ds_.n, BwAssemble<T>{raw(A_.row_ptr), raw(A_.col), raw(dfdx_), raw(dfdv_), raw(ds_.v), raw(f_),
-                                      raw(ds_.mass), raw(degree_), raw(A_.values), raw(b_), h,
-                                      static_cast<T>(1.0 + hd * alpha), static_cast<T>(hd * hd + hd * beta),
-                                      static_cast<T>(hd + beta), static_cast<T>(hd * cd), static_cast<T>(alpha),
-                                      static_cast<T>(cd), static_cast<T>(scene.gravity[0]),
-                                      static_cast<T>(scene.gravity[1]), static_cast<T>(scene.gravity[2])});
+  // The operations of the shared step skeleton (plugins/integrators/baraff_witkin/bw_step.hpp),
+  // the same attempt and retry policy as the CPU plugin, on device data.
+  struct StepOps {
+    CudaBw& bw;
+    Scene& scene;
     int contacts = 0;
-    if (colliders_) {
-      contacts = set_contact_constraints(scene, hd);
-    } else {
-      parallel_for(static_cast<Index>(pins_.size()), PinPrescribed<T>{raw(pins_), raw(ds_.v), raw(z_)});
+    void forces() { bw.model_.forces(bw.ds_.x, bw.ds_.v, bw.f_); }
+    void assemble(double hd) {
+      bw.model_.jacobians(bw.ds_.x, bw.ds_.v, bw.dfdx_, &bw.dfdv_);
+      const T h = static_cast<T>(hd);
+      const double alpha = bw.opt_.rayleigh_alpha, beta = bw.opt_.rayleigh_beta, cd = bw.opt_.kang_cho_damping;
+      parallel_for(bw.ds_.n,
+                   BwAssemble<T>{raw(bw.A_.row_ptr), raw(bw.A_.col), raw(bw.dfdx_), raw(bw.dfdv_), raw(bw.ds_.v),
+                                 raw(bw.f_), raw(bw.ds_.mass), raw(bw.degree_), raw(bw.A_.values), raw(bw.b_), h,
+                                 static_cast<T>(1.0 + hd * alpha), static_cast<T>(hd * hd + hd * beta),
+                                 static_cast<T>(hd + beta), static_cast<T>(hd * cd), static_cast<T>(alpha),
+                                 static_cast<T>(cd), static_cast<T>(scene.gravity[0]), static_cast<T>(scene.gravity[1]),
+                                 static_cast<T>(scene.gravity[2])});
     }
-    const auto t1 = Clock::now();
-    st.assemble_seconds += std::chrono::duration<double>(t1 - t0).count();
-    auto solve_once = [&] {
-      rep = SolveReport{};
-      const bool ok = pcg_.factorize(A_, S_, rep);
-      if (ok) {
-        if (!opt_.warm_start) fill(dv_, T(0));
-        const double fs = rep.factorize_seconds;
-        rep = pcg_.solve(A_, S_, b_, z_, dv_);
-        rep.factorize_seconds = fs;
-        st.linear_iterations += rep.iterations;
-        st.linear_residual = rep.residual;
-      }
-      return ok && rep.converged;
-    };
-    bool ok = solve_once();
-    // Contacts whose constraint would pull are released, and the step is solved once more.
-    if (ok && contacts > 0 && release_pulling_contacts()) ok = solve_once();
-    st.solve_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
-    if (!ok) {
-      fill(dv_, T(0));
-      return false;
+    int set_constraints(double hd) {
+      contacts = 0;
+      if (bw.colliders_)
+        contacts = bw.set_contact_constraints(scene, hd);
+      else
+        parallel_for(static_cast<Index>(bw.pins_.size()), PinPrescribed<T>{raw(bw.pins_), raw(bw.ds_.v), raw(bw.z_)});
+      return contacts;
     }
-    if (contacts > 0)
-      parallel_for(ds_.n, BwFrictionKernel<T>{raw(flag_), raw(ds_.v), raw(ds_.w), raw(cnormal_), raw(csv_), raw(cmus_),
-                                              raw(cmuk_), raw(cimpulse_), raw(dv_)});
-    parallel_for(3 * ds_.n, BwUpdate<T>{raw(dv_), raw(ds_.x), raw(ds_.v), h});
-    if (colliders_) {
-      parallel_for(ds_.n, BwFinishContactsKernel<T>{raw(flag_), raw(cnormal_), raw(csv_), raw(ds_.v), raw(in_contact_)});
+    bool factorize(SolveReport& rep) { return bw.pcg_.factorize(bw.A_, bw.S_, rep); }
+    SolveReport solve() { return bw.pcg_.solve(bw.A_, bw.S_, bw.b_, bw.z_, bw.dv_); }
+    void zero_dv() { fill(bw.dv_, T(0)); }
+    bool release_pulling_contacts(double) { return bw.release_pulling_contacts(); }
+    template <class F>
+    bool extra_solves(bool ok, double, F&&) { return ok; }  // no self-contact on the device
+    void after_solve(double) {
+      if (contacts > 0)
+        parallel_for(bw.ds_.n, BwFrictionKernel<T>{raw(bw.flag_), raw(bw.ds_.v), raw(bw.ds_.w), raw(bw.cnormal_),
+                                                    raw(bw.csv_), raw(bw.cmus_), raw(bw.cmuk_), raw(bw.cimpulse_),
+                                                    raw(bw.dv_)});
+    }
+    void update(double hd) {
+      parallel_for(3 * bw.ds_.n, BwUpdate<T>{raw(bw.dv_), raw(bw.ds_.x), raw(bw.ds_.v), static_cast<T>(hd)});
+    }
+    void after_update(double hd) {
+      if (!bw.colliders_) return;
+      parallel_for(bw.ds_.n, BwFinishContactsKernel<T>{raw(bw.flag_), raw(bw.cnormal_), raw(bw.csv_), raw(bw.ds_.v),
+                                                       raw(bw.in_contact_)});
       BwProjectKernel<T> pk{};
-      pk.count = fill_contact_shapes(*colliders_, t0_ + hd, pk.s1);
-      pk.pinned = raw(pinned_);
-      pk.x = raw(ds_.x);
-      parallel_for(ds_.n, pk);
+      pk.count = fill_contact_shapes(*bw.colliders_, bw.t0_ + hd, pk.s1);
+      pk.pinned = raw(bw.pinned_);
+      pk.x = raw(bw.ds_.x);
+      parallel_for(bw.ds_.n, pk);
     }
-    return true;
-  }
+    double& start_time() { return bw.t0_; }
+    bool warm_start() const { return bw.opt_.warm_start; }
+    bool halve_on_failure() const { return bw.opt_.halve_on_failure; }
+    int max_halvings() const { return bw.opt_.max_halvings; }
+  };
 
   // The filter, z and the collider contacts of this (sub)step, from the state at its start
   // t0_ and the explicit prediction to t0_ + h; returns the number of contacts.
@@ -814,24 +816,8 @@ class CudaBw final : public Integrator {
   }
 
   void advance(Scene& scene, double h, int depth, StepStats& st) {
-    SolveReport rep;
-    const double t_start = t0_;
-    if (attempt(scene, h, st, rep)) return;
-    if (opt_.halve_on_failure && depth < opt_.max_halvings) {
-      st.retries += 1;
-      advance(scene, 0.5 * h, depth + 1, st);
-      t0_ = t_start + 0.5 * h;  // the second half starts where the first ended (colliders)
-      advance(scene, 0.5 * h, depth + 1, st);
-      t0_ = t_start;
-      return;
-    }
-    char buf[256];
-    std::snprintf(buf, sizeof buf,
-                  "baraff_witkin (cuda): linear solve failed at step %lld (t = %.6g s, h = %.3g s%s): %d iterations, "
-                  "relative residual %.3g: ",
-                  static_cast<long long>(scene.state.step), scene.state.time, h,
-                  depth > 0 ? ", after halving the step" : "", rep.iterations, rep.residual);
-    throw SolverError(buf + (rep.message.empty() ? std::string("the solver reported no reason") : rep.message));
+    StepOps ops{*this, scene};
+    bw::advance(ops, scene.state, h, depth, st, "baraff_witkin (cuda)");
   }
 
   BwOptionsD opt_;

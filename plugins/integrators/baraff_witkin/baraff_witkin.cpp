@@ -11,6 +11,7 @@
 #include "loom/kernels/bw_assembly.hpp"
 #include "loom/solver_common.hpp"
 #include "loom/state.hpp"
+#include "bw_step.hpp"
 
 namespace loom {
 
@@ -334,86 +335,94 @@ void BaraffWitkin::assemble(const Scene& scene, double h) {
   for (Index i = 0; i < n; ++i) row(i);
 }
 
-bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& rep) {
-  State& s = scene.state;
-  const auto t0 = Clock::now();
-  scene.material->compute_forces(s.x, s.v, f_);
-  st.force_evaluations += 1;
-  auto assemble_system = [&] {
-    scene.material->compute_jacobians(s.x, s.v, dfdx_, &dfdv_);
-    if (self_contact_) {  // blocks the pattern holds for self-contacts only
-      self_contact_->zero_extra_blocks(dfdx_);
-      self_contact_->zero_extra_blocks(dfdv_);
-    }
-    assemble(scene, h);
-    if (self_contact_) self_contact_->undo_laplacian(A_, b_, s.v, h * options_.kang_cho_damping);
-  };
-  assemble_system();
-  set_constraints(scene, h);
-  const auto t1 = Clock::now();
-  st.assemble_seconds += seconds_between(t0, t1);
+// The operations of the shared step skeleton (bw_step.hpp) on the CPU.
+struct BaraffWitkin::StepOps {
+  BaraffWitkin& bw;
+  Scene& scene;
 
-  auto solve_once = [&] {
-    rep = SolveReport{};
-    scene.solver->set_coordinates(s.x);
-    const bool ok = scene.solver->factorize(A_, S_, rep);
-    if (ok) {
-      if (!options_.warm_start) std::fill(dv_.begin(), dv_.end(), 0.0);
-      const double fs = rep.factorize_seconds;
-      rep = scene.solver->solve(A_, S_, b_, z_, dv_);
-      rep.factorize_seconds = fs;
-      st.linear_iterations += rep.iterations;
-      st.linear_residual = rep.residual;
+  void forces() { scene.material->compute_forces(scene.state.x, scene.state.v, bw.f_); }
+  void assemble(double h) {
+    const State& s = scene.state;
+    scene.material->compute_jacobians(s.x, s.v, bw.dfdx_, &bw.dfdv_);
+    if (bw.self_contact_) {  // blocks the pattern holds for self-contacts only
+      bw.self_contact_->zero_extra_blocks(bw.dfdx_);
+      bw.self_contact_->zero_extra_blocks(bw.dfdv_);
     }
-    return ok && rep.converged;
-  };
-  bool ok = solve_once();
-  // Contacts whose constraint would pull are released, and the step is solved once more.
-  if (ok && !contacts_.empty() && release_pulling_contacts(scene, h)) ok = solve_once();
+    bw.assemble(scene, h);
+    if (bw.self_contact_) bw.self_contact_->undo_laplacian(bw.A_, bw.b_, s.v, h * bw.options_.kang_cho_damping);
+  }
+  int set_constraints(double h) {
+    bw.set_constraints(scene, h);
+    return static_cast<int>(bw.contacts_.size());
+  }
+  bool factorize(SolveReport& rep) {
+    scene.solver->set_coordinates(scene.state.x);
+    return scene.solver->factorize(bw.A_, bw.S_, rep);
+  }
+  SolveReport solve() { return scene.solver->solve(bw.A_, bw.S_, bw.b_, bw.z_, bw.dv_); }
+  void zero_dv() { std::fill(bw.dv_.begin(), bw.dv_.end(), 0.0); }
+  bool release_pulling_contacts(double h) { return bw.release_pulling_contacts(scene, h); }
   // Self-contacts (self_contact.hpp): the pairs this step brings within the thickness become
   // springs (a contact whose blocks the pattern lacks extends it first) and the step is solved
   // again with them; springs that would pull are released and the step solved again.
-  if (ok && self_contact_ && self_contact_->find(*scene.self_collision, s, dv_, h, *pattern_)) {
-    if (!self_contact_->blocks_complete()) {
-      rebuild_pattern(scene);
-      assemble_system();
-    }
-    self_contact_->add_terms(A_, b_, s.v, h);
-    ok = solve_once();
-    for (int r = 0; ok && r < ImplicitSelfContact::kMaxReleaseSolves && self_contact_->release(A_, b_, s.v, dv_, h); ++r)
+  template <class F>
+  bool extra_solves(bool ok, double h, F&& solve_once) {
+    State& s = scene.state;
+    if (ok && bw.self_contact_ && bw.self_contact_->find(*scene.self_collision, s, bw.dv_, h, *bw.pattern_)) {
+      if (!bw.self_contact_->blocks_complete()) {
+        bw.rebuild_pattern(scene);
+        assemble(h);
+      }
+      bw.self_contact_->add_terms(bw.A_, bw.b_, s.v, h);
       ok = solve_once();
+      for (int r = 0; ok && r < ImplicitSelfContact::kMaxReleaseSolves &&
+                      bw.self_contact_->release(bw.A_, bw.b_, s.v, bw.dv_, h);
+           ++r)
+        ok = solve_once();
+    }
+    return ok;
   }
-  st.solve_seconds += seconds_between(t1, Clock::now());
-  if (!ok) {
-    std::fill(dv_.begin(), dv_.end(), 0.0);  // no warm start from a failed solve
-    return false;
+  void after_solve(double h) {
+    if (!bw.contacts_.empty()) bw.apply_friction(scene);
+    if (bw.self_contact_) bw.self_contact_->apply_friction(scene.state, bw.dv_, h);
+    bw.record_pin_forces(scene, h);
   }
-  if (!contacts_.empty()) apply_friction(scene);
-  if (self_contact_) self_contact_->apply_friction(s, dv_, h);
-  record_pin_forces(scene, h);
-
-  const Index n = n_;
-  double* x = s.x.data();
-  double* v = s.v.data();
-  const double* dv = dv_.data();
+  void update(double h) {
+    State& s = scene.state;
+    const Index n = bw.n_;
+    double* x = s.x.data();
+    double* v = s.v.data();
+    const double* dv = bw.dv_.data();
 #pragma omp parallel for schedule(static) if (n >= solver::kParallelMinRows)
-  for (Index i = 0; i < n; ++i) {
-    const std::size_t o = 3 * static_cast<std::size_t>(i);
-    for (int c = 0; c < 3; ++c) {
-      v[o + c] += dv[o + c];
-      x[o + c] += h * v[o + c];
+    for (Index i = 0; i < n; ++i) {
+      const std::size_t o = 3 * static_cast<std::size_t>(i);
+      for (int c = 0; c < 3; ++c) {
+        v[o + c] += dv[o + c];
+        x[o + c] += h * v[o + c];
+      }
     }
   }
-  // Moving pins: x0 + h v1 equals p(t + h) up to rounding; store it exactly.
-  scene.pins.apply_positions(s, t0_ + h);
-  if (!contacts_.empty()) stop_landed(scene);
-  if (self_contact_) self_contact_->stop_approach(s);
-  if (!in_contact_.empty()) {
-    std::fill(in_contact_.begin(), in_contact_.end(), 0);
-    for (const Contact& ct : contacts_) in_contact_[ct.vertex] = 1;
+  void after_update(double h) {
+    State& s = scene.state;
+    // Moving pins: x0 + h v1 equals p(t + h) up to rounding; store it exactly.
+    scene.pins.apply_positions(s, bw.t0_ + h);
+    if (!bw.contacts_.empty()) bw.stop_landed(scene);
+    if (bw.self_contact_) bw.self_contact_->stop_approach(s);
+    if (!bw.in_contact_.empty()) {
+      std::fill(bw.in_contact_.begin(), bw.in_contact_.end(), 0);
+      for (const Contact& ct : bw.contacts_) bw.in_contact_[ct.vertex] = 1;
+    }
+    if (!scene.colliders.empty()) bw.project_positions(scene, bw.t0_ + h);
   }
-  if (!scene.colliders.empty()) project_positions(scene, t0_ + h);
-  return true;
+  double& start_time() { return bw.t0_; }
+  bool warm_start() const { return bw.options_.warm_start; }
+  bool halve_on_failure() const { return bw.options_.on_failure == BaraffWitkinOptions::OnFailure::HalveStep; }
+  int max_halvings() const { return bw.options_.max_halvings; }
+};
+
+bool BaraffWitkin::attempt(Scene& scene, double h, StepStats& st, SolveReport& rep) {
+  StepOps ops{*this, scene};
+  return bw::attempt(ops, h, st, rep);
 }
 
 // The force each pinned vertex receives from its pin in this step: the constraint force
@@ -437,27 +446,8 @@ void BaraffWitkin::record_pin_forces(Scene& scene, double h) {
 }
 
 void BaraffWitkin::advance(Scene& scene, double h, int depth, StepStats& st) {
-  SolveReport rep;
-  const double t_start = t0_;
-  if (attempt(scene, h, st, rep)) return;
-  if (options_.on_failure == BaraffWitkinOptions::OnFailure::HalveStep && depth < options_.max_halvings) {
-    st.retries += 1;
-    advance(scene, 0.5 * h, depth + 1, st);
-    t0_ = t_start + 0.5 * h;  // the second half starts where the first ended (prescribed pins)
-    advance(scene, 0.5 * h, depth + 1, st);
-    t0_ = t_start;
-    return;
-  }
-  char buf[256];
-  std::snprintf(buf, sizeof buf,
-                "baraff_witkin: linear solve failed at step %lld (t = %.6g s, h = %.3g s%s): %d iterations, "
-                "relative residual %.3g: ",
-                static_cast<long long>(scene.state.step), scene.state.time, h,
-                depth > 0 ? ", after halving the step" : "", rep.iterations, rep.residual);
-  std::string msg = buf + (rep.message.empty() ? std::string("the solver reported no reason") : rep.message);
-  if (options_.on_failure == BaraffWitkinOptions::OnFailure::HalveStep)
-    msg += " (gave up after " + std::to_string(options_.max_halvings) + " halvings; raise max_halvings or reduce dt)";
-  throw SolverError(msg);
+  StepOps ops{*this, scene};
+  bw::advance(ops, scene.state, h, depth, st, "baraff_witkin");
 }
 
 void BaraffWitkin::step(Scene& scene, double h) {

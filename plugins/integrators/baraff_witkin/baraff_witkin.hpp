@@ -74,6 +74,7 @@ class BaraffWitkin final : public Integrator {
   int pattern_rebuilds() const { return pattern_rebuilds_; }
 
  private:
+  struct StepOps;  // the operations of the shared step skeleton (bw_step.hpp)
   bool attempt(Scene& scene, double h, StepStats& st, SolveReport& rep);
   void advance(Scene& scene, double h, int depth, StepStats& st);
   void assemble(const Scene& scene, double h);

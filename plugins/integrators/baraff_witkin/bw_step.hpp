@@ -1,0 +1,100 @@
+// The Baraff-Witkin step skeleton, written once for every backend (issue 17): one attempt
+// (forces, assembly, constraints, solve, release pulling contacts and solve again, the
+// backend's extra solves, friction, update, after-step fix-ups) and the retry policy (halve
+// the step, recursively, with each half's own start time; else a SolverError naming step,
+// time, h, iterations, residual and the solver's reason). The CPU plugin (baraff_witkin.cpp)
+// and the CUDA backend (plugins/backends/cuda/cuda_integrators.cu) supply the operations:
+//
+//   void forces();                        f = f(x0, v0) (one force evaluation)
+//   void assemble(double h);              df/dx, df/dv, A and b of the step
+//   int  set_constraints(double h);       S and z (pins, contacts); returns the contact count
+//   bool factorize(SolveReport& rep);     the solver's factorize / preconditioner
+//   SolveReport solve();                  dv from the current S, z (warm start in dv)
+//   void zero_dv();                       dv = 0
+//   bool release_pulling_contacts(double h);  true when a contact was released (S, z rebuilt)
+//   bool extra_solves(bool ok, double h, F solve_once);  further solves (self-contact); returns ok
+//   void after_solve(double h);           friction, pin forces (dv final)
+//   void update(double h);                v += dv, x += h v
+//   void after_update(double h);          prescribed pin positions, landed contacts, projection
+//   double& start_time();                 t0 of the (sub)step being taken
+//   bool warm_start(); bool halve_on_failure(); int max_halvings();
+#pragma once
+
+#include <chrono>
+#include <cstdio>
+#include <string>
+
+#include "loom/common.hpp"
+#include "loom/integrator.hpp"
+#include "loom/linear_solver.hpp"
+
+namespace loom::bw {
+
+/// One attempt of a step of size h from the state at start_time(); false when a solve failed
+/// (dv is then zeroed: no warm start from a failed solve).
+template <class Ops>
+bool attempt(Ops& ops, double h, StepStats& st, SolveReport& rep) {
+  using Clock = std::chrono::steady_clock;
+  const auto t0 = Clock::now();
+  ops.forces();
+  st.force_evaluations += 1;
+  ops.assemble(h);
+  const int contacts = ops.set_constraints(h);
+  const auto t1 = Clock::now();
+  st.assemble_seconds += std::chrono::duration<double>(t1 - t0).count();
+  auto solve_once = [&] {
+    rep = SolveReport{};
+    const bool ok = ops.factorize(rep);
+    if (ok) {
+      if (!ops.warm_start()) ops.zero_dv();
+      const double fs = rep.factorize_seconds;
+      rep = ops.solve();
+      rep.factorize_seconds = fs;
+      st.linear_iterations += rep.iterations;
+      st.linear_residual = rep.residual;
+    }
+    return ok && rep.converged;
+  };
+  bool ok = solve_once();
+  // Contacts whose constraint would pull are released, and the step is solved once more.
+  if (ok && contacts > 0 && ops.release_pulling_contacts(h)) ok = solve_once();
+  ok = ops.extra_solves(ok, h, solve_once);
+  st.solve_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
+  if (!ok) {
+    ops.zero_dv();
+    return false;
+  }
+  ops.after_solve(h);
+  ops.update(h);
+  ops.after_update(h);
+  return true;
+}
+
+/// A step of size h with the retry policy: on failure, two halves (the second starting at the
+/// first's end time), up to max_halvings deep; then a SolverError. `who` prefixes the message.
+template <class Ops>
+void advance(Ops& ops, const State& state, double h, int depth, StepStats& st, const char* who) {
+  SolveReport rep;
+  const double t_start = ops.start_time();
+  if (attempt(ops, h, st, rep)) return;
+  if (ops.halve_on_failure() && depth < ops.max_halvings()) {
+    st.retries += 1;
+    advance(ops, state, 0.5 * h, depth + 1, st, who);
+    ops.start_time() = t_start + 0.5 * h;  // the second half starts where the first ended
+    advance(ops, state, 0.5 * h, depth + 1, st, who);
+    ops.start_time() = t_start;
+    return;
+  }
+  char buf[256];
+  std::snprintf(buf, sizeof buf,
+                "%s: linear solve failed at step %lld (t = %.6g s, h = %.3g s%s): %d iterations, "
+                "relative residual %.3g: ",
+                who, static_cast<long long>(state.step), state.time, h, depth > 0 ? ", after halving the step" : "",
+                rep.iterations, rep.residual);
+  std::string msg = buf + (rep.message.empty() ? std::string("the solver reported no reason") : rep.message);
+  if (ops.halve_on_failure())
+    msg += " (gave up after " + std::to_string(ops.max_halvings()) + " halvings; raise max_halvings or reduce dt)";
+  throw SolverError(msg);
+}
+
+}  // namespace loom::bw
