@@ -274,9 +274,18 @@ std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const In
     std::string chosen;
     std::vector<std::string> skipped;
     for (const auto& nm : names) {
-      if (loader.available(PluginKind::Solver, nm)) { chosen = nm; break; }
+      // the first available for this backend (a cpu-only solver is skipped on cuda)
+      if (loader.available(PluginKind::Solver, nm) &&
+          (sc.backend == "cpu" || loader.registry().has(PluginKind::Solver, nm, sc.backend))) { chosen = nm; break; }
       skipped.push_back(nm);
     }
+    if (chosen.empty() && sc.backend != "cpu")  // none runs on this backend: the first one, whose make names the fix
+      for (const auto& nm : names)
+        if (loader.available(PluginKind::Solver, nm)) {
+          chosen = nm;
+          skipped.clear();
+          break;
+        }
     if (chosen.empty()) {
       const auto avail = loader.names(PluginKind::Solver);
       const std::string hint = names.size() == 1 ? closest_match(names[0], avail) : "";
@@ -285,7 +294,8 @@ std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const In
                 (avail.empty() ? "none" : join(avail)) + ".");
     }
     if (!skipped.empty() && is_output_rank() && notes)
-      std::cerr << "loom: solver " << join(skipped) << " not available in this build; using " << chosen << "\n";
+      std::cerr << "loom: solver " << join(skipped) << " not available in this build"
+                << (sc.backend == "cpu" ? "" : " for backend " + sc.backend) << "; using " << chosen << "\n";
     loader.ensure(PluginKind::Solver, chosen);
     Params sp = solver.is_map() ? solver.child(chosen) : Params();
     if (solver.is_map()) {
