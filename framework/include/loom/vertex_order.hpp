@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "loom/common.hpp"
+#include "loom/incidence.hpp"
 #include "loom/traversal.hpp"
 
 namespace loom {
@@ -39,25 +40,19 @@ struct VertexOrder {
   Index to_internal(Index user) const { return identity() ? user : inv[static_cast<std::size_t>(user)]; }
 };
 
-/// Vertex adjacency of a spring list in CSR form (duplicates kept; self-loops refused).
+/// Vertex adjacency of a spring list in CSR form (duplicates kept; self-loops refused): the
+/// neighbours across the springs of the one incidence list (incidence.hpp), in spring order.
 struct VertexAdjacency {
   std::vector<Index> offsets, nbr;
   VertexAdjacency(Index n, std::span<const Index> si, std::span<const Index> sj) {
     if (si.size() != sj.size()) throw std::invalid_argument("vertex order: i and j differ in size");
-    offsets.assign(static_cast<std::size_t>(n) + 1, 0);
-    for (std::size_t s = 0; s < si.size(); ++s) {
+    for (std::size_t s = 0; s < si.size(); ++s)
       if (si[s] < 0 || sj[s] < 0 || si[s] >= n || sj[s] >= n)
         throw std::invalid_argument("vertex order: spring " + std::to_string(s) + " has an endpoint out of range");
-      ++offsets[static_cast<std::size_t>(si[s]) + 1];
-      ++offsets[static_cast<std::size_t>(sj[s]) + 1];
-    }
-    for (Index v = 0; v < n; ++v) offsets[v + 1] += offsets[v];
-    nbr.resize(static_cast<std::size_t>(offsets[n]));
-    std::vector<Index> pos(offsets.begin(), offsets.end() - 1);
-    for (std::size_t s = 0; s < si.size(); ++s) {
-      nbr[static_cast<std::size_t>(pos[si[s]]++)] = sj[s];
-      nbr[static_cast<std::size_t>(pos[sj[s]]++)] = si[s];
-    }
+    VertexIncidence inc(n, si, sj);
+    nbr.resize(inc.spring.size());
+    for (std::size_t e = 0; e < nbr.size(); ++e) nbr[e] = inc.other(e, si, sj);
+    offsets = std::move(inc.offsets);
   }
   Index degree(Index v) const { return offsets[v + 1] - offsets[v]; }
 };

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "loom/incidence.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/kernels/bw_assembly.hpp"
 #include "loom/kernels/contact.hpp"
@@ -149,27 +150,6 @@ void sync_after_step(DeviceState<T>& ds, State& s, int every) {
   if (every <= 1 || (s.step + 1) % every == 0) ds.download(s);
 }
 
-/// Vertex -> incident springs (sign +1 at the spring's i, -1 at its j), springs in order.
-void build_incidence(Index n, const std::vector<Index>& I, const std::vector<Index>& J, std::vector<Index>& ptr,
-                     std::vector<Index>& spring, std::vector<signed char>& sign) {
-  const Index S = static_cast<Index>(I.size());
-  ptr.assign(n + 1, 0);
-  for (Index q = 0; q < S; ++q) {
-    ptr[I[q] + 1]++;
-    ptr[J[q] + 1]++;
-  }
-  for (Index i = 0; i < n; ++i) ptr[i + 1] += ptr[i];
-  spring.resize(2 * static_cast<std::size_t>(S));
-  sign.resize(2 * static_cast<std::size_t>(S));
-  std::vector<Index> pos(ptr.begin(), ptr.end() - 1);
-  for (Index q = 0; q < S; ++q) {
-    spring[pos[I[q]]] = q;
-    sign[pos[I[q]]++] = 1;
-    spring[pos[J[q]]] = q;
-    sign[pos[J[q]]++] = -1;
-  }
-}
-
 // ======================= harmonic oscillation =======================
 
 template <class T, HoVariantD V>
@@ -265,12 +245,10 @@ class CudaHo final : public Integrator {
     cuda::upload(hi_, si_);
     cuda::upload(hj_, sj_);
     cuda::upload(set->rest_length, l0_);
-    std::vector<Index> ptr, sp;
-    std::vector<signed char> sg;
-    build_incidence(n, hi_, hj_, ptr, sp, sg);
-    cuda::upload(ptr, inc_ptr_);
-    cuda::upload(sp, inc_spring_);
-    cuda::upload(sg, inc_sign_);
+    const VertexIncidence inc(n, hi_, hj_);  // the one incidence builder (loom/incidence.hpp)
+    cuda::upload(inc.offsets, inc_ptr_);
+    cuda::upload(inc.spring, inc_spring_);
+    cuda::upload(inc.sign, inc_sign_);
     G_.assign(3 * static_cast<std::size_t>(S), T(0));
     P_.assign(variant_ == HoVariantD::AnalyticPosition ? 3 * static_cast<std::size_t>(S) : 0, T(0));
     ds_.upload(scene.state);

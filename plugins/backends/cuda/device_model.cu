@@ -4,6 +4,7 @@
 #include <stdexcept>
 
 #include "device_model.hpp"
+#include "loom/incidence.hpp"
 #include "loom/kernels/bending.hpp"
 #include "loom/kernels/spring.hpp"
 
@@ -262,21 +263,12 @@ void DeviceForceModel<T>::add_springs(const ElementBlock& b, const BsrPattern* p
   cuda::upload(l0, d->l0);
   cuda::upload(k, d->k);
   cuda::upload(c, d->c);
-  // Incidence: vertex -> (spring, sign), springs in increasing order.
-  std::vector<Index> ptr(n_ + 1, 0), sp(2 * static_cast<std::size_t>(S)), blk;
-  std::vector<signed char> sg(2 * static_cast<std::size_t>(S));
-  for (Index q = 0; q < S; ++q) {
-    ptr[I[q] + 1]++;
-    ptr[J[q] + 1]++;
-  }
-  for (Index i = 0; i < n_; ++i) ptr[i + 1] += ptr[i];
-  std::vector<Index> fillp(ptr.begin(), ptr.end() - 1);
-  for (Index q = 0; q < S; ++q) {
-    sp[fillp[I[q]]] = q;
-    sg[fillp[I[q]]++] = 1;
-    sp[fillp[J[q]]] = q;
-    sg[fillp[J[q]]++] = -1;
-  }
+  // Incidence: vertex -> (spring, sign), springs in increasing order (loom/incidence.hpp).
+  const VertexIncidence inc(n_, I, J);
+  const std::vector<Index>& ptr = inc.offsets;
+  const std::vector<Index>& sp = inc.spring;
+  const std::vector<std::int8_t>& sg = inc.sign;
+  std::vector<Index> blk;
   if (pattern) {
     blk.resize(sp.size());
     for (Index i = 0; i < n_; ++i)
