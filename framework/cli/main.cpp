@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <csignal>
-#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -12,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "loom/clock.hpp"
 #include "loom/common.hpp"
 #include "loom/output.hpp"
 #include "loom/registry.hpp"
@@ -260,9 +260,9 @@ int main(int argc, char** argv) {
       opt.study = args.study;
       opt.out_dir = args.out.empty() ? "out/study_" + stem(args.study) : args.out;
       const bool tty = ::isatty(STDOUT_FILENO) && !args.quiet;
-      const auto t0 = std::chrono::steady_clock::now();
+      const auto t0 = loom::Clock::now();
       opt.progress = [&](const std::string& what, double frac) {
-        const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        const double el = loom::seconds_since(t0);
         if (tty) {
           const int width = 30, filled = static_cast<int>(width * frac);
           std::printf("\r\033[K[%.*s%*s] %3d%%  %.0f s  %s", filled, "##############################", width - filled, "",
@@ -293,7 +293,7 @@ int main(int argc, char** argv) {
       if (!args.quiet) loom::cli::print_study_table(rows);
       if (!args.quiet)
         std::printf("loom: study done in %.1f s: %zu rows (%d not ok: diverged/failed/timeout); wrote %s/study.csv\n",
-                    std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), rows.size(), bad,
+                    loom::seconds_since(t0), rows.size(), bad,
                     opt.out_dir.c_str());
       if (!args.quiet)
         std::printf("loom: the reference changes by %.3g (RMS, x cloth size) when its step is halved: smaller errors "
@@ -339,18 +339,18 @@ int main(int argc, char** argv) {
     sim.output().overwrite = args.overwrite;
     const bool show = !args.quiet && loom::is_output_rank();
     const bool tty = show && ::isatty(STDOUT_FILENO);
-    const auto t0 = std::chrono::steady_clock::now();
+    const auto t0 = loom::Clock::now();
     // Progress: on a terminal one line redrawn at most every 0.5 s; elsewhere (a log) one line
     // every 5 s. Steps per second, simulated time, and the time left.
     const long long total_steps = static_cast<long long>(sim.frames() - sim.start_frame()) * sim.substeps();
     const long long first_step = sim.scene().state.step;
     auto last_print = t0;
     auto report = [&](bool final_line) {
-      const auto now = std::chrono::steady_clock::now();
-      const double since = std::chrono::duration<double>(now - last_print).count();
+      const auto now = loom::Clock::now();
+      const double since = loom::seconds_between(last_print, now);
       if (!final_line && since < (tty ? 0.5 : 5.0)) return;
       last_print = now;
-      const double el = std::chrono::duration<double>(now - t0).count();
+      const double el = loom::seconds_between(t0, now);
       const long long done = sim.scene().state.step - first_step;
       const double rate = el > 0 ? done / el : 0.0;
       const double eta = rate > 0 ? (total_steps - done) / rate : 0.0;
@@ -378,7 +378,7 @@ int main(int argc, char** argv) {
     if (tty) std::printf("\n");
     if (show) {
       const auto& st = sim;
-      const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double el = loom::seconds_since(t0);
       const auto f = st.measure(st.frames());
       std::printf("loom: summary: %lld steps in %.3g s (%.3g ms per step in the integrator); largest strain %.4g; "
                   "final energy %.6g J (kinetic %.4g, elastic %.4g); %lld force evaluations, %lld linear iterations\n",
@@ -394,7 +394,7 @@ int main(int argc, char** argv) {
       return loom::cli::render_command(r);
     }
     if (!args.quiet && loom::is_output_rank()) {
-      const double el = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double el = loom::seconds_since(t0);
       std::printf("loom: %d frames (%lld steps, %.4g s simulated) in %.3g s; wrote %s\n", sim.frames() - sim.start_frame(),
                   static_cast<long long>(sim.scene().state.step), sim.scene().state.time, el, sim.output().dir.c_str());
     }

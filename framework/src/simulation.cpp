@@ -1,3 +1,4 @@
+#include "loom/clock.hpp"
 #include "loom/simulation.hpp"
 #include "scene_build.hpp"
 #include "loom/memory_estimate.hpp"
@@ -206,13 +207,13 @@ void Simulation::request_stop() { g_stop_requested = 1; }
 void Simulation::step() {
   if (g_stop_requested)
     throw Interrupted("interrupted at step " + std::to_string(scene_->state.step) + " (t = " + fmt(scene_->state.time) + " s)");
-  const auto t0 = std::chrono::steady_clock::now();
+  const auto t0 = Clock::now();
   if (scene_->self_collision) scene_->self_collision->begin_step(scene_->state);
   integrator_->step(*scene_, dt_);
   if (!scene_->colliders.empty() && !integrator_->handles_contacts())
     scene_->colliders.resolve_contacts(scene_->state, scene_->state.time, dt_);
   if (scene_->self_collision) scene_->self_collision->resolve(scene_->state, dt_);  // after colliders: last word
-  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double secs = seconds_since(t0);
   step_seconds_ += secs;
   step_seconds_total_ += secs;
   ++steps_in_frame_;

@@ -5,6 +5,7 @@
 #include <cstdio>
 
 #include "loom/filtered_pcg.hpp"
+#include "loom/clock.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 
 namespace loom::cuda {
@@ -89,8 +90,6 @@ void DeviceFilter<T>::rebuild_constrained() {
 }
 
 namespace {
-
-using Clock = std::chrono::steady_clock;
 
 template <class T>
 struct AddPrescribed {  // dv <- S dv + z on the constrained vertices (free ones keep their guess)
@@ -285,7 +284,7 @@ bool DevicePcg<T>::factorize(const DeviceBsr<T>& A, const DeviceFilter<T>& S, So
                                                                                : 2;
   const int bad = reduce_sum<int>(
       n_, Preconditioner<T>{raw(A.diag), raw(A.values), raw(S.free), raw(S.proj), kind, raw(pinv_)});
-  report.factorize_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  report.factorize_seconds = seconds_since(t0);
   if (bad > 0) {
     report.converged = false;
     report.message = name_ + ": " + std::to_string(bad) +
@@ -310,7 +309,7 @@ SolveReport DevicePcg<T>::solve(const DeviceBsr<T>& A, const DeviceFilter<T>& S,
   set.max_iterations = opt_.max_iterations;
   set.name = name_.c_str();
   SolveReport rep = pcg::solve(ops, set, dv, r_, c_, q_, s_);
-  rep.solve_seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+  rep.solve_seconds = seconds_since(t0);
   return rep;
 }
 

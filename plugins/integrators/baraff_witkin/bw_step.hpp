@@ -24,6 +24,7 @@
 #include <cstdio>
 #include <string>
 
+#include "loom/clock.hpp"
 #include "loom/common.hpp"
 #include "loom/integrator.hpp"
 #include "loom/linear_solver.hpp"
@@ -34,14 +35,13 @@ namespace loom::bw {
 /// (dv is then zeroed: no warm start from a failed solve).
 template <class Ops>
 bool attempt(Ops& ops, double h, StepStats& st, SolveReport& rep) {
-  using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
   ops.forces();
   st.force_evaluations += 1;
   ops.assemble(h);
   const int contacts = ops.set_constraints(h);
   const auto t1 = Clock::now();
-  st.assemble_seconds += std::chrono::duration<double>(t1 - t0).count();
+  st.assemble_seconds += seconds_between(t0, t1);
   auto solve_once = [&] {
     rep = SolveReport{};
     const bool ok = ops.factorize(rep);
@@ -59,7 +59,7 @@ bool attempt(Ops& ops, double h, StepStats& st, SolveReport& rep) {
   // Contacts whose constraint would pull are released, and the step is solved once more.
   if (ok && contacts > 0 && ops.release_pulling_contacts(h)) ok = solve_once();
   ok = ops.extra_solves(ok, h, solve_once);
-  st.solve_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
+  st.solve_seconds += seconds_since(t1);
   if (!ok) {
     ops.zero_dv();
     return false;
