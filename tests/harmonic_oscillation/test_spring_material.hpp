@@ -92,4 +92,32 @@ inline std::unique_ptr<Scene> make_scene(std::vector<double> x, std::vector<doub
   return sc;
 }
 
+/// An nx x nx sheet (spacing 0.02, slightly rippled, varied velocities and masses) with
+/// structural springs (one direction damped, written with either endpoint first), shear springs
+/// and, when `bend`, bend springs two apart: the cloth of the fused-path tests (SE, RK4).
+struct TestCloth {
+  std::vector<double> x, v, m;
+  SpringSet springs;
+};
+inline TestCloth make_test_cloth(int nx, bool bend) {
+  TestCloth t;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      t.x.insert(t.x.end(), {0.02 * c, 0.001 * std::sin(0.7 * c + r), 0.02 * r});
+      t.v.insert(t.v.end(), {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.0});
+      t.m.push_back(1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5)));
+    }
+  SpringSet& s = t.springs;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      const int a = r * nx + c;
+      if (c + 1 < nx) s.add(a + 1, a, 0.02, 2000, 0.02, SpringClass::Structural);   // either endpoint first
+      if (r + 1 < nx) s.add(a, a + nx, 0.02, 2000, 0.0, SpringClass::Structural);
+      if (c + 1 < nx && r + 1 < nx) s.add(a, a + nx + 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+      if (c > 0 && r + 1 < nx) s.add(a, a + nx - 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+      if (bend && c + 2 < nx) s.add(a, a + 2, 0.04, 50, 0.0, SpringClass::Bend);
+    }
+  return t;
+}
+
 }  // namespace loom::testing

@@ -127,22 +127,9 @@ TEST(Rk4, FourthOrderOnIsolatedSpring) {
 // moving pins; and it gives the same bits on 1 and 2 threads.
 TEST(Rk4, FusedSpringPathMatchesGenericPath) {
   const int nx = 52;   // 52 x 52 vertices, ~10k springs: above kParallelMinSprings
-  std::vector<double> x, v, m;
-  for (int r = 0; r < nx; ++r)
-    for (int c = 0; c < nx; ++c) {
-      x.insert(x.end(), {0.02 * c, 0.001 * std::sin(0.7 * c + r), 0.02 * r});
-      v.insert(v.end(), {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.0});
-      m.push_back(1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5)));
-    }
-  SpringSet s;
-  for (int r = 0; r < nx; ++r)
-    for (int c = 0; c < nx; ++c) {
-      const int a = r * nx + c;
-      if (c + 1 < nx) s.add(a + 1, a, 0.02, 2000, 0.02, SpringClass::Structural);   // either endpoint first
-      if (r + 1 < nx) s.add(a, a + nx, 0.02, 2000, 0.0, SpringClass::Structural);
-      if (c + 1 < nx && r + 1 < nx) s.add(a, a + nx + 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
-      if (c > 0 && r + 1 < nx) s.add(a, a + nx - 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
-    }
+  const loom::testing::TestCloth cloth = loom::testing::make_test_cloth(nx, false);
+  const std::vector<double>&x = cloth.x, &v = cloth.v, &m = cloth.m;
+  const SpringSet& s = cloth.springs;
   ASSERT_GE(s.size(), kParallelMinSprings);
   std::vector<double> res[3];
   for (int run = 0; run < 3; ++run) {   // 0: generic, 1: fused 1 thread, 2: fused 2 threads
