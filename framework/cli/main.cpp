@@ -19,6 +19,7 @@
 #include "loom/stability.hpp"
 #include "loom/study.hpp"
 #include "loom/threads.hpp"
+#include "loom/thread_controller.hpp"
 #include "check_cmd.hpp"
 #include "plot_cmd.hpp"
 #include "render_cmd.hpp"
@@ -385,6 +386,9 @@ int main(int argc, char** argv) {
                   static_cast<long long>(st.scene().state.step - first_step), el,
                   st.scene().state.step > first_step ? 1e3 * st.step_seconds_total() / (st.scene().state.step - first_step) : 0.0, f.max_strain,
                   f.kinetic + f.gravitational + f.elastic, f.kinetic, f.elastic, st.force_evaluations(), st.linear_iterations());
+      if (const auto* tc = st.thread_controller())
+        std::printf("loom: threads auto: ended on %d (%d probes, %d switches, probes cost %.3g s)\n", tc->chosen(),
+                    tc->probes(), tc->switches(), tc->probe_loss());
     }
     if (args.render && loom::is_output_rank()) {
       if (!args.quiet)

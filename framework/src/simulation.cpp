@@ -12,6 +12,7 @@
 #include <csignal>
 #include <cerrno>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <cstdio>
 #include <filesystem>
@@ -26,6 +27,7 @@
 #include "loom/run_output.hpp"
 #include "loom/vtk_output.hpp"
 #include "loom/threads.hpp"
+#include "loom/thread_controller.hpp"
 #include "loom/text.hpp"
 
 namespace fs = std::filesystem;
@@ -40,8 +42,9 @@ std::string resolve_path(const std::string& base_dir, const std::string& path) {
 namespace {
 bool g_notes = true;
 
-// `threads: auto` (default) or a count; the policy lives in loom/threads.hpp.
-void configure_threads(const Params& t, Scene& sc) {
+// `threads: auto` (default) or a count; the policy lives in loom/threads.hpp. Returns whether
+// the count is auto's own choice (then loom/thread_controller.hpp adapts it during the run).
+bool configure_threads(const Params& t, Scene& sc) {
   int requested = 0;
   if (t.valid()) {
     if (t.is_scalar() && t.as_string() == "auto") {
@@ -60,6 +63,8 @@ void configure_threads(const Params& t, Scene& sc) {
     std::cerr << "loom: note: threads: " << requested << " capped at " << sc.threads
               << ", the cores this process may use (more threads than cores only wait at barriers).\n";
   omp_set_num_threads(sc.threads);
+  const char* env = std::getenv("OMP_NUM_THREADS");
+  return requested == 0 && !(env && std::atoi(env) > 0) && sc.backend == "cpu";
 }
 }
 void Simulation::set_notes(bool on) { g_notes = on; }
@@ -104,7 +109,8 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   base_dir_ = base_dir.empty() ? std::string(".") : base_dir;
 
   sc.backend = root.get_choice("backend", "cpu", {"cpu", "cuda"});
-  configure_threads(root.child("threads"), sc);
+  if (configure_threads(root.child("threads"), sc) && usable_cores() > 1)
+    thread_ctl_ = std::make_unique<ThreadController>(sc.threads, usable_cores());
 
   // The stages (scene_build.cpp), in the order their results are needed.
   sc.mesh = scene_build::mesh(root, base_dir, [&](long long vertices) { check_memory(root, vertices); });
@@ -217,6 +223,11 @@ void Simulation::step() {
   step_seconds_ += secs;
   step_seconds_total_ += secs;
   ++steps_in_frame_;
+  if (thread_ctl_) {
+    const int before = thread_ctl_->threads();
+    thread_ctl_->record(secs);
+    if (thread_ctl_->threads() != before) omp_set_num_threads(thread_ctl_->threads());
+  }
   const StepStats s = integrator_->last_step();
   force_evals_ += s.force_evaluations;
   linear_iters_ += s.linear_iterations;

@@ -14,6 +14,8 @@
 
 namespace loom {
 
+class ThreadController;  // loom/thread_controller.hpp
+
 /// Divergence guards, checked after every `check_every` steps.
 struct GuardOptions {
   double max_velocity = 1e3;   ///< m/s; beyond this the run stops as diverged
@@ -144,6 +146,11 @@ class Simulation {
   double step_seconds_total_ = 0;
   long long steps_in_frame_ = 0;
   std::function<void()> on_step_;
+  std::unique_ptr<ThreadController> thread_ctl_;  ///< `threads: auto`'s step-time controller (null: fixed count)
+
+ public:
+  /// The step-time controller of `threads: auto` (null with a fixed count, OMP_NUM_THREADS or one core).
+  const ThreadController* thread_controller() const { return thread_ctl_.get(); }
 };
 
 /// Resolve a path relative to the scene file's folder (absolute paths unchanged).

@@ -1,0 +1,105 @@
+// The adaptive part of `threads: auto` (docs/ARCHITECTURE.md, "Threads"): during a run, measure
+// the step time with each candidate thread count, keep the fastest, and measure again now and
+// then, at a bounded cost.
+//
+// The start-up rule (loom/threads.hpp) guesses a count from the cores and the load when the run
+// starts. That guess cannot see what a count costs for this scene (on a small mesh a second
+// thread may only add barriers) nor a competitor that starts later. The controller corrects it
+// from the step times themselves:
+// - Samples: whole steps are batched until a batch lasts at least `sample_seconds` (2 ms); a
+//   sample is the batch's mean step time. A count's time is the median of `samples` (3) samples.
+//   The first step of the run (set-up work) is not sampled.
+// - Probe: the current count's last samples are its baseline; each other candidate (1 and the
+//   usable cores) is then run for `samples` samples, or for one sample when that sample is more
+//   than `reject_factor` (1.5) x the baseline (a clearly worse count costs one sample, not three).
+//   The fastest median wins; another count replaces the current one only when it is at least
+//   `switch_gain` (3%) faster.
+// - When: the first probe after `first_probe_steps` (20) steps and `min_interval` (0.25 s) of
+//   step time; later probes when the time since the last decision reaches the expected cost of
+//   the next probe divided by `overhead` (3%), and at least `min_interval`; so probing costs
+//   about 3% of the step time. The expected cost is the larger of what the last probe cost (its
+//   steps' excess over the baseline) and the losers' median excess times their probe steps, and
+//   at least half the previous estimate (a preempted step can cost many medians, so one cheap
+//   probe does not bring the next one forward). When the chosen count's step time drifts by more
+//   than `drift` (1.5x either way: a competitor started or stopped, the scene changed), the next
+//   probe may come twice as early (6%).
+// The controller is pure logic on the step times it is given (no clock of its own), so tests
+// drive it with made-up times. Simulation::step feeds it and applies threads().
+#pragma once
+
+namespace loom {
+
+struct ThreadControllerConfig {
+  double sample_seconds = 2e-3;   ///< a sample is a batch of whole steps lasting at least this
+  int samples = 3;                ///< samples per count in a probe (median); at most kMaxSamples
+  double reject_factor = 1.5;     ///< a probe sample this much slower than the baseline ends that probe
+  double switch_gain = 0.03;      ///< another count must be this much faster to replace the current one
+  double overhead = 0.03;         ///< probing may cost this fraction of the step time
+  double first_probe_steps = 20;  ///< first probe after this many (baseline) step times ...
+  double min_interval = 0.25;     ///< ... and never sooner than this (seconds) after a decision
+  double drift = 1.5;             ///< the chosen count's time changed by this factor: probe twice as early
+};
+
+class ThreadController {
+ public:
+  using Config = ThreadControllerConfig;
+  static constexpr int kMaxSamples = 8;
+  static constexpr int kMaxCandidates = 3;
+
+  /// initial: the count the run starts with; max_threads: the usable cores. Candidates are
+  /// initial, 1 and max_threads (distinct). With one candidate the controller never changes.
+  explicit ThreadController(int initial, int max_threads, Config cfg = {});
+
+  /// The count to use for the next step.
+  int threads() const { return current_; }
+  /// Feed the wall time of the step just taken with threads().
+  void record(double step_seconds);
+
+  int probes() const { return probes_; }              ///< probes started so far
+  int switches() const { return switches_; }          ///< times the chosen count changed
+  bool probing() const { return probing_; }
+  int chosen() const { return chosen_; }              ///< the count kept by the last decision
+  double probe_loss() const { return probe_loss_total_; }  ///< extra step time spent in probes (s), as measured
+  double elapsed() const { return elapsed_; }         ///< total step time fed (s)
+
+ private:
+  static double median(const double* v, int n);
+  void on_sample(double s, int steps);
+  void start_probe();
+  void next_candidate();
+  void decide();
+
+  Config cfg_;
+  int cand_[kMaxCandidates] = {};
+  int ncand_ = 0;
+  int current_ = 1, chosen_ = 1;
+  bool probing_ = false;
+  bool skip_first_ = true;
+
+  double elapsed_ = 0, since_decision_ = 0;
+  int steps_since_decision_ = 0;
+  double batch_time_ = 0;
+  int batch_steps_ = 0;
+
+  // The chosen count's recent samples (a ring) and its time at the last decision.
+  double recent_[kMaxSamples] = {};
+  int nrecent_ = 0, recent_pos_ = 0;
+  double ref_ = 0;
+  int decisions_ = 0;
+  double next_loss_ = 0;  // expected extra time of the next probe (s)
+
+  // The probe in progress: per candidate, its samples, steps per sample and whether rejected.
+  double meas_[kMaxCandidates][kMaxSamples] = {};
+  int nmeas_[kMaxCandidates] = {};
+  int steps_per_sample_[kMaxCandidates] = {};
+  bool rejected_[kMaxCandidates] = {};
+  bool measured_[kMaxCandidates] = {};
+  int probe_idx_ = 0;      // candidate index being probed
+  int baseline_idx_ = 0;   // candidate index of the count that was chosen when the probe began
+  double baseline_ = 0;    // its median step time
+  double probe_loss_ = 0;  // extra time of this probe so far, against the baseline
+  double probe_loss_total_ = 0;
+  int probes_ = 0, switches_ = 0;
+};
+
+}  // namespace loom

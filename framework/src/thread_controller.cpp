@@ -1,0 +1,145 @@
+#include "loom/thread_controller.hpp"
+
+#include <algorithm>
+
+namespace loom {
+
+ThreadController::ThreadController(int initial, int max_threads, Config cfg) : cfg_(cfg) {
+  cfg_.samples = std::clamp(cfg_.samples, 1, kMaxSamples);
+  max_threads = std::max(1, max_threads);
+  initial = std::clamp(initial, 1, max_threads);
+  for (const int c : {initial, 1, max_threads})
+    if (std::find(cand_, cand_ + ncand_, c) == cand_ + ncand_) cand_[ncand_++] = c;
+  current_ = chosen_ = initial;
+}
+
+double ThreadController::median(const double* v, int n) {
+  double a[kMaxSamples];
+  std::copy(v, v + n, a);
+  std::sort(a, a + n);
+  return n % 2 ? a[n / 2] : 0.5 * (a[n / 2 - 1] + a[n / 2]);
+}
+
+void ThreadController::record(double t) {
+  elapsed_ += t;
+  since_decision_ += t;
+  ++steps_since_decision_;
+  if (ncand_ < 2) return;
+  if (skip_first_) {  // the first step of a run carries set-up work: not sampled, not waited on
+    skip_first_ = false;
+    since_decision_ = 0;
+    steps_since_decision_ = 0;
+    return;
+  }
+  if (probing_) probe_loss_ += t - baseline_;
+  batch_time_ += t;
+  ++batch_steps_;
+  if (batch_time_ < cfg_.sample_seconds) return;
+  const double s = batch_time_ / batch_steps_;
+  const int steps = batch_steps_;
+  batch_time_ = 0;
+  batch_steps_ = 0;
+  on_sample(s, steps);
+}
+
+void ThreadController::on_sample(double s, int steps) {
+  if (probing_) {
+    const int k = probe_idx_;
+    meas_[k][nmeas_[k]++] = s;
+    steps_per_sample_[k] = std::max(steps_per_sample_[k], steps);
+    if (s > cfg_.reject_factor * baseline_) rejected_[k] = true;
+    if (rejected_[k] || nmeas_[k] >= cfg_.samples) {
+      measured_[k] = true;
+      next_candidate();
+    }
+    return;
+  }
+  const int n = cfg_.samples;
+  recent_[recent_pos_] = s;
+  recent_pos_ = (recent_pos_ + 1) % n;
+  nrecent_ = std::min(nrecent_ + 1, n);
+  for (int k = 0; k < ncand_; ++k)
+    if (cand_[k] == chosen_) steps_per_sample_[k] = steps;
+  if (nrecent_ < n) return;
+  const double m = median(recent_, nrecent_);
+  if (ref_ <= 0) ref_ = m;
+  double need;
+  if (decisions_ == 0) {
+    need = std::max(cfg_.min_interval, cfg_.first_probe_steps * m);
+  } else {
+    const bool drifted = m > cfg_.drift * ref_ || m * cfg_.drift < ref_;
+    need = std::max(cfg_.min_interval, next_loss_ / ((drifted ? 2.0 : 1.0) * cfg_.overhead));
+  }
+  if (since_decision_ >= need) start_probe();
+}
+
+void ThreadController::start_probe() {
+  baseline_idx_ = 0;
+  for (int k = 0; k < ncand_; ++k) {
+    nmeas_[k] = 0;
+    rejected_[k] = false;
+    measured_[k] = false;
+    if (cand_[k] == chosen_) baseline_idx_ = k;
+    else steps_per_sample_[k] = 0;
+  }
+  const int b = baseline_idx_;
+  std::copy(recent_, recent_ + nrecent_, meas_[b]);
+  nmeas_[b] = nrecent_;
+  measured_[b] = true;
+  baseline_ = median(recent_, nrecent_);
+  probing_ = true;
+  ++probes_;
+  probe_loss_ = 0;
+  probe_idx_ = -1;
+  next_candidate();
+}
+
+void ThreadController::next_candidate() {
+  batch_time_ = 0;
+  batch_steps_ = 0;
+  for (int k = probe_idx_ + 1; k < ncand_; ++k)
+    if (!measured_[k]) {
+      probe_idx_ = k;
+      current_ = cand_[k];
+      return;
+    }
+  decide();
+}
+
+void ThreadController::decide() {
+  double med[kMaxCandidates];
+  for (int k = 0; k < ncand_; ++k) med[k] = median(meas_[k], nmeas_[k]);
+  int w = baseline_idx_, a = baseline_idx_;
+  for (int k = 0; k < ncand_; ++k)
+    if (med[k] < med[a]) a = k;
+  if (a != w && med[a] < (1.0 - cfg_.switch_gain) * med[w]) w = a;
+  // What the next probe is expected to cost: each loser run for as many steps as this probe
+  // ran it (the old baseline: one sample if it would be rejected, else `samples`), at its
+  // measured excess over the winner.
+  // A step that a competitor preempts can take many times its median, so the estimate decays
+  // (halves per probe) rather than forgetting a costly probe at once.
+  double loss = 0;
+  for (int k = 0; k < ncand_; ++k) {
+    if (k == w) continue;
+    const bool rej = k == baseline_idx_ ? med[k] > cfg_.reject_factor * med[w] : rejected_[k];
+    const double n = (rej ? 1 : cfg_.samples) * std::max(1, steps_per_sample_[k]);
+    loss += n * std::max(0.0, med[k] - med[w]);
+  }
+  next_loss_ = std::max({loss, probe_loss_, 0.5 * next_loss_});
+  probe_loss_total_ += probe_loss_;
+  if (cand_[w] != chosen_) ++switches_;
+  chosen_ = current_ = cand_[w];
+  ref_ = med[w];
+  // The winner's probe samples seed its recent samples (drift is judged against ref_).
+  nrecent_ = std::min(nmeas_[w], cfg_.samples);
+  std::copy(meas_[w], meas_[w] + nrecent_, recent_);
+  recent_pos_ = nrecent_ % cfg_.samples;
+  since_decision_ = 0;
+  steps_since_decision_ = 0;
+  ++decisions_;
+  probing_ = false;
+  batch_time_ = 0;
+  batch_steps_ = 0;
+}
+
+}  // namespace loom

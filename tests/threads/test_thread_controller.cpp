@@ -1,0 +1,211 @@
+// ThreadController (loom/thread_controller.hpp) on made-up step times: a "world" gives the wall
+// time of a step as a function of the thread count and of the time elapsed, and the tests check
+// which count the controller runs and what its probes cost, computed from those same times.
+// Nothing here measures a clock.
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <functional>
+
+#include "loom/thread_controller.hpp"
+
+using loom::ThreadController;
+
+namespace {
+
+struct Trace {
+  double elapsed = 0;        // sum of step times
+  double extra = 0;          // time above what the faster count would have taken
+  double at_best = 0;        // time spent on the faster count
+  long steps = 0;
+  double first_at = -1;      // elapsed time when `watch` became the chosen count (after `after`)
+};
+
+// world(threads, elapsed) -> seconds of one step; best(elapsed) -> the faster count there.
+Trace drive(ThreadController& c, double seconds, const std::function<double(int, double)>& world,
+          const std::function<int(double)>& best, int watch = 0, double after = 0) {
+  Trace r;
+  while (r.elapsed < seconds) {
+    const int n = c.threads();
+    const double t = world(n, r.elapsed);
+    const double tb = world(best(r.elapsed), r.elapsed);
+    if (n == best(r.elapsed)) r.at_best += t;
+    r.extra += t - tb;
+    r.elapsed += t;
+    ++r.steps;
+    c.record(t);
+    if (watch && r.first_at < 0 && r.elapsed >= after && c.chosen() == watch && !c.probing()) r.first_at = r.elapsed;
+  }
+  return r;
+}
+
+}  // namespace
+
+TEST(ThreadController, OneCoreNeverProbes) {
+  ThreadController c(1, 1);
+  for (int i = 0; i < 10000; ++i) {
+    EXPECT_EQ(c.threads(), 1);
+    c.record(1e-3);
+  }
+  EXPECT_EQ(c.probes(), 0);
+}
+
+TEST(ThreadController, KeepsTheFasterCountAndProbesAtTheBudget) {
+  // 2 threads 10 ms, 1 thread 18 ms: a probe of 1 is rejected after one sample (18 > 1.5 x 10)
+  // and costs 8 ms; the next probe is due when 8 ms is 3% of the time since the decision.
+  ThreadController c(2, 2);
+  auto world = [](int n, double) { return n == 2 ? 0.010 : 0.018; };
+  const Trace r = drive(c, 60.0, world, [](double) { return 2; });
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_EQ(c.switches(), 0);
+  // Re-evaluated periodically: one probe per (8 ms / 0.03 + one step) at most, and at least
+  // half as many (the interval is max(0.25 s, 0.267 s) plus the probe itself).
+  const double interval = 0.008 / 0.03;
+  EXPECT_LE(c.probes(), static_cast<int>(60.0 / interval) + 1);
+  EXPECT_GE(c.probes(), static_cast<int>(60.0 / (interval + 0.05)) / 2);
+  // Each probe costs one 1-thread step: 8 ms per probe.
+  EXPECT_NEAR(r.extra, 0.008 * c.probes(), 1e-9);
+  EXPECT_LE(r.extra / r.elapsed, 0.031);
+}
+
+TEST(ThreadController, SwitchesToOneThreadWhenItIsFaster) {
+  // The gnatv drape case: a small mesh where a second thread only adds barriers.
+  ThreadController c(2, 2);
+  auto world = [](int n, double) { return n == 2 ? 0.033 : 0.030; };
+  const Trace r = drive(c, 20.0, world, [](double) { return 1; });
+  EXPECT_EQ(c.chosen(), 1);
+  EXPECT_GE(c.switches(), 1);
+  // 20 steps + 3 samples before the switch, then probes of 2 threads (not rejected: three
+  // samples each at 3 ms extra = 9 ms), each due when 9 ms is 3% of the time since the last
+  // decision: the probes cost 3% (the budget), although a quarter of the time runs on 2
+  // threads, because 2 threads are only 10% slower here.
+  EXPECT_GE(r.at_best / r.elapsed, 0.7);
+  EXPECT_LE(r.extra / r.elapsed, 0.031);
+}
+
+TEST(ThreadController, HysteresisKeepsTheCurrentCountWhenTheyTie) {
+  ThreadController c(2, 2);
+  auto world = [](int n, double) { return n == 2 ? 0.0100 : 0.0101; };
+  drive(c, 10.0, world, [](double) { return 2; });
+  EXPECT_EQ(c.switches(), 0);
+  EXPECT_GT(c.probes(), 1);
+}
+
+TEST(ThreadController, LeavesTwoThreadsWhenACompetitorStarts) {
+  // Alone until t = 5 s: 2 threads 10 ms, 1 thread 18 ms. Then a CPU-bound process shares a
+  // core: every barrier of a 2-thread step waits for a descheduled thread (30 ms), 1 thread 19 ms.
+  ThreadController c(2, 2);
+  const double change = 5.0;
+  auto world = [&](int n, double e) {
+    if (e < change) return n == 2 ? 0.010 : 0.018;
+    return n == 2 ? 0.030 : 0.019;
+  };
+  auto best = [&](double e) { return e < change ? 2 : 1; };
+  const Trace r = drive(c, 15.0, world, best, 1, change);
+  EXPECT_EQ(c.chosen(), 1);
+  ASSERT_GT(r.first_at, change);
+  // Drift (30 > 1.5 x 10 ms) allows a probe 0.25 s after the last decision at the latest,
+  // after three 30 ms samples; then one probe sample of 1 thread's 3: under half a second.
+  EXPECT_LT(r.first_at - change, 0.5);
+}
+
+TEST(ThreadController, ReturnsToTwoThreadsWhenTheCompetitorStops) {
+  // Loaded at the start (the start-up rule saw the competitor and chose 1), alone from 5 s.
+  ThreadController c(1, 2);
+  const double change = 5.0;
+  auto world = [&](int n, double e) {
+    if (e < change) return n == 2 ? 0.030 : 0.019;
+    return n == 2 ? 0.010 : 0.018;
+  };
+  auto best = [&](double e) { return e < change ? 1 : 2; };
+  const Trace r = drive(c, 15.0, world, best, 2, change);
+  EXPECT_EQ(c.chosen(), 2);
+  ASSERT_GT(r.first_at, change);
+  // 1 thread barely changes (no drift), so the periodic probe finds it: due when the last
+  // probe's cost (one 2-thread sample, 11 ms) is 3% of the time since: 0.37 s, plus 3 samples.
+  EXPECT_LT(r.first_at - change, 0.37 + 0.1);
+  // Probing a loaded second thread cost 11 ms per 0.37 s before the change.
+  EXPECT_LE(r.extra / r.elapsed, 0.05);
+}
+
+TEST(ThreadController, MedianIgnoresSpikesOfADescheduledStep) {
+  // Every 7th step is 4x slower (a step preempted by another process), whatever the count.
+  ThreadController c(2, 2);
+  long k = 0;
+  auto world = [&](int n, double) {
+    const double base = n == 2 ? 0.010 : 0.016;
+    return (++k % 7 == 0) ? 4 * base : base;
+  };
+  const Trace r = drive(c, 30.0, world, [](double) { return 2; });
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_GE(r.at_best / r.elapsed, 0.9);
+}
+
+TEST(ThreadController, BatchesShortSteps) {
+  // 20 us steps: a sample is a batch of 100 steps (2 ms); 1 thread is faster here.
+  ThreadController c(2, 2);
+  auto world = [](int n, double) { return n == 2 ? 25e-6 : 20e-6; };
+  const Trace r = drive(c, 5.0, world, [](double) { return 1; });
+  EXPECT_EQ(c.chosen(), 1);
+  EXPECT_GE(r.at_best / r.elapsed, 0.9);
+}
+
+TEST(ThreadController, FirstStepSetUpIsNotSampledAndTheFirstProbeWaits) {
+  // A 2 s first step (factorisation, allocation) must not make 2 threads look slow, and no
+  // probe starts before 20 step times and 0.25 s after it.
+  ThreadController c(2, 2);
+  bool first = true;
+  auto world = [&](int n, double) {
+    double t = n == 2 ? 0.050 : 0.090;
+    if (first) t = 2.0, first = false;
+    return t;
+  };
+  double e = 0;
+  while (c.probes() == 0 && e < 10.0) {
+    const double t = world(c.threads(), e);
+    e += t;
+    c.record(t);
+  }
+  EXPECT_EQ(c.probes(), 1);
+  EXPECT_GE(e - 2.0, 20 * 0.050 - 1e-12);
+  drive(c, 10.0, world, [](double) { return 2; });
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_EQ(c.switches(), 0);
+}
+
+TEST(ThreadController, ThreeCandidatesOnFourCores) {
+  // Start-up rule said 3 (one core busy); 1, 3 and 4 are tried and 3 kept.
+  ThreadController c(3, 4);
+  auto world = [](int n, double) { return n == 3 ? 0.010 : n == 4 ? 0.025 : 0.024; };
+  drive(c, 10.0, world, [](double) { return 3; });
+  EXPECT_EQ(c.chosen(), 3);
+  EXPECT_GT(c.probes(), 0);
+  ThreadController d(3, 4);
+  auto world4 = [](int n, double) { return n == 4 ? 0.007 : n == 3 ? 0.010 : 0.024; };
+  drive(d, 10.0, world4, [](double) { return 4; });
+  EXPECT_EQ(d.chosen(), 4);
+}
+
+TEST(ThreadController, PreemptedProbesDoNotExceedTheBudget) {
+  // Loaded machine: 1 thread 4 ms; a 2-thread step usually 9 ms but one in five waits 100 ms
+  // for a descheduled thread (deterministic sequence). The budget is on the measured cost of
+  // the probes, so the long ones push the next probe out; a cheap probe does not pull it back.
+  ThreadController c(1, 2);
+  std::uint32_t state = 12345;
+  auto world = [&](int n, double) {
+    if (n == 1) return 0.004;
+    state = state * 1664525u + 1013904223u;
+    return (state >> 24) % 5 == 0 ? 0.100 : 0.009;
+  };
+  double elapsed = 0, extra = 0;
+  while (elapsed < 120.0) {
+    const int n = c.threads();
+    const double t = world(n, elapsed);
+    extra += t - 0.004;
+    elapsed += t;
+    c.record(t);
+  }
+  EXPECT_EQ(c.chosen(), 1);
+  EXPECT_GT(c.probes(), 10);
+  EXPECT_LE(extra / elapsed, 0.035);
+}
