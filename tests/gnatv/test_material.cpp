@@ -235,7 +235,9 @@ TEST(GnatvMaterial, AssembledJacobianIsSymmetricAndMatchesFiniteDifferences) {
 }
 
 TEST(GnatvMaterial, ParallelResultsEqualSerialBitForBit) {
-  const loom::Mesh mesh = loom::make_grid(20, 20, 10.0, 10.0);
+  // Above the serial rule (kParallelMinVertices): smaller meshes run on one thread anyway.
+  const loom::Mesh mesh = loom::make_grid(70, 70, 10.0, 10.0);
+  ASSERT_GE(mesh.num_vertices(), loom::kParallelMinVertices);
   auto m = make(mesh);
   std::vector<std::array<loom::Index, 2>> pairs;
   m->jacobian_pairs(pairs);

@@ -215,7 +215,7 @@ void GnatvMaterial::compute_forces(std::span<const double> x, std::span<const do
   double* Fo = f.data();
   const std::size_t n3 = 3 * static_cast<std::size_t>(n_);
   const int ncol = num_colours();
-#pragma omp parallel
+#pragma omp parallel if (n_ >= kParallelMinVertices)  // the one rule (common.hpp)
   {
 #pragma omp for schedule(static)
     for (std::size_t i = 0; i < n3; ++i) Fo[i] = 0.0;
@@ -239,7 +239,7 @@ double GnatvMaterial::elastic_energy(std::span<const double> x) const {
   const double* X = x.data();
   const Index nt = num_triangles();
   double E = 0;
-#pragma omp parallel for schedule(static) reduction(+ : E)
+#pragma omp parallel for schedule(static) reduction(+ : E) if (n_ >= kParallelMinVertices)
   for (Index t = 0; t < nt; ++t) {
     const auto& tv = tri_[t];
     double P[3][3];
@@ -254,7 +254,7 @@ double GnatvMaterial::max_strain(std::span<const double> x) const {
   const double* X = x.data();
   const Index nt = num_triangles();
   double m = 0;
-#pragma omp parallel for schedule(static) reduction(max : m)
+#pragma omp parallel for schedule(static) reduction(max : m) if (n_ >= kParallelMinVertices)
   for (Index t = 0; t < nt; ++t) {
     const auto& tv = tri_[t];
     double P[3][3];
@@ -333,7 +333,7 @@ void GnatvMaterial::compute_jacobians(std::span<const double> x, std::span<const
   const std::size_t nd = dfdv ? dfdv->values().size() : 0;
   const int ncol = num_colours();
   const bool psd = opt_.psd_projection;
-#pragma omp parallel
+#pragma omp parallel if (n_ >= kParallelMinVertices)  // the one rule (common.hpp)
   {
 #pragma omp for schedule(static) nowait
     for (std::size_t i = 0; i < nd; ++i) D[i] = 0.0;  // no material damping: df/dv = 0
