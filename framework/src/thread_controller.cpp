@@ -65,7 +65,7 @@ void ThreadController::on_sample(double s, int steps) {
   if (ref_ <= 0) ref_ = m;
   double need;
   if (decisions_ == 0) {
-    need = std::max(cfg_.min_interval, cfg_.first_probe_steps * m);
+    need = cfg_.first_probe_steps * m;  // early: a wrong start-up guess costs most in a short run
   } else {
     const bool drifted = m > cfg_.drift * ref_ || m * cfg_.drift < ref_;
     need = std::max(cfg_.min_interval, next_loss_ / ((drifted ? 2.0 : 1.0) * cfg_.overhead));

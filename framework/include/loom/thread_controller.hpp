@@ -14,8 +14,9 @@
 //   than `reject_factor` (1.5) x the baseline (a clearly worse count costs one sample, not three).
 //   The fastest median wins; another count replaces the current one only when it is at least
 //   `switch_gain` (3%) faster.
-// - When: the first probe after `first_probe_steps` (20) steps and `min_interval` (0.25 s) of
-//   step time; later probes when the time since the last decision reaches the expected cost of
+// - When: the first probe after `first_probe_steps` (10) step times (and the baseline's 3
+//   samples): a probe of a count twice as slow then costs about one step in ten, once, and a
+//   wrong start-up guess is corrected early in a short run; later probes when the time since the last decision reaches the expected cost of
 //   the next probe divided by `overhead` (3%), and at least `min_interval`; so probing costs
 //   about 3% of the step time. The expected cost is the larger of what the last probe cost (its
 //   steps' excess over the baseline) and the losers' median excess times their probe steps, and
@@ -35,8 +36,8 @@ struct ThreadControllerConfig {
   double reject_factor = 1.5;     ///< a probe sample this much slower than the baseline ends that probe
   double switch_gain = 0.03;      ///< another count must be this much faster to replace the current one
   double overhead = 0.03;         ///< probing may cost this fraction of the step time
-  double first_probe_steps = 20;  ///< first probe after this many (baseline) step times ...
-  double min_interval = 0.25;     ///< ... and never sooner than this (seconds) after a decision
+  double first_probe_steps = 10;  ///< first probe after this many (baseline) step times
+  double min_interval = 0.25;     ///< later probes never sooner than this (seconds) after a decision
   double drift = 1.5;             ///< the chosen count's time changed by this factor: probe twice as early
 };
 
