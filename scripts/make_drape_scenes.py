@@ -50,7 +50,7 @@ integrator:
 solver:
   type: [cholmod, eigen_ldlt]
 backend: cpu
-threads: 2
+threads: auto
 pins: [{{vertices: [{", ".join(str(p) for p in pins)}]}}]
 gravity: [0, -9.81, 0]
 frames: 300                      # 5 s
