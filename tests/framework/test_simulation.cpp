@@ -1,11 +1,17 @@
 #include <gtest/gtest.h>
 
+#include <omp.h>
+
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <string>
 
 #include "loom/restart.hpp"
 #include "loom/simulation.hpp"
+#include "loom/thread_controller.hpp"
+#include "loom/threads.hpp"
 
 namespace fs = std::filesystem;
 
@@ -227,4 +233,31 @@ TEST_F(Fixture, UnwritableOutputFolderIsBadInput) {
   auto sim = make(kBase);
   sim->output().dir = "/proc/loom_cannot_write_here";
   EXPECT_THROW(sim->run(), loom::InputError);
+}
+
+// threads: auto attaches the step-time controller (loom/thread_controller.hpp) unless a count,
+// OMP_NUM_THREADS (which ctest sets) or a single usable core decides; Simulation::step applies
+// the controller's count.
+TEST_F(Fixture, ThreadsAutoAdaptsOnlyWhenNothingElseDecides) {
+  const char* env = std::getenv("OMP_NUM_THREADS");
+  const std::string saved = env ? env : "";
+  const int saved_threads = omp_get_max_threads();
+  unsetenv("OMP_NUM_THREADS");
+  {
+    auto sim = make(kBase, {"threads=auto"});
+    ASSERT_EQ(sim->thread_controller() != nullptr, loom::usable_cores() > 1);
+    for (int f = 0; f < 4; ++f) sim->advance_frame();
+    if (const auto* tc = sim->thread_controller()) {
+      EXPECT_EQ(omp_get_max_threads(), tc->threads());
+      EXPECT_GT(tc->elapsed(), 0.0);
+    }
+    EXPECT_EQ(make(kBase, {"threads=1"})->thread_controller(), nullptr);
+  }
+  setenv("OMP_NUM_THREADS", "2", 1);
+  EXPECT_EQ(make(kBase, {"threads=auto"})->thread_controller(), nullptr);
+  if (env)
+    setenv("OMP_NUM_THREADS", saved.c_str(), 1);
+  else
+    unsetenv("OMP_NUM_THREADS");
+  omp_set_num_threads(saved_threads);
 }
