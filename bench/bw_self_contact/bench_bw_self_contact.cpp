@@ -52,8 +52,11 @@ void BM_BwStep(benchmark::State& st, bool implicit) {
   const int n = static_cast<int>(st.range(0));
   omp_set_num_threads(static_cast<int>(st.range(1)));
   loom::Simulation::set_notes(false);
-  auto sim = loom::Simulation::from_string(scene(n, implicit), "bench.yaml", ".", {}, loader());
+  // The count in the scene too: `threads: auto` would choose its own (and adapt it during the run).
+  const std::string threads = "threads=" + std::to_string(st.range(1));
+  auto sim = loom::Simulation::from_string(scene(n, implicit), "bench.yaml", ".", {threads}, loader());
   sim->scene().state = draped(n);
+  omp_set_num_threads(static_cast<int>(st.range(1)));  // draped() may have built an auto scene
   for (int k = 0; k < 3; ++k) sim->step();  // warm-up: work arrays, candidate lists, contact pattern
   double impulses = 0, ccd = 0, frozen = 0, iterations = 0, response = 0;
   for (auto _ : st) {

@@ -54,8 +54,11 @@ const loom::State& draped() {
 void BM_Step(benchmark::State& st, const std::string& name, bool collider) {
   omp_set_num_threads(static_cast<int>(st.range(0)));
   loom::Simulation::set_notes(false);
-  auto sim = loom::Simulation::from_string(scene(kIntegrators.at(name), collider), "bench.yaml", ".", {}, loader());
+  // The count in the scene too: `threads: auto` would choose its own (and adapt it during the run).
+  const std::string threads = "threads=" + std::to_string(st.range(0));
+  auto sim = loom::Simulation::from_string(scene(kIntegrators.at(name), collider), "bench.yaml", ".", {threads}, loader());
   sim->scene().state = draped();
+  omp_set_num_threads(static_cast<int>(st.range(0)));  // draped() may have built an auto scene
   for (int k = 0; k < 3; ++k) sim->step();
   int contacts = 0;
   for (auto _ : st) {

@@ -113,8 +113,11 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
   const int n = static_cast<int>(st.range(0));
   omp_set_num_threads(static_cast<int>(st.range(1)));
   loom::Simulation::set_notes(false);
-  auto sim = loom::Simulation::from_string(scene(n, integrator, self), "bench.yaml", ".", {}, loader());
+  // The count in the scene too: `threads: auto` would choose its own (and adapt it during the run).
+  const std::string threads = "threads=" + std::to_string(st.range(1));
+  auto sim = loom::Simulation::from_string(scene(n, integrator, self), "bench.yaml", ".", {threads}, loader());
   sim->scene().state = draped(n);
+  omp_set_num_threads(static_cast<int>(st.range(1)));  // draped() may have built an auto scene
   for (int k = 0; k < 3; ++k) sim->step();  // warm-up: work arrays and candidate lists sized
   double broad = 0, narrow = 0, response = 0, rebuilds = 0, full = 0, refreshed = 0, candidates = 0, impulses = 0;
   for (auto _ : st) {
