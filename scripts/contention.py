@@ -118,7 +118,7 @@ def main():
     try:
         plans = [plan_scene(a, sc, tmp, env) for sc in sorted(glob.glob(a.scenes))]
         # Alone: 1 + ~0.6 + ~0.6 one-thread times; loaded: 1 + ~2.5 + ~1 (measured ratios).
-        est = sum(p["est_one_thread"] for p in plans) * a.repeat * (2.2 + 4.5)
+        est = sum(p["est_one_thread"] * (3 if p["est_one_thread"] < 0.5 else 1) for p in plans) * a.repeat * (2.2 + 4.5)
         for p in plans:
             cap = (f"capped: 1 s would take ~{p['one_thread_seconds_for_sim']:.0f} s on one thread"
                    if p["capped"] else "1 s")
