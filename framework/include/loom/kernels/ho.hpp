@@ -197,10 +197,12 @@ LOOM_HD inline void ho_spring_axis(const T* x, const T* v, I a, I b, T l0, T n[3
   const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
   const T l = sqrt(l2);
   // No comparison (a compare under -ftrapping-math, GCC's default, keeps loops over springs from
-  // vectorising): adding the smallest normal number changes l2 only when l2 is below about 2^53
-  // (double) or 2^24 (float) times it. A degenerate spring (d = 0) gets n = 0 (d times a finite
-  // 1/sqrt), so its impulse s n is 0 whatever delta is.
-  const T inv = T(1) / sqrt(l2 + std::numeric_limits<T>::min());
+  // vectorising): adding the smallest normal number changes l only when l is below about 2^53
+  // (double) or 2^24 (float) times it, so inv is 1/l to the bit for any spring longer than
+  // about 1e-146 m (double) or 4e-16 m (float), with one square root per spring, not two. A
+  // degenerate spring (d = 0) gets n = 0 (d times the finite 1/min), so its impulse s n is 0
+  // whatever delta is.
+  const T inv = T(1) / (l + std::numeric_limits<T>::min());
   n[0] = d0 * inv;
   n[1] = d1 * inv;
   n[2] = d2 * inv;
