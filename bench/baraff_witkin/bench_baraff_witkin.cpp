@@ -9,7 +9,9 @@
 // preconditioner (eigen_pcg block_jacobi, eigen_pcg sa_amg with the rigid-body or translation
 // near-null space and a prolongator (or the whole coarse hierarchy) rebuilt every step or every
 // 10th, eigen_ldlt up to 128^2; *_cold: warm_start off, each solve from dv = 0; *_extrapolated:
-// from 2 dv(n-1) - dv(n-2)),
+// from 2 dv(n-1) - dv(n-2); *_saved: each system also solved from dv = 0, untimed, for the
+// counter iters_saved = cold minus warm (or extrapolated) iterations per solve; *_sweeps2,
+// *_coarse2, *_hierarchy2: cycle variants of NUMERICS.md 3.6),
 // with a timing wrapper around the solver: setup_ms (the first factorize: aggregation and
 // patterns + values), factorize_ms and solve_ms per step, iters per step, step_ms.
 //   bench_baraff_witkin --benchmark_filter=bw_solver --benchmark_counters_tabular=true
@@ -57,6 +59,14 @@ class Timed final : public loom::LinearSolver {
     // instead of the integrator's warm start (dv1): measured here, not in the integrator.
     if (extrapolate && prev0.size() == dv.size())
       for (std::size_t k = 0; k < dv.size(); ++k) dv[k] = 2 * prev1[k] - prev0[k];
+    if (measure_saved) {
+      // The same system solved from dv = 0 (the cold start) first, untimed: the difference of
+      // the iteration counts is what the warm (or extrapolated) start saved in this step.
+      const auto tc = std::chrono::steady_clock::now();
+      cold.assign(dv.size(), 0.0);
+      cold_iterations += s_->solve(A, S, b, z, cold).iterations;
+      untimed += std::chrono::duration<double>(std::chrono::steady_clock::now() - tc).count();
+    }
     const auto t0 = std::chrono::steady_clock::now();
     loom::SolveReport r = s_->solve(A, S, b, z, dv);
     if (extrapolate) {
@@ -68,11 +78,11 @@ class Timed final : public loom::LinearSolver {
     ++solves;
     return r;
   }
-  void reset_counts() { factorize_total = solve_total = 0; iterations = 0; solves = 0; }
-  double setup = 0, factorize_total = 0, solve_total = 0;
-  long iterations = 0, solves = 0, factorizations = 0;
-  bool extrapolate = false;
-  std::vector<double> prev0, prev1;
+  void reset_counts() { factorize_total = solve_total = untimed = 0; iterations = cold_iterations = 0; solves = 0; }
+  double setup = 0, factorize_total = 0, solve_total = 0, untimed = 0;
+  long iterations = 0, solves = 0, factorizations = 0, cold_iterations = 0;
+  bool extrapolate = false, measure_saved = false;
+  std::vector<double> prev0, prev1, cold;
 
  private:
   std::unique_ptr<loom::LinearSolver> s_;
@@ -156,6 +166,7 @@ struct SolverVariant {
   int max_n = 1 << 30;
   bool warm_start = true;  // BaraffWitkinOptions::warm_start (start from the previous dv)
   bool extrapolate = false;  // start from 2 dv(n-1) - dv(n-2) instead
+  bool measure_saved = false;  // also solve from dv = 0 (untimed): counter iters_saved
 };
 
 std::vector<SolverVariant> variants() {
@@ -178,6 +189,21 @@ std::vector<SolverVariant> variants() {
   v.push_back({"eigen_pcg_sa_amg_rigid_extrapolated", false, amg, 256, true, true});
   amg.amg.prolongator_refresh_steps = 10;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10", false, amg});
+  // iters_saved per solve by the warm start and by the extrapolated start (each step also
+  // solved from dv = 0, untimed and subtracted from step_ms).
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_saved", false, amg, 1 << 30, true, false, true});
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_extrapolated_saved", false, amg, 1 << 30, true, true, true});
+  // Cycle variants (issue 15, NUMERICS.md 3.6): a second Gauss-Seidel sweep on every level or
+  // on the coarse levels only, and the coarse levels recomputed every 2nd step.
+  amg.amg.smoothing_sweeps = 2;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_sweeps2", false, amg});
+  amg.amg.smoothing_sweeps = 1;
+  amg.amg.coarse_smoothing_sweeps = 2;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_coarse2", false, amg});
+  amg.amg.coarse_smoothing_sweeps = 0;
+  amg.amg.hierarchy_refresh_steps = 2;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_hierarchy2", false, amg});
+  amg.amg.hierarchy_refresh_steps = 1;
   amg.amg.aggressive_levels = 1;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_aggressive1", false, amg});
   amg.amg.aggressive_levels = 2;
@@ -210,6 +236,7 @@ Timed* install_solver(std::unique_ptr<loom::LinearSolver>& solver, const SolverV
   auto timed = std::make_unique<Timed>(std::move(inner));
   Timed* t = timed.get();
   t->extrapolate = var.extrapolate;
+  t->measure_saved = var.measure_saved;
   solver = std::move(timed);
   return t;
 }
@@ -270,10 +297,13 @@ void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, cons
   long steps = 0;
   for (auto _ : st) {
     const auto t0 = std::chrono::steady_clock::now();
+    const double untimed0 = t->untimed;
     assemble += step();
-    step_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    step_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() - (t->untimed - untimed0);
     ++steps;
   }
+  if (t->measure_saved)
+    st.counters["iters_saved"] = static_cast<double>(t->cold_iterations - t->iterations) / std::max(1L, t->solves);
   st.counters["vertices"] = n * n;
   st.counters["setup_ms"] = 1e3 * t->setup;
   st.counters["factorize_ms"] = 1e3 * t->factorize_total / std::max(1L, t->solves);

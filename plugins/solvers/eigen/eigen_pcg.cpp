@@ -52,6 +52,8 @@ ParamSpec make_pcg_spec(const char* name, const char* summary) {
         "block (i,j) strong if |A_ij| > theta sqrt(|A_ii| |A_jj|)");
     a.integer("smoothing_sweeps", m.smoothing_sweeps).range(ParamRange::closed(1, 10)).help(
         "Gauss-Seidel sweeps before and after the coarse correction");
+    a.integer("coarse_smoothing_sweeps", m.coarse_smoothing_sweeps).range(ParamRange::closed(0, 10)).help(
+        "Gauss-Seidel sweeps on the levels below the finest (0 = smoothing_sweeps)");
     a.integer("coarse_dofs", m.coarse_dofs).range(ParamRange::closed(6, 4000)).units("DOFs").help(
         "levels are added until one has at most this many DOFs (dense Cholesky)");
     a.integer("max_levels", m.max_levels).range(ParamRange::closed(1, 30)).help("most levels of the hierarchy");
@@ -112,6 +114,7 @@ PcgOptions parse_pcg_options(const Params& p, const ParamSpec& spec, const std::
     m.near_null_modes = a.text("near_null_space") == "rigid" ? 6 : 3;
     m.strength_threshold = a.number("strength_threshold");
     m.smoothing_sweeps = a.int32("smoothing_sweeps");
+    m.coarse_smoothing_sweeps = a.int32("coarse_smoothing_sweeps");
     m.coarse_dofs = static_cast<Index>(a.integer("coarse_dofs"));
     m.max_levels = a.int32("max_levels");
     m.prolongator_refresh_steps = a.int32("prolongator_refresh_steps");

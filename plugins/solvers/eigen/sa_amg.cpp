@@ -1001,7 +1001,7 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
                                        const std::vector<double>& dinv, const std::vector<std::uint8_t>& clean,
                                        const std::vector<Index>& cp, const std::vector<Index>& cr,
                                        const std::vector<Index>& pp, const std::vector<Index>& pr, const double* b,
-                                       double* x, double* r, bool par) {
+                                       double* x, double* r, bool par, bool with_residual = true) {
   const int nc = static_cast<int>(cp.size()) - 1;
   const int np = static_cast<int>(pp.size()) - 1;
   const Index n = A.rows;
@@ -1026,6 +1026,7 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
         gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
       }
     }
+    if (with_residual) {
 #pragma omp for schedule(static)
     for (Index i = 0; i < n; ++i) {
       double* ri = r + static_cast<std::size_t>(B) * i;
@@ -1036,6 +1037,7 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
       } else {
         row_residual<B, T>(A, b, x, i, ri);
       }
+    }
     }
   }
 }
@@ -1083,15 +1085,17 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
     constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
     double* r = L.r.data();
     const Index nc = C.A.rows;
-    const bool fused = o_.smoothing_sweeps == 1 && L.clean.size() == static_cast<std::size_t>(n);
-    if (fused) {
+    const int sweeps = l == 0 || o_.coarse_smoothing_sweeps == 0 ? o_.smoothing_sweeps : o_.coarse_smoothing_sweeps;
+    // The first forward sweep starts from x = 0 and reads only the blocks left of the
+    // diagonal of the interior rows; with one sweep the residual is fused into it as well.
+    const bool from_zero = L.clean.size() == static_cast<std::size_t>(n);
+    const bool fused = sweeps == 1 && from_zero;
+    if (from_zero)
       gs_forward_from_zero_and_residual<B, T>(L.A, L.diag, L.dinv, L.clean, L.colour_ptr, L.colour_rows, L.part_ptr,
-                                              L.part_rows, b, x, r, par);
-      lap(t_.apply_fine_smooth);
-    } else {
-      for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
-      lap(t_.apply_fine_smooth);
-    }
+                                              L.part_rows, b, x, r, par, fused);
+    for (int s = from_zero ? 1 : 0; s < sweeps; ++s)
+      gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+    lap(t_.apply_fine_smooth);
 #pragma omp parallel if (par)
     {
       if (!fused) {
@@ -1117,7 +1121,7 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
         gemv_add<B, M>(values<T>(L.P) + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
                        x + static_cast<std::size_t>(B) * i);
     lap(t_.apply_fine_transfer);
-    for (int s = 0; s < o_.smoothing_sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+    for (int s = 0; s < sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
     lap(t_.apply_fine_smooth);
   });
 }

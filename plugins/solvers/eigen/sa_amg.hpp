@@ -33,6 +33,10 @@ struct SaAmgOptions {
   int near_null_modes = 6;        ///< 6: translations + rotations (needs coordinates), 3: translations
   double strength_threshold = 0;  ///< block (i,j) strong if |A_ij|_F > theta sqrt(|A_ii|_F |A_jj|_F)
   int smoothing_sweeps = 1;       ///< Gauss-Seidel sweeps before and after the coarse correction
+  /// Gauss-Seidel sweeps on the levels below the finest; 0 = smoothing_sweeps. The coarse
+  /// levels of the rigid-body hierarchy are 6x6-block and denser than level 0, so a second
+  /// sweep there costs about as much as one on level 0 (NUMERICS.md 3.6).
+  int coarse_smoothing_sweeps = 0;
   Index coarse_dofs = 300;        ///< levels are added until a level has at most this many DOFs
   int max_levels = 10;
   /// Rebuild T, P every k refreshes (the Galerkin product always): measured, rebuilding every
