@@ -11,7 +11,8 @@
 // 10th, eigen_ldlt up to 128^2; *_cold: warm_start off, each solve from dv = 0; *_extrapolated:
 // from 2 dv(n-1) - dv(n-2); *_saved: each system also solved from dv = 0, untimed, for the
 // counter iters_saved = cold minus warm (or extrapolated) iterations per solve; *_sweeps2,
-// *_coarse2, *_hierarchy2: cycle variants of NUMERICS.md 3.6),
+// *_coarse2, *_hierarchy2: cycle variants of NUMERICS.md 3.6; *_fullspmv: the PCG's SpMV over
+// full rows instead of the upper triangle),
 // with a timing wrapper around the solver: setup_ms (the first factorize: aggregation and
 // patterns + values), factorize_ms and solve_ms per step, iters per step, step_ms.
 //   bench_baraff_witkin --benchmark_filter=bw_solver --benchmark_counters_tabular=true
@@ -19,6 +20,7 @@
 #include <benchmark/benchmark.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <functional>
 #include <memory>
@@ -193,6 +195,10 @@ std::vector<SolverVariant> variants() {
   // solved from dv = 0, untimed and subtracted from step_ms).
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_saved", false, amg, 1 << 30, true, false, true});
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_extrapolated_saved", false, amg, 1 << 30, true, true, true});
+  // The PCG's SpMV over the full rows instead of the upper triangle (A/B of upper_spmv.hpp).
+  amg.upper_triangle_spmv = false;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_fullspmv", false, amg});
+  amg.upper_triangle_spmv = true;
   // Cycle variants (issue 15, NUMERICS.md 3.6): a second Gauss-Seidel sweep on every level or
   // on the coarse levels only, and the coarse levels recomputed every 2nd step.
   amg.amg.smoothing_sweeps = 2;
@@ -363,7 +369,61 @@ const bool registered_wool_solvers = [] {
   return true;
 }();
 
+// What the PCG tolerance costs in accuracy (counters, not timings): the wool hang at n^2 run
+// for `steps` steps of h = 0.01 with sa_amg PCG at tolerance 10^-range(1), against the same
+// run at tolerance 1e-10 (the solve error) and against a run at h/2 and tolerance 1e-10 (the
+// time-discretisation error, sampled at the same time). Counters: rms_solve_err and
+// rms_time_err (RMS vertex position difference / cloth width 10 m), their ratio, iterations per
+// step at this tolerance.
+std::vector<double> wool_positions(int n, double tol, double h, int steps, double* iters) {
+  auto sc = wool_scene(n, false);
+  loom::PcgOptions o;
+  o.tolerance = tol;
+  o.preconditioner = loom::PcgPreconditioner::SaAmg;
+  o.max_iterations = 100000;
+  sc->solver = std::make_unique<loom::EigenPcg>(o);
+  loom::BaraffWitkinOptions bo;
+  bo.kang_cho_damping = 0.01;
+  loom::BaraffWitkin bw(bo);
+  bw.prepare(*sc, h);
+  long it = 0;
+  for (int k = 0; k < steps; ++k) {
+    bw.step(*sc, h);
+    it += bw.last_step().linear_iterations;
+  }
+  if (iters) *iters = static_cast<double>(it) / steps;
+  return sc->state.x;
+}
+
+double rms_diff(const std::vector<double>& a, const std::vector<double>& b, double width) {
+  double s = 0;
+  for (std::size_t k = 0; k < a.size(); ++k) s += (a[k] - b[k]) * (a[k] - b[k]);
+  return std::sqrt(s / static_cast<double>(a.size() / 3)) / width;
+}
+
+void BM_ToleranceError(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const double tol = std::pow(10.0, -static_cast<double>(st.range(1)));
+  const int steps = static_cast<int>(st.range(2));
+  double iters = 0, e_solve = 0, e_time = 0;
+  for (auto _ : st) {
+    const std::vector<double> x = wool_positions(n, tol, 0.01, steps, &iters);
+    const std::vector<double> ref = wool_positions(n, 1e-10, 0.01, steps, nullptr);
+    const std::vector<double> half = wool_positions(n, 1e-10, 0.005, 2 * steps, nullptr);
+    e_solve = rms_diff(x, ref, 10.0);
+    e_time = rms_diff(ref, half, 10.0);
+  }
+  st.counters["iters"] = iters;
+  st.counters["rms_solve_err"] = e_solve;
+  st.counters["rms_time_err"] = e_time;
+  st.counters["solve_over_time_err"] = e_solve / e_time;
+}
+
 }  // namespace
+
+// args: grid n, -log10(tolerance), steps (of h = 0.01 from rest)
+BENCHMARK(BM_ToleranceError)->Name("bw_tolerance_error/wool64")->ArgsProduct({{64}, {3, 4, 5, 6}, {100}})->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_ToleranceError)->Name("bw_tolerance_error/wool128")->ArgsProduct({{128}, {3, 4, 5}, {30}})->Iterations(1)->Unit(benchmark::kSecond);
 
 BENCHMARK(BM_MaterialForcesJacobians)->Name("gnatv_forces_jacobians/wool32")->Arg(32)->Unit(benchmark::kMillisecond);
 

@@ -149,6 +149,15 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
   const BsrPattern& P = A.pattern();
   const Index n = n_;
   const PcgPreconditioner pc = options_.preconditioner;
+  use_upper_ = false;
+  if (options_.upper_triangle_spmv) {
+    if (upper_pattern_ != &P || upper_nnz_ != P.nnz_blocks()) {  // a new pattern: allocates, once
+      upper_.analyze(P);
+      upper_pattern_ = &P;
+      upper_nnz_ = P.nnz_blocks();
+    }
+    use_upper_ = upper_.symmetric_values(A, 1e-12, n >= options_.parallel_min_rows);
+  }
   if (pc == PcgPreconditioner::SaAmg) {
     if (!amg_) amg_ = std::make_unique<amg::SaAmg>(options_.amg);
     std::span<const double> x;
@@ -226,6 +235,7 @@ struct CpuPcgOps {
   std::span<const double> b, z;
   const double* pinv;   // 9 per vertex (null with amg)
   amg::SaAmg* amg;      // the V-cycle (null without)
+  const UpperTriangleSpmv* upper;  // the SpMV from the upper triangle (null: full rows)
   bool par;
   Index n;
 
@@ -260,7 +270,10 @@ struct CpuPcgOps {
 #pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
     for (Index i = 0; i < n; ++i) {
       const std::size_t o = 3 * static_cast<std::size_t>(i);
-      block_row_multiply3(rp, col, val, cp, i, qp + o);
+      if (upper)
+        upper->row(A, cp, i, qp + o);
+      else
+        block_row_multiply3(rp, col, val, cp, i, qp + o);
       const int f = S.free_dofs(i);
       if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), qp + o);
       cq += kernels::dot3(cp + o, qp + o);
@@ -329,7 +342,8 @@ SolveReport EigenPcg::solve(const BsrMatrix& A, const Filter& S, std::span<const
   if (b.size() != N || z.size() != N || dv.size() != N)
     throw std::invalid_argument(name_ + ": vector sizes do not match the matrix");
   const bool use_amg = options_.preconditioner == PcgPreconditioner::SaAmg;
-  CpuPcgOps ops{A, S, b, z, pinv_.data(), use_amg ? amg_.get() : nullptr, n_ >= options_.parallel_min_rows, n_};
+  CpuPcgOps ops{A, S, b, z, pinv_.data(), use_amg ? amg_.get() : nullptr, use_upper_ ? &upper_ : nullptr,
+                n_ >= options_.parallel_min_rows, n_};
   pcg::Settings set;
   set.tolerance = options_.tolerance;
   set.max_iterations = options_.max_iterations;

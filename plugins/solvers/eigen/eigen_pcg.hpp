@@ -11,6 +11,7 @@
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "sa_amg.hpp"
+#include "upper_spmv.hpp"
 
 namespace loom {
 
@@ -25,6 +26,10 @@ struct PcgOptions {
   /// oversubscribed). 0 = always parallel.
   Index parallel_min_rows = kParallelMinRows;  // the rule in common.hpp (a scene may override it)
   amg::SaAmgOptions amg;       ///< preconditioner: sa_amg (the `sa_amg:` map)
+  /// The iteration's SpMV reads only the blocks on and above the diagonal (upper_spmv.hpp)
+  /// whenever A is symmetric to rounding (checked at every factorize); false: always the
+  /// full rows (the benchmark's A/B switch).
+  bool upper_triangle_spmv = true;
 };
 
 /// The keys of filtered_pcg (cpu and cuda): tolerance, max_iterations, preconditioner (none |
@@ -59,6 +64,14 @@ class EigenPcg final : public LinearSolver {
   std::vector<double> pinv_;  // 9 per vertex: S_i P_i^{-1} S_i
   std::vector<double> r_, c_, q_, s_;
   std::string name_;
+  UpperTriangleSpmv upper_;
+  const BsrPattern* upper_pattern_ = nullptr;
+  Index upper_nnz_ = -1;
+  bool use_upper_ = false;  // A symmetric to rounding at the last factorize
+
+ public:
+  /// Whether the last factorize() found A symmetric and the SpMV uses its upper triangle.
+  bool upper_triangle_in_use() const { return use_upper_; }
 };
 
 }  // namespace loom
