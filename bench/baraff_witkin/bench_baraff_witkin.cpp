@@ -11,8 +11,8 @@
 // 10th, eigen_ldlt up to 128^2; *_cold: warm_start off, each solve from dv = 0; *_extrapolated:
 // from 2 dv(n-1) - dv(n-2); *_saved: each system also solved from dv = 0, untimed, for the
 // counter iters_saved = cold minus warm (or extrapolated) iterations per solve; *_sweeps2,
-// *_coarse2, *_hierarchy2: cycle variants of NUMERICS.md 3.6; *_fullspmv: the PCG's SpMV over
-// full rows instead of the upper triangle),
+// *_coarse2, *_hierarchy2: cycle variants of NUMERICS.md 3.6; *_upperspmv: the PCG's SpMV from
+// the upper triangle instead of the full rows),
 // with a timing wrapper around the solver: setup_ms (the first factorize: aggregation and
 // patterns + values), factorize_ms and solve_ms per step, iters per step, step_ms.
 //   bench_baraff_witkin --benchmark_filter=bw_solver --benchmark_counters_tabular=true
@@ -195,10 +195,10 @@ std::vector<SolverVariant> variants() {
   // solved from dv = 0, untimed and subtracted from step_ms).
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_saved", false, amg, 1 << 30, true, false, true});
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_extrapolated_saved", false, amg, 1 << 30, true, true, true});
-  // The PCG's SpMV over the full rows instead of the upper triangle (A/B of upper_spmv.hpp).
-  amg.upper_triangle_spmv = false;
-  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_fullspmv", false, amg});
+  // The PCG's SpMV from the upper triangle instead of the full rows (A/B of upper_spmv.hpp).
   amg.upper_triangle_spmv = true;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_upperspmv", false, amg});
+  amg.upper_triangle_spmv = false;
   // Cycle variants (issue 15, NUMERICS.md 3.6): a second Gauss-Seidel sweep on every level or
   // on the coarse levels only, and the coarse levels recomputed every 2nd step.
   amg.amg.smoothing_sweeps = 2;
@@ -333,6 +333,7 @@ void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, cons
     st.counters["coarse_ms"] = per * (e.apply_coarse - t_start.apply_coarse);
     const auto& lv = pcg->amg()->levels();
     st.counters["l0_blocks_per_row"] = static_cast<double>(lv[0].nnz_blocks) / lv[0].rows;
+    st.counters["l0_p_blocks_per_row"] = static_cast<double>(lv[0].p_nnz_blocks) / lv[0].rows;
     if (lv.size() > 1) {
       st.counters["l1_rows"] = static_cast<double>(lv[1].rows);
       st.counters["l1_blocks_per_row"] = static_cast<double>(lv[1].nnz_blocks) / lv[1].rows;

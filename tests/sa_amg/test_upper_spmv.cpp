@@ -71,6 +71,7 @@ TEST(UpperTriangleSpmv, PcgGivesTheSameAnswerAsTheFullRows) {
       o.preconditioner = pc;
       o.tolerance = 1e-10;
       o.amg.coarse_dofs = 24;
+      o.upper_triangle_spmv = true;
       std::vector<double> a, b;
       bool ua = false, ub = true;
       const loom::SolveReport ra = solve(s, o, a, ua);
@@ -103,6 +104,7 @@ TEST(UpperTriangleSpmv, AsymmetricValuesFallBackToFullRows) {
   EXPECT_FALSE(u.symmetric_values(s.A, 1e-12, false));
   loom::PcgOptions o;
   o.tolerance = 1e-10;
+  o.upper_triangle_spmv = true;
   std::vector<double> dv;
   bool used = true;
   const loom::SolveReport r = solve(s, o, dv, used);

@@ -945,7 +945,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   for (const Level& L : L_)
     info_.push_back({L.A.rows, L.A.br, L.A.nnz(),
                      L.colour_ptr.empty() ? 0 : static_cast<int>(L.colour_ptr.size()) - 1,
-                     L.part_ptr.empty() ? 0 : static_cast<int>(L.part_ptr.size()) - 1});
+                     L.part_ptr.empty() ? 0 : static_cast<int>(L.part_ptr.size()) - 1, L.P.nnz()});
   return true;
 }
 

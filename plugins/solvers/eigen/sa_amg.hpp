@@ -93,6 +93,7 @@ struct LevelInfo {
   Index nnz_blocks = 0;
   int colours = 0;   ///< colours of the part-boundary rows
   int parts = 0;     ///< row blocks smoothed lexicographically in parallel
+  Index p_nnz_blocks = 0;  ///< blocks of the prolongator to the next level (0 on the coarsest)
 };
 
 class SaAmg {

@@ -91,16 +91,18 @@ class UpperTriangleSpmv {
 #if defined(__AVX2__) && defined(__FMA__)
     // (A_ji^T x_j)_a = sum_c A_ji[c][a] x_j[c]: the rows of A_ji scaled by x_j's entries.
     const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
-    __m256d acc = _mm256_setzero_pd();
+    // Three independent accumulators (one per row of the block), as in the full-row product,
+    // so consecutive FMAs do not wait on each other.
+    __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd();
     for (Index t = lo_ptr_[i]; t < lo_ptr_[i + 1]; ++t) {
       const double* B = val + 9 * static_cast<std::size_t>(lo_pos_[t]);
       const double* xj = x + 3 * static_cast<std::size_t>(lo_row_[t]);
-      acc = _mm256_fmadd_pd(_mm256_maskload_pd(B, m3), _mm256_broadcast_sd(xj), acc);
-      acc = _mm256_fmadd_pd(_mm256_maskload_pd(B + 3, m3), _mm256_broadcast_sd(xj + 1), acc);
-      acc = _mm256_fmadd_pd(_mm256_maskload_pd(B + 6, m3), _mm256_broadcast_sd(xj + 2), acc);
+      a0 = _mm256_fmadd_pd(_mm256_maskload_pd(B, m3), _mm256_broadcast_sd(xj), a0);
+      a1 = _mm256_fmadd_pd(_mm256_maskload_pd(B + 3, m3), _mm256_broadcast_sd(xj + 1), a1);
+      a2 = _mm256_fmadd_pd(_mm256_maskload_pd(B + 6, m3), _mm256_broadcast_sd(xj + 2), a2);
     }
     alignas(32) double l[4];
-    _mm256_store_pd(l, acc);
+    _mm256_store_pd(l, _mm256_add_pd(_mm256_add_pd(a0, a1), a2));
     yi[0] += l[0];
     yi[1] += l[1];
     yi[2] += l[2];
