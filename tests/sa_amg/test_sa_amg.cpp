@@ -516,7 +516,9 @@ TEST(SaAmg, SweepCountsPerLevelStaySpdMonotoneAndExact) {
   const std::vector<ts::System> sys = systems();
   for (auto [fine, coarse] : {std::pair{2, 0}, std::pair{1, 2}, std::pair{2, 1}, std::pair{3, 2}}) {
     for (Index min_dofs : {Index{1} << 30, Index{0}}) {
-      for (const ts::System& s : sys) {
+      if (min_dofs != 0 && fine + coarse != 2) continue;  // the serial schedule: 2/0 only (test time)
+      for (std::size_t si = 0; si < sys.size(); ++si) {
+        const ts::System& s = sys[si];
         SaAmgOptions o = small_coarse();
         o.smoothing_sweeps = fine;
         o.coarse_smoothing_sweeps = coarse;
@@ -534,8 +536,9 @@ TEST(SaAmg, SweepCountsPerLevelStaySpdMonotoneAndExact) {
                                                           Eigen::EigenvaluesOnly);
         EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "sweeps " << fine << "/" << coarse << " n " << s.n;
         // PCG: the A-norm error of the iterates never grows, and the answer is the dense one
-        // (on the 8-part schedule; the serial one is covered by the dense check above).
-        if (min_dofs != 0) continue;
+        // (on the 8-part schedule, on a random network and on the cloth with contacts; the
+        // others are covered by the dense check above).
+        if (min_dofs != 0 || (si != 0 && si != 3)) continue;
         const Eigen::VectorXd ref = ts::dense_solution(s);
         const Eigen::MatrixXd At = ts::projected_matrix(s);
         double prev = INFINITY;
