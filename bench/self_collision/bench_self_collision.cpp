@@ -30,6 +30,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <ctime>
 #include <fstream>
 #include <algorithm>
 #include <map>
@@ -147,6 +148,82 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
     st.counters["impulses"] = C(impulses, C::kAvgIterations);
   }
 }
+
+// One-thread CPU time of the steps with self-collision, split by what the candidate lists did
+// (full rebuild, refresh only, neither), from the draped state: the thread's own CPU clock
+// (CLOCK_THREAD_CPUTIME_ID), so other processes on a shared machine add little. Run with
+// one thread for a figure that does not depend on the machine's load:
+//   LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_StepSplit
+// Counters: ms per step of each kind of step and their share of the steps, ms of the step
+// without self-collision on the same state (`without_ms`, same process), and the work counts
+// per step (pairs in the lists, near pairs, impulses, broad-phase exact distance tests, CCD
+// cubics solved).
+double thread_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
+
+void BM_StepSplit(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const int steps = static_cast<int>(st.range(1));
+  omp_set_num_threads(1);
+  loom::Simulation::set_notes(false);
+  double without = 0;
+  {
+    auto sim = loom::Simulation::from_string(scene(n, "symplectic_euler", false), "bench.yaml", ".", {}, loader());
+    sim->scene().state = draped(n);
+    for (int k = 0; k < 3; ++k) sim->step();
+    const double t0 = thread_cpu_seconds();
+    for (int k = 0; k < steps; ++k) sim->step();
+    without = (thread_cpu_seconds() - t0) / steps;
+  }
+  double t_full = 0, t_refresh = 0, t_other = 0;
+  double n_full = 0, n_refresh = 0, n_other = 0;
+  double candidates = 0, near = 0, impulses = 0, exact = 0, refreshed = 0, full = 0, ccd = 0;
+  for (auto _ : st) {
+    auto sim = loom::Simulation::from_string(scene(n, "symplectic_euler", true), "bench.yaml", ".", {}, loader());
+    sim->scene().state = draped(n);
+    for (int k = 0; k < 3; ++k) sim->step();
+    for (int k = 0; k < steps; ++k) {
+      const double t0 = thread_cpu_seconds();
+      sim->step();
+      const double dt = thread_cpu_seconds() - t0;
+      const auto& s = sim->scene().self_collision->last_stats();
+      if (s.rebuilds > 0) {
+        t_full += dt, ++n_full;
+      } else if (s.refreshed > 0) {
+        t_refresh += dt, ++n_refresh;
+      } else {
+        t_other += dt, ++n_other;
+      }
+      candidates += static_cast<double>(s.candidates_vt + s.candidates_ee);
+      near += static_cast<double>(s.near);
+      impulses += static_cast<double>(s.proximity + s.ccd_collisions);
+      exact += static_cast<double>(s.exact_tests);
+      ccd += static_cast<double>(s.ccd_tests);
+      refreshed += static_cast<double>(s.refreshed);
+      full += s.rebuilds;
+    }
+  }
+  const double total = static_cast<double>(st.iterations()) * steps;
+  st.counters["without_ms"] = 1e3 * without;
+  st.counters["with_ms"] = 1e3 * (t_full + t_refresh + t_other) / total;
+  st.counters["ratio"] = (t_full + t_refresh + t_other) / total / without;
+  st.counters["full_step_ms"] = n_full > 0 ? 1e3 * t_full / n_full : 0;
+  st.counters["refresh_step_ms"] = n_refresh > 0 ? 1e3 * t_refresh / n_refresh : 0;
+  st.counters["other_step_ms"] = n_other > 0 ? 1e3 * t_other / n_other : 0;
+  st.counters["full_share"] = n_full / total;
+  st.counters["refresh_share"] = n_refresh / total;
+  st.counters["full_rebuilds"] = full / total;
+  st.counters["refreshed"] = refreshed / total;
+  st.counters["candidates"] = candidates / total;
+  st.counters["near"] = near / total;
+  st.counters["impulses"] = impulses / total;
+  st.counters["exact_tests"] = exact / total;
+  st.counters["ccd_tests"] = ccd / total;
+}
+BENCHMARK(BM_StepSplit)->Args({64, 2000})->Args({128, 500})->Iterations(1)->Unit(benchmark::kMillisecond);
 
 // ---------------------------------------------------------------------------------------------
 // Broad phase alone, BVH against a uniform-grid spatial hash, on the draped cloth: find every

@@ -268,6 +268,50 @@ bool ccd_edge_edge(const double x0[4][3], const double x1[4][3], double tol, dou
       t);
 }
 
+// Separating axis between the centres (see the header).
+bool segments_farther_than(const double* p0, const double* p1, const double* q0, const double* q1, double r) {
+  double m[3], de[3], df[3];
+  for (int k = 0; k < 3; ++k) {
+    m[k] = 0.5 * ((q0[k] + q1[k]) - (p0[k] + p1[k]));
+    de[k] = p1[k] - p0[k];
+    df[k] = q1[k] - q0[k];
+  }
+  // On an axis u (any nonzero vector): every point of the second segment is at least
+  // (u.m - |u.de| / 2 - |u.df| / 2) / |u| beyond every point of the first along u, so the
+  // distance is at least that; it is >= r when num = u.m - (|u.de| + |u.df|) / 2 > 0 and
+  // num >= r |u|. Axes: m itself, then the parts of m across each segment (segments side by
+  // side, offset along their length).
+  auto gap_at_least_r = [&](const double* u) {
+    const double num = dot(u, m) - 0.5 * (std::abs(dot(u, de)) + std::abs(dot(u, df)));
+    return num > 0 && num >= r * std::sqrt(dot(u, u));
+  };
+  if (gap_at_least_r(m)) return true;
+  auto across = [&](const double* d) {
+    const double dd = dot(d, d);
+    if (!(dd > 0)) return false;
+    const double md = dot(m, d) / dd;
+    const double u[3] = {m[0] - md * d[0], m[1] - md * d[1], m[2] - md * d[2]};
+    return gap_at_least_r(u);
+  };
+  return across(de) || across(df);
+}
+
+bool point_triangle_farther_than(const double* p, const double* a, const double* b, const double* c, double r) {
+  // On u = p - centroid: the triangle lies within its vertices' largest projection from the
+  // centroid, so the distance is at least (|u|^2 - that) / |u| when that is positive.
+  double ctr[3], u[3];
+  for (int k = 0; k < 3; ++k) {
+    ctr[k] = (a[k] + b[k] + c[k]) * (1.0 / 3.0);
+    u[k] = p[k] - ctr[k];
+  }
+  double pa[3], pb[3], pc[3];
+  sub(a, ctr, pa);
+  sub(b, ctr, pb);
+  sub(c, ctr, pc);
+  const double num = dot(u, u) - std::max({dot(u, pa), dot(u, pb), dot(u, pc)});
+  return num > 0 && num >= r * std::sqrt(dot(u, u));
+}
+
 void TriangleBvh::build(const std::vector<double>& centroids) {
   const Index nt = static_cast<Index>(centroids.size() / 3);
   nodes_.clear();
@@ -307,6 +351,9 @@ void TriangleBvh::build(const std::vector<double>& centroids) {
   b.make(ids.data(), ids.data() + nt);
   parent_.assign(nodes_.size(), -1);
   leaf_.assign(nt, -1);
+  marked_.assign(nodes_.size(), 0);
+  marked_list_.clear();
+  marked_list_.reserve(nodes_.size());
   for (std::size_t i = 0; i < nodes_.size(); ++i) {
     const Node& n = nodes_[i];
     if (n.tri >= 0) {
@@ -316,6 +363,19 @@ void TriangleBvh::build(const std::vector<double>& centroids) {
       parent_[n.right] = static_cast<Index>(i);
     }
   }
+}
+
+void TriangleBvh::mark(Index tri) {
+  if (marked_.size() != nodes_.size()) marked_.assign(nodes_.size(), 0);
+  for (Index i = leaf_[tri]; i >= 0 && !marked_[i]; i = parent_[i]) {
+    marked_[i] = 1;
+    marked_list_.push_back(i);
+  }
+}
+
+void TriangleBvh::clear_marks() {
+  for (const Index i : marked_list_) marked_[i] = 0;
+  marked_list_.clear();
 }
 
 void TriangleBvh::update_leaf(Index tri, const double* lo, const double* hi) {
@@ -676,26 +736,13 @@ void SelfCollision::edge_box(Index e, double gap) {
   }
 }
 
-void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
-  const bool par = nv_ >= kParallelMinVertices;
-  const Index ne = static_cast<Index>(edges_.size());
-  if (x0_in != ref_x_.data()) std::memcpy(ref_x_.data(), x0_in, ref_x_.size() * sizeof(double));
-  const double* x0 = ref_x_.data();
-#pragma omp parallel if (par)
-  {
-#pragma omp for schedule(static) nowait
-    for (Index i = 0; i < nv_; ++i) vertex_box(i, gap);
-#pragma omp for schedule(static) nowait
-    for (Index t = 0; t < nt_; ++t) triangle_box(t, gap);
-#pragma omp for schedule(static)
-    for (Index e = 0; e < ne; ++e) edge_box(e, gap);
-  }
-  bvh_.refit(tlo_.data(), thi_.data(), 0.0);
-
+void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
   // Traversal: a fixed number of independent node pairs (tasks) shared out among the threads,
   // each task filling its own lists (kept between calls: no allocation once they have grown),
   // then joined in task order. The tasks do not depend on the thread count, so neither does
   // the order in which the response visits the pairs, and no sort is needed.
+  const bool par = nv_ >= kParallelMinVertices;
+  const double* x0 = ref_x_.data();
   const int nth = par ? std::max(1, omp_get_max_threads()) : 1;
   bvh_.split(par ? kTraversalTasks : 1, tasks_);
   const std::size_t ntasks = tasks_.size();
@@ -708,10 +755,11 @@ void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
     return alo[0] <= bhi[0] && blo[0] <= ahi[0] && alo[1] <= bhi[1] && blo[1] <= ahi[1] && alo[2] <= bhi[2] &&
            blo[2] <= ahi[2];
   };
+  Index exact_count = 0;
 #pragma omp parallel num_threads(nth) if (nth > 1)
   {
     const int me = omp_get_thread_num();
-#pragma omp for schedule(dynamic, 1)
+#pragma omp for schedule(dynamic, 1) reduction(+ : exact_count)
     for (std::size_t q = 0; q < ntasks; ++q) {
       std::vector<Pair>& vt = task_vt_[q];
       std::vector<Pair>& ee = task_ee_[q];
@@ -723,45 +771,75 @@ void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
         if (!overlap(&vlo_[3 * v], &vhi_[3 * v], &tlo_[3 * t], &thi_[3 * t])) return;
         double dist = 0;
         if (exact) {
+          const double r = gap + reach_[v] + treach_[t];
+          if (selfcol::point_triangle_farther_than(&x0[3 * v], &x0[3 * tv[0]], &x0[3 * tv[1]], &x0[3 * tv[2]], r)) return;
+          ++exact_count;
           double w[3];
           dist = selfcol::point_triangle_distance(&x0[3 * v], &x0[3 * tv[0]], &x0[3 * tv[1]], &x0[3 * tv[2]], w);
-          if (!(dist < gap + reach_[v] + treach_[t])) return;
+          if (!(dist < r)) return;
         }
         vt.push_back({v, t, dist});
       };
+      // With marked_only (a refresh), a leaf pair has at least one refreshed triangle, and
+      // only the element pairs that the refresh dropped are looked at: those with a refreshed
+      // vertex, triangle or edge (flags set by refresh()).
       auto emit = [&](Index A, Index B) {
+        const bool all_a = !marked_only || tflag_[A], all_b = !marked_only || tflag_[B];
         for (Index v : own_verts_[A])
-          if (v >= 0) vert_tri(v, B);
+          if (v >= 0 && (all_b || vflag_[v])) vert_tri(v, B);
         for (Index v : own_verts_[B])
-          if (v >= 0) vert_tri(v, A);
+          if (v >= 0 && (all_a || vflag_[v])) vert_tri(v, A);
         for (Index e : own_edges_[A]) {
           // B's box holds its edges' boxes: an edge of A clear of it meets none of them.
           if (e < 0 || !overlap(&elo_[3 * e], &ehi_[3 * e], &tlo_[3 * B], &thi_[3 * B])) continue;
+          const bool all_f = !marked_only || eflag_[e];
           const auto& E = edges_[e];
           for (Index f : own_edges_[B]) {
-            if (f < 0) continue;
+            if (f < 0 || !(all_f || eflag_[f])) continue;
             const auto& F = edges_[f];
             if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
             if (!overlap(&elo_[3 * e], &ehi_[3 * e], &elo_[3 * f], &ehi_[3 * f])) continue;
             double dist = 0;
             if (exact) {
+              const double r = gap + ereach_[e] + ereach_[f];
+              if (selfcol::segments_farther_than(&x0[3 * E[0]], &x0[3 * E[1]], &x0[3 * F[0]], &x0[3 * F[1]], r)) continue;
+              ++exact_count;
               double ss, tt;
               dist = selfcol::segment_segment_distance(&x0[3 * E[0]], &x0[3 * E[1]], &x0[3 * F[0]], &x0[3 * F[1]], ss, tt);
-              if (!(dist < gap + ereach_[e] + ereach_[f])) continue;
+              if (!(dist < r)) continue;
             }
             ee.push_back({std::min(e, f), std::max(e, f), dist});
           }
         }
       };
-      bvh_.pairs_from(tasks_[q], emit, tstack_[me]);
+      bvh_.pairs_from(tasks_[q], emit, tstack_[me], marked_only);
     }
   }
-  vt_.clear();
-  ee_.clear();
   for (std::size_t q = 0; q < ntasks; ++q) {
     vt_.insert(vt_.end(), task_vt_[q].begin(), task_vt_[q].end());
     ee_.insert(ee_.end(), task_ee_[q].begin(), task_ee_[q].end());
   }
+  stats_.exact_tests += exact_count;
+}
+
+void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
+  const bool par = nv_ >= kParallelMinVertices;
+  const Index ne = static_cast<Index>(edges_.size());
+  if (x0_in != ref_x_.data()) std::memcpy(ref_x_.data(), x0_in, ref_x_.size() * sizeof(double));
+#pragma omp parallel if (par)
+  {
+#pragma omp for schedule(static) nowait
+    for (Index i = 0; i < nv_; ++i) vertex_box(i, gap);
+#pragma omp for schedule(static) nowait
+    for (Index t = 0; t < nt_; ++t) triangle_box(t, gap);
+#pragma omp for schedule(static)
+    for (Index e = 0; e < ne; ++e) edge_box(e, gap);
+  }
+  bvh_.refit(tlo_.data(), thi_.data(), 0.0);
+
+  vt_.clear();
+  ee_.clear();
+  traverse(gap, exact, false);
   std::fill(moved_.begin(), moved_.end(), 0.0);
   have_candidates_ = true;
   stats_.rebuilt = true;
@@ -800,7 +878,6 @@ void SelfCollision::refresh(const double* x0) {
   // vertices), so it cannot come within th. Pairs of the other vertices keep their reference
   // positions, reaches and distances: only the pairs involving a refreshed vertex change.
   const double th = opt_.thickness;
-  const double* X = ref_x_.data();
   refresh_t_.clear();
   refresh_e_.clear();
   for (const Index v : refresh_v_) {
@@ -824,56 +901,14 @@ void SelfCollision::refresh(const double* x0) {
             vt_.end());
   ee_.erase(std::remove_if(ee_.begin(), ee_.end(), [&](const Pair& p) { return eflag_[p.a] || eflag_[p.b]; }),
             ee_.end());
-  // ... and find them again. Vertex-triangle: a refreshed vertex against every triangle, and
-  // every other vertex against the refreshed triangles; edge-edge: each refreshed edge against
-  // every edge, a pair of two refreshed edges from its smaller one.
-  auto overlap = [](const double* alo, const double* ahi, const double* blo, const double* bhi) {
-    return alo[0] <= bhi[0] && blo[0] <= ahi[0] && alo[1] <= bhi[1] && blo[1] <= ahi[1] && alo[2] <= bhi[2] &&
-           blo[2] <= ahi[2];
-  };
-  auto try_vt = [&](Index v, Index t) {
-    const Index* tv = &tris_[3 * t];
-    if (v == tv[0] || v == tv[1] || v == tv[2]) return;
-    if (!overlap(&vlo_[3 * v], &vhi_[3 * v], &tlo_[3 * t], &thi_[3 * t])) return;
-    double w[3];
-    const double dist = selfcol::point_triangle_distance(&X[3 * v], &X[3 * tv[0]], &X[3 * tv[1]], &X[3 * tv[2]], w);
-    if (dist < th + reach_[v] + treach_[t]) vt_.push_back({v, t, dist});
-  };
-  // One box query per refreshed triangle T finds every leaf B near it; a refreshed vertex or
-  // edge is handled with the first refreshed triangle that contains it (flag 2), whose box
-  // contains its own.
-  for (const Index T : refresh_t_) {
-    Index mine_v[3], mine_e[3];
-    int nmv = 0, nme = 0;
-    for (int k = 0; k < 3; ++k) {
-      const Index v = tris_[3 * T + k];
-      if (vflag_[v] == 1) vflag_[v] = 2, mine_v[nmv++] = v;
-      const Index e = tri_edges_[3 * T + k];
-      if (eflag_[e] == 1) eflag_[e] = 2, mine_e[nme++] = e;
-    }
-    bvh_.query(&tlo_[3 * T], &thi_[3 * T],
-               [&](Index B) {
-                 for (const Index q : own_verts_[B])
-                   if (q >= 0 && !vflag_[q]) try_vt(q, T);
-                 for (int i = 0; i < nmv; ++i) try_vt(mine_v[i], B);
-                 for (int i = 0; i < nme; ++i) {
-                   const Index e = mine_e[i];
-                   if (!overlap(&elo_[3 * e], &ehi_[3 * e], &tlo_[3 * B], &thi_[3 * B])) continue;
-                   const auto& E = edges_[e];
-                   for (const Index f : own_edges_[B]) {
-                     if (f < 0 || (eflag_[f] && f <= e)) continue;
-                     const auto& F = edges_[f];
-                     if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
-                     if (!overlap(&elo_[3 * e], &ehi_[3 * e], &elo_[3 * f], &ehi_[3 * f])) continue;
-                     double ss, tt;
-                     const double dist = selfcol::segment_segment_distance(&X[3 * E[0]], &X[3 * E[1]], &X[3 * F[0]],
-                                                                           &X[3 * F[1]], ss, tt);
-                     if (dist < th + ereach_[e] + ereach_[f]) ee_.push_back({std::min(e, f), std::max(e, f), dist});
-                   }
-                 }
-               },
-               qstack_);
-  }
+  // ... and find them again: the traversal of a rebuild, restricted to the node pairs above a
+  // refreshed triangle, and in them to the element pairs just dropped. A pair (vertex v,
+  // triangle t) is met at the leaf pair (owner of v, t) and an edge pair at the pair of the
+  // edges' owners, exactly once each as in a rebuild; a refreshed vertex or edge lies in a
+  // refreshed owner, so every dropped pair has a marked leaf.
+  for (const Index t : refresh_t_) bvh_.mark(t);
+  traverse(th, true, true);
+  bvh_.clear_marks();
   for (const Index v : refresh_v_) vflag_[v] = 0;
   for (const Index t : refresh_t_) tflag_[t] = 0;
   for (const Index e : refresh_e_) eflag_[e] = 0;
@@ -951,9 +986,10 @@ Index SelfCollision::freeze_pass(State& s) {
         const double motion = vt ? step_len_[idx[0]] + std::max({step_len_[idx[1]], step_len_[idx[2]], step_len_[idx[3]]})
                                  : std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
         if (motion == 0) continue;
-        const double mv = vt ? moved_[idx[0]] + std::max({moved_[idx[1]], moved_[idx[2]], moved_[idx[3]]})
-                             : std::max(moved_[idx[0]], moved_[idx[1]]) + std::max(moved_[idx[2]], moved_[idx[3]]);
-        if (p.dist_ref - mv - motion > tol) continue;
+        double m[4];
+        for (int i = 0; i < 4; ++i) m[i] = moved_[idx[i]] + step_len_[idx[i]];
+        const double mv = vt ? m[0] + std::max({m[1], m[2], m[3]}) : std::max(m[0], m[1]) + std::max(m[2], m[3]);
+        if (p.dist_ref - mv > tol) continue;
         double t;
         if (!pair_ccd(vt, idx, tol, t)) continue;
         ++found;
@@ -1013,12 +1049,18 @@ void SelfCollision::resolve(State& s, double h) {
   // Narrow phase (proximity at the start positions): a pair can only come within the
   // thickness if its distance at the broad phase, less the motion since and during the step,
   // is below it (distance is 1-Lipschitz in each vertex position).
+  // A vertex stays within moved_ + step_len_ of its reference position over the step, so each
+  // element stays within the largest of these among its vertices (a tighter bound than the
+  // largest motion since the reference plus the largest step).
   const auto bound = [&](bool vt, const Index idx[4]) {
-    if (vt)
-      return moved_[idx[0]] + std::max({moved_[idx[1]], moved_[idx[2]], moved_[idx[3]]}) + step_len_[idx[0]] +
-             std::max({step_len_[idx[1]], step_len_[idx[2]], step_len_[idx[3]]});
-    return std::max(moved_[idx[0]], moved_[idx[1]]) + std::max(moved_[idx[2]], moved_[idx[3]]) +
-           std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
+    double m[4];
+    for (int i = 0; i < 4; ++i) m[i] = moved_[idx[i]] + step_len_[idx[i]];
+    if (vt) return m[0] + std::max({m[1], m[2], m[3]});
+    return std::max(m[0], m[1]) + std::max(m[2], m[3]);
+  };
+  const auto step_bound = [&](bool vt, const Index idx[4]) {
+    if (vt) return step_len_[idx[0]] + std::max({step_len_[idx[1]], step_len_[idx[2]], step_len_[idx[3]]});
+    return std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
   };
   const Index nvt = static_cast<Index>(vt_.size()), npairs = nvt + static_cast<Index>(ee_.size());
   near_flag_.resize(npairs);
@@ -1033,17 +1075,21 @@ void SelfCollision::resolve(State& s, double h) {
   near_.clear();
   for (Index q = 0; q < npairs; ++q)
     if (near_flag_[q]) near_.push_back(q);
+  stats_.near = static_cast<Index>(near_.size());
+  near_dist_.assign(near_.size(), -1.0);
   max_growth_ = 0;
   responded_ = false;
   Index proximity = 0;
-  for (const Index q : near_) {
+  for (std::size_t r = 0; r < near_.size(); ++r) {
     if (!opt_.repulsion) break;
+    const Index q = near_[r];
     const bool vt = q < nvt;
     const Pair& p = vt ? vt_[q] : ee_[q - nvt];
     Index idx[4];
     pair_vertices(vt, p, idx);
     double w[4], nrm[3];
     const double dist = pair_distance(vt, idx, x0_.data(), w, nrm);
+    near_dist_[r] = dist;
     double dn = 0;
     for (int i = 0; i < 4; ++i)
       for (int k = 0; k < 3; ++k) dn += w[i] * d_[3 * idx[i] + k] * nrm[k];
@@ -1081,6 +1127,10 @@ void SelfCollision::resolve(State& s, double h) {
         Index idx[4];
         pair_vertices(vt, p, idx);
         if (p.dist_ref - bound(vt, idx) > tol) continue;
+        // Tighter for a near pair: its distance at the step's start less the motion in the step
+        // (d as the responses have changed it so far).
+        if (use_near && near_dist_[r] >= 0 && near_dist_[r] - step_bound(vt, idx) > tol) continue;
+        ++stats_.ccd_tests;
         double t;
         if (!pair_ccd(vt, idx, tol, t)) continue;
         ++hits;

@@ -413,3 +413,146 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
     }
   }
 }
+
+TEST(SelfCollisionDistance, SeparatingAxisRejectionsNeverExceedTheDistance) {
+  // segments_farther_than / point_triangle_farther_than may only answer "at least r" when the
+  // distance (independent brute-force minimisation) is at least r. Random elements at every
+  // scale of separation, with r just below, at and above the distance; plus touching,
+  // parallel and degenerate elements.
+  std::mt19937 rng(41);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  int rejected = 0, cases = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    const double spread = trial % 3 == 0 ? 0.1 : (trial % 3 == 1 ? 1.0 : 3.0);
+    double p[3], a[3], b[3], c[3];
+    for (int k = 0; k < 3; ++k) {
+      p[k] = spread * U(rng);
+      a[k] = U(rng);
+      b[k] = U(rng);
+      c[k] = U(rng);
+    }
+    if (trial % 50 == 0)
+      for (int k = 0; k < 3; ++k) c[k] = 0.5 * (a[k] + b[k]);  // degenerate triangle, and segment through a midpoint
+    if (trial % 50 == 1)
+      for (int k = 0; k < 3; ++k) c[k] = p[k] + (b[k] - a[k]);  // segments (a, b) and (p, c) parallel
+    if (trial % 50 == 2)
+      for (int k = 0; k < 3; ++k) p[k] = (a[k] + b[k] + c[k]) / 3.0;  // vertex at the centroid
+    if (trial % 50 == 3)
+      for (int k = 0; k < 3; ++k) p[k] = a[k] + b[k] - c[k];  // segments (a, b), (p, c) crossing at their midpoints
+    if (trial % 50 == 4)
+      for (int k = 0; k < 3; ++k) p[k] = b[k] + (b[k] - a[k]), c[k] = b[k] + 2 * (b[k] - a[k]);  // collinear, in a row
+    if (trial % 50 == 5)
+      for (int k = 0; k < 3; ++k) p[k] = a[k] + 0.25 * (b[k] - a[k]), c[k] = a[k] + 0.75 * (b[k] - a[k]);  // overlapping
+    const double dvt = brute_point_triangle(p, a, b, c);
+    const double dee = brute_segment_segment(a, b, p, c);
+    for (const double f : {0.0, 0.5, 0.9, 0.999, 1.001, 1.1, 2.0}) {
+      // r = f d, and for elements that touch (d = 0) a small positive r: never "farther".
+      if (dvt == 0 && point_triangle_farther_than(p, a, b, c, 1e-3 * (1 + f))) ADD_FAILURE() << "touching, trial " << trial;
+      if (dee == 0 && segments_farther_than(a, b, p, c, 1e-3 * (1 + f))) ADD_FAILURE() << "touching, trial " << trial;
+      ++cases;
+      if (point_triangle_farther_than(p, a, b, c, f * dvt)) {
+        ++rejected;
+        EXPECT_GE(dvt, f * dvt - 1e-9) << "vertex-triangle rejected above its distance, trial " << trial;
+      }
+      if (segments_farther_than(a, b, p, c, f * dee)) {
+        ++rejected;
+        EXPECT_GE(dee, f * dee - 1e-9) << "edge-edge rejected above its distance, trial " << trial;
+      }
+    }
+  }
+  EXPECT_GT(rejected, cases / 10);  // the bound does reject (it is not trivially false)
+
+  // On a flat sheet, neighbours beside each other (the pairs a rebuild mostly visits) are
+  // rejected at half an edge: their distances are at least 0.707 edge, and the axis between
+  // the centres lies in the sheet, across the gap between them.
+  const Mesh mesh = make_grid(5, 5, 1.0, 1.0, GridPlane::XZ);  // edge 0.25
+  const double r = 0.5 * 0.25;
+  const auto edges = mesh.edges();
+  const double* x = mesh.positions.data();
+  int pairs = 0, kept = 0;
+  for (Index v = 0; v < mesh.num_vertices(); ++v)
+    for (Index t = 0; t < mesh.num_triangles(); ++t) {
+      const Index* tv = &mesh.triangles[3 * t];
+      if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
+      ++pairs;
+      ASSERT_GE(brute_point_triangle(&x[3 * v], &x[3 * tv[0]], &x[3 * tv[1]], &x[3 * tv[2]]), 0.7 * 0.25);
+      kept += point_triangle_farther_than(&x[3 * v], &x[3 * tv[0]], &x[3 * tv[1]], &x[3 * tv[2]], r) ? 0 : 1;
+    }
+  for (std::size_t e = 0; e < edges.size(); ++e)
+    for (std::size_t f = e + 1; f < edges.size(); ++f) {
+      const auto &E = edges[e], &F = edges[f];
+      if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+      ++pairs;
+      kept += segments_farther_than(&x[3 * E[0]], &x[3 * E[1]], &x[3 * F[0]], &x[3 * F[1]], r) ? 0 : 1;
+    }
+  EXPECT_EQ(kept, 0) << "of " << pairs << " non-adjacent pairs of the flat sheet";
+}
+
+TEST(SelfCollisionBvh, ListsHoldExactlyThePairsWithinThicknessPlusReachesAfterRefreshesAndRebuilds) {
+  // The same shaken sheet as above. After every step the lists must equal, pair for pair and
+  // without duplicates, the non-adjacent pairs whose distance at the lists' reference positions
+  // is below thickness + the largest reach of each element's vertices (brute force over all
+  // pairs): refreshes (a traversal restricted to the refreshed triangles, which must find
+  // exactly the pairs it dropped) and rebuilds alike.
+  const Mesh mesh = make_grid(10, 10, 0.3, 0.3, GridPlane::XZ);
+  const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
+  const auto edges = mesh.edges();
+  const double th = 0.006, h = 0.01;
+  for (const double fraction : {1.0, 0.0}) {
+    SelfCollision::Options o;
+    o.thickness = th;
+    o.friction = 0.2;
+    o.refresh_fraction = fraction;
+    SelfCollision sc(o, mesh);
+    State s;
+    s.resize(nv);
+    for (Index i = 0; i < nv; ++i) s.mass[i] = 1e-3;
+    s.update_inverse_masses();
+    s.x = mesh.positions;
+    std::mt19937 rng(29);
+    std::normal_distribution<double> N(0.0, 1.0);
+    Index refreshed = 0;
+    std::size_t checked = 0;
+    std::vector<std::array<Index, 2>> vt, ee, bvt, bee;
+    std::vector<double> X, reach;
+    for (int step = 0; step < 120; ++step) {
+      sc.begin_step(s);
+      for (Index i = 0; i < nv; ++i)
+        for (int k = 0; k < 3; ++k) {
+          const double dx = (i % 13 == 0 ? 0.006 : 0.0015) * N(rng);
+          s.x[3 * i + k] += dx;
+          s.v[3 * i + k] = dx / h;
+        }
+      sc.resolve(s, h);
+      if (!sc.last_stats().rebuilt) continue;
+      refreshed += sc.last_stats().refreshed;
+      sc.candidate_lists(vt, ee);
+      sc.list_reference(X, reach);
+      bvt.clear();
+      bee.clear();
+      for (Index v = 0; v < nv; ++v)
+        for (Index t = 0; t < nt; ++t) {
+          const Index* tv = &mesh.triangles[3 * t];
+          if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
+          const double r = th + reach[v] + std::max({reach[tv[0]], reach[tv[1]], reach[tv[2]]});
+          double w[3];
+          if (point_triangle_distance(&X[3 * v], &X[3 * tv[0]], &X[3 * tv[1]], &X[3 * tv[2]], w) < r) bvt.push_back({v, t});
+        }
+      for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
+        for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
+          const auto &E = edges[e], &F = edges[f];
+          if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+          const double r = th + std::max(reach[E[0]], reach[E[1]]) + std::max(reach[F[0]], reach[F[1]]);
+          double a, b;
+          if (segment_segment_distance(&X[3 * E[0]], &X[3 * E[1]], &X[3 * F[0]], &X[3 * F[1]], a, b) < r) bee.push_back({e, f});
+        }
+      ASSERT_EQ(vt, bvt) << "step " << step << ", fraction " << fraction;
+      ASSERT_EQ(ee, bee) << "step " << step << ", fraction " << fraction;
+      checked += bvt.size() + bee.size();
+    }
+    EXPECT_GT(checked, 1000u) << fraction;
+    if (fraction == 1.0) {
+      EXPECT_GT(refreshed, 100) << "the refreshes were exercised";
+    }
+  }
+}

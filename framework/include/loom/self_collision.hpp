@@ -32,6 +32,16 @@ double point_triangle_distance(const double* p, const double* a, const double* b
 double segment_segment_distance(const double* p0, const double* p1, const double* q0, const double* q1, double& s,
                                 double& t);
 
+/// Cheap tests that the distance of two segments (p0, p1), (q0, q1), or of p to triangle
+/// (a, b, c), is at least r, for rejecting a pair before its exact distance: a separating axis
+/// along the direction between the elements' centres (on a unit vector u, a segment lies within
+/// half its projected length of its midpoint, a triangle within its vertices' largest
+/// projection from its centroid). True only when the distance is >= r; false says nothing.
+/// Sheet neighbours (elements beside each other, the most common pairs a rebuild visits) get a
+/// bound close to their distance; stacked layers do not (their exact distance decides).
+bool segments_farther_than(const double* p0, const double* p1, const double* q0, const double* q1, double r);
+bool point_triangle_farther_than(const double* p, const double* a, const double* b, const double* c, double r);
+
 /// Continuous collision detection for linear motion x(t) = x0 + t (x1 - x0), t in [0, 1].
 /// Vertex-triangle: points are {p, a, b, c}; edge-edge: {p0, p1, q0, q1}. A collision is the
 /// earliest t in (0, 1] at which the four points are coplanar (a root of the cubic
@@ -61,9 +71,15 @@ class TriangleBvh {
   template <class F>
   void self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack) const;
   /// The part of self_pairs below one task: {a, a} the pairs inside node a, {a, b} the pairs
-  /// between a and b.
+  /// between a and b. With marked_only, only the pairs with at least one marked leaf (mark()):
+  /// node pairs with no marked node below either side are skipped whole.
   template <class F>
-  void pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack) const;
+  void pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack,
+                  bool marked_only = false) const;
+  /// Mark triangle tri's leaf and its ancestors (for pairs_from's marked_only); clear_marks()
+  /// unmarks every node marked since the last clear. No allocation once grown.
+  void mark(Index tri);
+  void clear_marks();
   /// Independent tasks for a parallel traversal (at least `target` where the tree has them):
   /// self_pairs emits exactly the union of pairs_from over the tasks, each pair once.
   /// `tasks` is overwritten; it allocates only when it must grow.
@@ -79,6 +95,8 @@ class TriangleBvh {
   std::vector<Node> nodes_;
   std::vector<Index> parent_;  ///< per node (-1 for the root)
   std::vector<Index> leaf_;    ///< per triangle: its leaf node
+  std::vector<std::uint8_t> marked_;  ///< per node: a marked leaf lies below (mark())
+  std::vector<Index> marked_list_;    ///< the marked nodes, for clear_marks()
 };
 
 template <class F>
@@ -107,7 +125,8 @@ void TriangleBvh::self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack)
 }
 
 template <class F>
-void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack) const {
+void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack,
+                             bool marked_only) const {
   auto overlap = [](const Node& a, const Node& b) {
     return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
            a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
@@ -118,6 +137,7 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
   while (!stack.empty()) {
     const auto [a, b] = stack.back();
     stack.pop_back();
+    if (marked_only && !marked_[a] && !marked_[b]) continue;
     const Node& A = nodes_[a];
     if (a == b) {
       if (A.tri >= 0) continue;
@@ -152,6 +172,9 @@ struct SelfCollisionStats {
   Index ccd_collisions = 0;      ///< CCD impulses, all iterations
   int ccd_iterations = 0;        ///< CCD passes over the candidates
   Index frozen = 0;              ///< vertices the fail-safe returned to their start position
+  Index near = 0;                ///< pairs of the lists that could come within the thickness this step
+  Index exact_tests = 0;         ///< exact distances computed by rebuilds and refreshes (work counter)
+  Index ccd_tests = 0;           ///< pairs whose CCD cubic was solved, all passes (work counter)
   double broad_seconds = 0, narrow_seconds = 0, response_seconds = 0;
 };
 
@@ -211,6 +234,13 @@ class SelfCollision {
   /// The candidate lists of the last resolve() (sorted), for tests: they hold every pair that
   /// could come within the thickness during that step.
   void candidate_lists(std::vector<std::array<Index, 2>>& vt, std::vector<std::array<Index, 2>>& ee) const;
+  /// The lists' reference positions (3 per vertex) and reaches, for tests: the lists hold
+  /// exactly the non-adjacent pairs whose distance at the reference positions is below
+  /// thickness + the largest reach among each element's vertices.
+  void list_reference(std::vector<double>& x, std::vector<double>& reach) const {
+    x = ref_x_;
+    reach = reach_;
+  }
 
   /// A pair of non-adjacent elements and its distance: vertex-triangle (a = vertex, b =
   /// triangle) or edge-edge (a < b, indices into Mesh::edges()).
@@ -232,6 +262,10 @@ class SelfCollision {
   // gap / 2); triangles, edges: their vertices' box grown by the largest reach_ among them +
   // gap / 2) overlap; with `exact`, only those closer than gap + the two elements' reaches.
   void broad_phase(const double* x0, double gap, bool exact);
+  // The traversal of broad_phase (boxes and hierarchy ready, at ref_x_): appends the pairs to
+  // vt_, ee_. With marked_only, only the pairs that refresh() dropped (a refreshed vertex,
+  // triangle or edge), through the node pairs above the marked (refreshed) triangles.
+  void traverse(double gap, bool exact, bool marked_only);
   // The step's lists: reach_ from this step's displacements (step_len_), then broad_phase.
   void rebuild(const double* x0);
   // Keep the lists complete for this step: nothing when every vertex is within its reach;
@@ -275,6 +309,7 @@ class SelfCollision {
   std::vector<Pair> vt_, ee_;
   std::vector<std::uint8_t> near_flag_;          ///< per pair (VT then EE): could be within the thickness this step
   std::vector<Index> near_;                      ///< those pairs (index into VT then EE)
+  std::vector<double> near_dist_;                ///< per near pair: its distance at the step's start (-1: not computed)
   std::vector<double> len0_;                     ///< per vertex |d| before any response this step
   double max_growth_ = 0;                        ///< largest |d| - len0 after responses
   bool responded_ = false;                       ///< d or v changed this step
