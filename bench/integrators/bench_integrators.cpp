@@ -222,6 +222,28 @@ void BM_HoStep_double_direct(benchmark::State& st) {
   set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), false));
 }
 
+// A/B of the windowed grouped sweep (ho_window.hpp): the HO step on raw arrays (the plugin's
+// step without pins and clock), window on (the default) and off (the plain grouped sweep, what
+// the step ran before). Same springs, same cloth, interleave them with --benchmark_repetitions.
+void ho_window_bench(benchmark::State& st, bool window) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  HoSprings<double> s = c.ho.springs();
+  if (!window) s.win_cap = 0;
+  st.counters["window"] = static_cast<double>(s.win_cap);
+  std::vector<double> x = c.x0, v(x.size(), 0.0), dv(x.size(), 0.0);
+  const std::array<double, 3> g{0.0, -9.81, 0.0};
+  for (auto _ : st)
+    ho_step_arrays<double, HoVariant::Velocity>(c.ho.layout(), s, x.data(), v.data(), dv.data(), nullptr,
+                                                c.scene.state.inv_mass.data(), c.h, g);
+  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), s.table));
+}
+void BM_HoStep_double_window(benchmark::State& st) { ho_window_bench(st, true); }
+void BM_HoStep_double_nowindow(benchmark::State& st) { ho_window_bench(st, false); }
+
 void BM_HoStep_float(benchmark::State& st) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
@@ -433,6 +455,8 @@ BENCHMARK(BM_Triad)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime(
 BENCHMARK(BM_HoStep_double)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_sqrt5)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_direct)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_window)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_nowindow)->Apply(rows_args);
 BENCHMARK(BM_HoStep_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_float)->Apply(rows_args);

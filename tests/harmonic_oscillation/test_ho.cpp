@@ -529,6 +529,85 @@ TEST(HoStorage, GroupedAndPlainSweepsAgree) {
   }
 }
 
+// The windowed grouped sweep (ho_window.hpp: x, v and the accumulators of the live vertices in
+// structure of arrays) performs the plain grouped sweep's operations in the same order: the
+// same bits, for every variant and storage, with the default capacity and with the smallest
+// one the plan allows (the window then moves its live vertices every block or two).
+TEST(HoStorage, WindowedSweepIsBitIdentical) {
+  const int nx = 48;
+  std::vector<double> x, v, m;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      x.insert(x.end(), {0.02 * c + 0.003 * std::sin(1.3 * r * c), 0.001 * std::sin(0.7 * c + r), 0.02 * r});
+      v.insert(v.end(), {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.005 * std::sin(c - r)});
+      m.push_back(1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5)));
+    }
+  SpringSet s;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      const int a = r * nx + c;
+      if (c + 1 < nx) s.add(a, a + 1, 0.02, 2000, 0.0, SpringClass::Structural);
+      if (r + 1 < nx) s.add(a + nx, a, 0.02, 2000, 0.0, SpringClass::Structural);
+      if (c + 1 < nx && r + 1 < nx) s.add(a, a + nx + 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+      if (c > 0 && r + 1 < nx) s.add(a, a + nx - 1, 0.02 * std::sqrt(2.0), 500 + (c % 3), 0.0, SpringClass::Shear);
+      if (c + 2 < nx) s.add(a, a + 2, 0.04, 50, 0.0, SpringClass::Bend);
+      if (r + 2 < nx && (c % 2 == 0)) s.add(a, a + 2 * nx, 0.04, 50, 0.0, SpringClass::Bend);   // step-2 runs
+      if (c + 2 < nx && r % 3 == 0) s.add(a, a + 2, 0.04, 50, 0.0, SpringClass::Bend);   // duplicate pairs
+    }
+  const std::vector<Index> pins{nx * (nx - 1), nx * nx - 1};
+  int checked = 0;
+  for (HoVariant var : {HoVariant::Velocity, HoVariant::AnalyticPosition, HoVariant::KangCho2011})
+    for (bool table : {true, false}) {
+      auto scene = make_scene(x, v, m, pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(s, m));
+      HoIntegrator ho(var, table, true, HoReorder::None);
+      ho.prepare(*scene, 1e-4);
+      ASSERT_TRUE(ho.springs().grouped);
+      ASSERT_GT(ho.springs().win_cap, 0);
+      ASSERT_GE(ho.springs().win_cap, ho.springs().win_span);
+      EXPECT_EQ(ho.springs().table, table);
+      const std::array<double, 3> g{0, -9.81, 0};
+      const double* w = scene->state.inv_mass.data();
+      auto run = [&](Index cap) {
+        HoSprings<double> sp = ho.springs();
+        sp.win_cap = cap;
+        allocate_ho_window(sp, ho.layout().parts());
+        std::vector<double> X = x, V = v, dv(x.size(), 0.0), dx(x.size(), 0.0);
+        for (int st = 0; st < 12; ++st) {
+          switch (var) {
+            case HoVariant::Velocity:
+              ho_step_arrays<double, HoVariant::Velocity>(ho.layout(), sp, X.data(), V.data(), dv.data(), nullptr, w,
+                                                          1e-4, g);
+              break;
+            case HoVariant::AnalyticPosition:
+              ho_step_arrays<double, HoVariant::AnalyticPosition>(ho.layout(), sp, X.data(), V.data(), dv.data(),
+                                                                  dx.data(), w, 1e-4, g);
+              break;
+            case HoVariant::KangCho2011:
+              ho_step_arrays<double, HoVariant::KangCho2011>(ho.layout(), sp, X.data(), V.data(), dv.data(), nullptr,
+                                                             w, 1e-4, g);
+              break;
+          }
+        }
+        EXPECT_TRUE(std::all_of(dv.begin(), dv.end(), [](double d) { return d == 0.0; }));
+        X.insert(X.end(), V.begin(), V.end());
+        return X;
+      };
+      const std::vector<double> plain = run(0);
+      const std::vector<double> moved0 = run(ho.springs().win_cap);
+      const std::vector<double> moved1 = run(ho.springs().win_span);
+      ASSERT_EQ(plain.size(), moved0.size());
+      double change = 0;
+      for (std::size_t q = 0; q < plain.size(); ++q) {
+        ASSERT_EQ(plain[q], moved0[q]) << to_string(var) << " table " << table << " entry " << q;
+        ASSERT_EQ(plain[q], moved1[q]) << to_string(var) << " table " << table << " entry " << q << " (smallest window)";
+        change = std::max(change, std::abs(plain[q] - (q < x.size() ? x[q] : v[q - x.size()])));
+      }
+      EXPECT_GT(change, 1e-6);   // the springs did act
+      ++checked;
+    }
+  EXPECT_EQ(checked, 6);
+}
+
 // ---- Vertex order (reorder key): RCM order, user-visible results unchanged ----
 
 namespace {

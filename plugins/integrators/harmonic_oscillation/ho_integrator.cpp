@@ -154,6 +154,8 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
       out.part_block.clear();
     }
   }
+  plan_ho_window(layout, out);
+  allocate_ho_window(out, layout.parts());
   out.is_deferred.assign(static_cast<std::size_t>(n), 0);
   for (Index q = layout.colour_begin(0); q < S; ++q) out.is_deferred[out.i[q]] = out.is_deferred[out.j[q]] = 1;
   out.deferred.clear();

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -23,6 +24,7 @@
 #include "loom/spring_layout.hpp"
 #include "loom/traversal.hpp"
 #include "loom/vertex_order.hpp"
+#include "ho_window.hpp"
 
 #ifdef _OPENMP
 #include <omp.h>
@@ -77,6 +79,15 @@ struct HoSprings {
   std::vector<Segment> segs;
   std::vector<Block> blocks;
   std::vector<Index> part_block;           ///< blocks of part p: [part_block[p], part_block[p + 1])
+  // Window of the grouped sweep (ho_window.hpp): per block, 1 + the largest vertex it reads; the
+  // window capacity in vertices (0: off, the plain grouped sweep runs); the scratch, parts x
+  // kHoWinArrays x win_cap (written by the step: each part uses only its own slice).
+  std::vector<Index> block_need;
+  Index win_span = 0;             ///< the most vertices live at once (plan_ho_window)
+  Index win_cap = 0;
+  mutable std::vector<T> win;
+  std::vector<std::uint8_t> seg_uniform;   ///< table storage: segment's springs share one id
+
   Index size() const { return static_cast<Index>(i.size()); }
 };
 
@@ -101,6 +112,11 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
   out.segs = in.segs;
   out.blocks = in.blocks;
   out.part_block = in.part_block;
+  out.block_need = in.block_need;
+  out.win_span = in.win_span;
+  out.win_cap = in.win_cap;
+  out.win.assign(in.win.size(), T(0));
+  out.seg_uniform.clear();   // table storage is rebuilt by update_ho_coefficients
   out.l0.assign(in.l0.begin(), in.l0.end());
   out.k.assign(in.k.begin(), in.k.end());
   out.c.assign(in.c.begin(), in.c.end());
@@ -183,10 +199,12 @@ void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h,
       s.kv.clear();
       s.ex.clear();
       s.ev.clear();
+      mark_uniform_segments(s);
       return;
     }
   }
   s.id.clear();
+  mark_uniform_segments(s);
   s.kx.resize(S);
   s.kv.resize(S);
   s.ex.resize(pos ? S : 0);
@@ -447,13 +465,118 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
     }
   };
 
+  // Windowed grouped sweep of part p (ho_window.hpp): the same segments and additions as
+  // sweep_grouped, on structure-of-arrays copies of the live vertices.
+  auto sweep_window = [&](int p) {
+    constexpr Index Bk = kHoVertexBlock;
+    constexpr int Vi = V == HoVariant::Velocity ? 0 : (V == HoVariant::AnalyticPosition ? 1 : 2);
+    const Index cap = s.win_cap;
+    T* base = s.win.data() + static_cast<std::size_t>(p) * kHoWinArrays * static_cast<std::size_t>(cap);
+    T* A[kHoWinArrays];
+    for (int e = 0; e < kHoWinArrays; ++e) A[e] = base + static_cast<std::size_t>(e) * static_cast<std::size_t>(cap);
+    T* const X = A[0];
+    T* const Y = A[1];
+    T* const Z = A[2];
+    T* const VX = A[3];
+    T* const VY = A[4];
+    T* const VZ = A[5];
+    T* const DX = A[6];
+    T* const DY = A[7];
+    T* const DZ = A[8];
+    T* const PX = A[9];
+    T* const PY = A[10];
+    T* const PZ = A[11];
+    const int narr = kPos ? 12 : 9;
+    const std::uint8_t* uniform = s.seg_uniform.size() == s.segs.size() ? s.seg_uniform.data() : nullptr;
+    Index ws = layout.part_vertex_begin(p), fill = ws, qfin = ws;
+    alignas(64) T Gi[3 * Bk], Gj[3 * Bk];
+    alignas(64) T Qi[kPos ? 3 * Bk : 1], Qj[kPos ? 3 * Bk : 1];
+    for (Index bk = s.part_block[p]; bk < s.part_block[p + 1]; ++bk) {
+      const auto& B = s.blocks[bk];
+      const Index need = s.block_need[bk];
+      if (need > ws + cap) {   // move the live vertices [qfin, fill) to the start
+        const std::size_t sh = static_cast<std::size_t>(qfin - ws), cnt = static_cast<std::size_t>(fill - qfin);
+        for (int e = 0; e < narr; ++e) std::memmove(A[e], A[e] + sh, cnt * sizeof(T));
+        ws = qfin;
+      }
+      for (; fill < need; ++fill) {
+        const std::size_t o = 3 * static_cast<std::size_t>(fill);
+        const Index l = fill - ws;
+        X[l] = x[o];
+        Y[l] = x[o + 1];
+        Z[l] = x[o + 2];
+        VX[l] = v[o];
+        VY[l] = v[o + 1];
+        VZ[l] = v[o + 2];
+        DX[l] = DY[l] = DZ[l] = T(0);
+        if constexpr (kPos) PX[l] = PY[l] = PZ[l] = T(0);
+      }
+      for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
+        const auto& G = s.segs[sg];
+        const std::size_t off = Table ? 0 : static_cast<std::size_t>(G.begin);
+        const std::uint16_t* id = Table ? P.id + G.begin : nullptr;
+        const T* ex = kPos ? P.ex + off : nullptr;
+        const T* ev = kPos ? P.ev + off : nullptr;
+        const Index a = G.i0 - ws;
+        const bool uni = Table && uniform != nullptr && uniform[sg];
+        const T* l0 = P.l0 + off;
+        const T* kx = P.kx + off;
+        const T* kv = P.kv + off;
+        if (G.step == 1) {
+          if (uni)
+            ho_window_impulses<T, Vi, Table, true, 1, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z, VX,
+                                                          VY, VZ, w, Gi, Gj, Qi, Qj);
+          else
+            ho_window_impulses<T, Vi, Table, false, 1, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z, VX,
+                                                           VY, VZ, w, Gi, Gj, Qi, Qj);
+          ho_window_scatter<T, 1, Bk>(G.len, a, G.off, DX, DY, DZ, Gi, Gj);
+          if constexpr (kPos) ho_window_scatter<T, 1, Bk>(G.len, a, G.off, PX, PY, PZ, Qi, Qj);
+        } else {
+          if (uni)
+            ho_window_impulses<T, Vi, Table, true, 2, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z, VX,
+                                                          VY, VZ, w, Gi, Gj, Qi, Qj);
+          else
+            ho_window_impulses<T, Vi, Table, false, 2, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z, VX,
+                                                           VY, VZ, w, Gi, Gj, Qi, Qj);
+          ho_window_scatter<T, 2, Bk>(G.len, a, G.off, DX, DY, DZ, Gi, Gj);
+          if constexpr (kPos) ho_window_scatter<T, 2, Bk>(G.len, a, G.off, PX, PY, PZ, Qi, Qj);
+        }
+      }
+      for (; qfin < B.vertex_end; ++qfin) {
+        const Index l = qfin - ws;
+        const std::size_t o = 3 * static_cast<std::size_t>(qfin);
+        if (deferred[qfin]) {   // cross springs add to it later: hand the sums to the accumulators
+          dv[o] += DX[l];
+          dv[o + 1] += DY[l];
+          dv[o + 2] += DZ[l];
+          if constexpr (kPos) {
+            dx[o] += PX[l];
+            dx[o + 1] += PY[l];
+            dx[o + 2] += PZ[l];
+          }
+        } else {
+          const T dq[3] = {DX[l], DY[l], DZ[l]};
+          T pq[3] = {T(0), T(0), T(0)};
+          if constexpr (kPos) {
+            pq[0] = PX[l];
+            pq[1] = PY[l];
+            pq[2] = PZ[l];
+          }
+          kernels::ho_finalise_vertex<T, kPos>(x + o, v + o, dq, pq, w[qfin], h, hg, gg);
+        }
+      }
+    }
+  };
+
   // One parallel region (loom/traversal.hpp): the parts' sweeps, the cross springs, then the
   // vertices the cross springs touch.
   const bool serial = s.size() < kHoSerialSprings || traversal_threads() == 1;
   traverse_parts(
       layout, !serial,
       [&](int p) {
-        if (s.grouped)
+        if (s.grouped && s.win_cap > 0)
+          sweep_window(p);
+        else if (s.grouped)
           sweep_grouped(p);
         else
           sweep(p);

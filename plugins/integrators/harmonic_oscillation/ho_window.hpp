@@ -1,0 +1,163 @@
+// The windowed grouped sweep of the HO step (issue 16): the grouped sweep (HoSprings::grouped,
+// segments of springs (i0 + step r, i0 + step r + off)) run on a per-part window that holds x, v
+// and the accumulators of the live vertices in structure of arrays.
+//
+// Why: the plain grouped sweep reads x[3 i + e] and v[3 i + e] (three doubles per vertex) in its
+// vectorised impulse loop, so every lane needs shuffles to go from the interleaved layout to one
+// register per component, and every segment shuffles again (a vertex is read by about 10
+// segments, once per spring it is an endpoint of). Here each vertex is copied once into the
+// window (X, Y, Z, VX, VY, VZ, contiguous per component) just before the first block that reads
+// it, the segments read and accumulate there with unit stride (stride 2 for step-2 segments), and
+// the vertex is finalised from the window (user arrays written once) as soon as the sweep has
+// passed it. The accumulators live in the window too (cache resident), so the 3n accumulator
+// array is touched only for the vertices that cross springs reach.
+//
+// The window of part p covers vertices [ws, ws + cap); when the next block needs a vertex beyond
+// it, the live vertices [qfin, fill) move to the start (ws = qfin). cap is chosen in
+// plan_ho_window from the largest live span of any block (4x it, at least 1024), so a move
+// copies at most a quarter of the window. The arithmetic and the order of every addition are
+// those of the plain grouped sweep: results are bit-identical (tests/harmonic_oscillation,
+// HoStorage.WindowedSweepIsBitIdentical).
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "loom/common.hpp"
+#include "loom/kernels/ho.hpp"
+
+namespace loom {
+
+/// Arrays per part in the window: x, v (3 each), the velocity and position accumulators (3 each).
+constexpr int kHoWinArrays = 12;
+/// Largest live span (vertices) for which the window is used; beyond it the plain grouped sweep runs.
+constexpr Index kHoWinMaxSpan = 1 << 16;
+
+/// Window plan for grouped springs: need[bk] = 1 + the largest vertex that block bk reads (at
+/// least the block's vertex_end); win_span, the largest number of vertices live at once (from the
+/// first unfinished vertex to the farthest one read); the capacity win_cap (0 when that span is
+/// too large: window off). Any capacity >= win_span is correct.
+template <class Springs, class Layout>
+void plan_ho_window(const Layout& layout, Springs& s) {
+  s.block_need.assign(s.blocks.size(), 0);
+  s.win_cap = 0;
+  s.win_span = 0;
+  if (!s.grouped) return;
+  Index span = 0;
+  for (int p = 0; p < layout.parts(); ++p) {
+    Index qfin = layout.part_vertex_begin(p);
+    for (Index bk = s.part_block[p]; bk < s.part_block[p + 1]; ++bk) {
+      const auto& B = s.blocks[bk];
+      Index need = B.vertex_end;
+      for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
+        const auto& G = s.segs[sg];
+        need = std::max(need, G.i0 + G.off + G.step * (G.len - 1) + 1);
+      }
+      s.block_need[bk] = need;
+      span = std::max(span, need - qfin);
+      qfin = B.vertex_end;
+    }
+  }
+  s.win_span = span;
+  if (span > kHoWinMaxSpan) return;
+  s.win_cap = std::max<Index>(1024, 4 * span);
+}
+
+/// Allocate the window scratch (parts x kHoWinArrays x cap), zeroed.
+template <class Springs>
+void allocate_ho_window(Springs& s, int parts) {
+  s.win.assign(s.win_cap > 0 ? static_cast<std::size_t>(parts) * kHoWinArrays * static_cast<std::size_t>(s.win_cap) : 0,
+               0);
+}
+
+/// Table storage: seg_uniform[sg] = 1 when every spring of segment sg has the same parameter id
+/// (on a uniform cloth most do), so that the impulse loop reads its constants once instead of
+/// gathering them per spring. Cleared for direct storage or ungrouped springs.
+template <class Springs>
+void mark_uniform_segments(Springs& s) {
+  s.seg_uniform.clear();
+  if (!s.table || !s.grouped) return;
+  s.seg_uniform.assign(s.segs.size(), 0);
+  for (std::size_t sg = 0; sg < s.segs.size(); ++sg) {
+    const auto& G = s.segs[sg];
+    bool same = true;
+    for (Index r = 1; r < G.len && same; ++r) same = s.id[G.begin + r] == s.id[G.begin];
+    s.seg_uniform[sg] = same ? 1 : 0;
+  }
+}
+
+/// Per-segment impulse loop on the window: springs (a + Step r, a + Step r + off) in window
+/// coordinates (Uniform: every spring has parameter id ID[0]), inverse masses from the user-order array at global index i0 + Step r. Writes
+/// the w-weighted impulses of both ends into G (3 x kHoVertexBlock, SoA) and, for
+/// analytic_position, the displacements into Q. The arithmetic is kernels::ho_spring_velocity's
+/// (ho_spring_axis) operation for operation.
+template <class T, int V, bool Table, bool Uniform, int Step, Index Bk>
+inline void ho_window_impulses(Index len, Index a, Index off, Index i0, const std::uint16_t* __restrict ID,
+                               const T* __restrict L0, const T* __restrict KX, const T* __restrict KV,
+                               const T* __restrict EX, const T* __restrict EV, const T* __restrict X,
+                               const T* __restrict Y, const T* __restrict Z, const T* __restrict VX,
+                               const T* __restrict VY, const T* __restrict VZ, const T* __restrict w,
+                               T* __restrict Gi, T* __restrict Gj, T* __restrict Qi, T* __restrict Qj) {
+  constexpr bool kPos = V == 1;   // HoVariant::AnalyticPosition
+  constexpr bool kKc = V == 2;    // HoVariant::KangCho2011
+  const T tiny = std::numeric_limits<T>::min();
+  const std::size_t c0 = Table ? static_cast<std::size_t>(ID[0]) : 0;
+  for (Index r = 0; r < len; ++r) {
+    const Index p = a + Step * r, q = p + off;
+    const std::size_t c = Table ? (Uniform ? c0 : static_cast<std::size_t>(ID[r])) : static_cast<std::size_t>(r);
+    using std::sqrt;
+    using std::abs;
+    const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
+    const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+    const T l = sqrt(l2);
+    const T inv = T(1) / (l + tiny);
+    const T n0 = d0 * inv, n1 = d1 * inv, n2 = d2 * inv;
+    const T delta = l - L0[c];
+    const T ddot = n0 * (VX[q] - VX[p]) + n1 * (VY[q] - VY[p]) + n2 * (VZ[q] - VZ[p]);
+    T sv;
+    if constexpr (kKc)
+      sv = KX[c] * delta + KV[c] * abs(ddot);
+    else
+      sv = KX[c] * delta + KV[c] * ddot;
+    const T g0 = sv * n0, g1 = sv * n1, g2 = sv * n2;
+    const T wi = w[i0 + Step * r], wj = w[i0 + off + Step * r];
+    Gi[r] = wi * g0;
+    Gi[Bk + r] = wi * g1;
+    Gi[2 * Bk + r] = wi * g2;
+    Gj[r] = wj * g0;
+    Gj[Bk + r] = wj * g1;
+    Gj[2 * Bk + r] = wj * g2;
+    if constexpr (kPos) {
+      const T e = EX[c] * delta + EV[c] * ddot;
+      const T p0 = e * n0, p1 = e * n1, p2 = e * n2;
+      Qi[r] = wi * p0;
+      Qi[Bk + r] = wi * p1;
+      Qi[2 * Bk + r] = wi * p2;
+      Qj[r] = wj * p0;
+      Qj[Bk + r] = wj * p1;
+      Qj[2 * Bk + r] = wj * p2;
+    }
+  }
+}
+
+/// Adds +Gi at window vertices a + Step r, then -Gj at a + off + Step r (two passes: the ranges
+/// may overlap), per component: the order of the plain sweep's ho_segment_scatter.
+template <class T, int Step, Index Bk>
+inline void ho_window_scatter(Index len, Index a, Index off, T* __restrict AX, T* __restrict AY, T* __restrict AZ,
+                              const T* __restrict Gi, const T* __restrict Gj) {
+  for (Index r = 0; r < len; ++r) {
+    AX[a + Step * r] += Gi[r];
+    AY[a + Step * r] += Gi[Bk + r];
+    AZ[a + Step * r] += Gi[2 * Bk + r];
+  }
+  for (Index r = 0; r < len; ++r) {
+    AX[a + off + Step * r] -= Gj[r];
+    AY[a + off + Step * r] -= Gj[Bk + r];
+    AZ[a + off + Step * r] -= Gj[2 * Bk + r];
+  }
+}
+
+}  // namespace loom
