@@ -10,6 +10,8 @@
 //   harmonic_oscillation  variants velocity | analytic_position | kang_cho_2011, same per-spring
 //                         math as the CPU plugin (loom/kernels/ho.hpp)
 //   rk4                   loom/kernels/rk4.hpp stages; forces from the device force model
+//   symplectic_euler      forces from the device force model, then the CPU plugin's vertex update
+//                         (symplectic_euler/se_update.hpp); sphere/plane contacts after the step
 //   baraff_witkin         device assembly of A and b (NUMERICS 3.1/3.2, Kang-Cho and Rayleigh
 //                         damping), pins through the filter S, solved by cusparse_pcg on device
 #pragma once
@@ -24,6 +26,7 @@
 #include "loom/integrator.hpp"
 #include "loom/params.hpp"
 #include "rk4_integrator.hpp"
+#include "symplectic_euler.hpp"
 
 namespace loom::cuda {
 
@@ -37,10 +40,12 @@ enum class HoVariantD { Velocity = 0, AnalyticPosition = 1, KangCho2011 = 2 };
 std::unique_ptr<Integrator> make_cuda_ho(const Params& p);
 std::unique_ptr<Integrator> make_cuda_rk4(const Params& p);
 std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p);
+std::unique_ptr<Integrator> make_cuda_symplectic_euler(const Params& p);
 
 /// Direct construction (tests, benchmarks).
 std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision, int host_sync_every = 1);
 std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every = 1);
+std::unique_ptr<Integrator> make_cuda_symplectic_euler(Precision precision, int host_sync_every = 1);
 struct BwOptionsD {
   double kang_cho_damping = 0, rayleigh_alpha = 0, rayleigh_beta = 0;
   bool halve_on_failure = false;

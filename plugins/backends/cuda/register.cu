@@ -15,6 +15,10 @@ static void register_cuda(loom::Registry& r) {
   r.add_integrator({PluginKind::Integrator, "rk4", "cuda", "1.0",
                     "classical RK4 on the GPU (precision double | float)", "", &loom::rk4_spec()},
                    [](const loom::Params& p) { return loom::cuda::make_cuda_rk4(p); });
+  r.add_integrator({PluginKind::Integrator, "symplectic_euler", "cuda", "1.0",
+                    "explicit symplectic Euler on the GPU: device forces, the CPU plugin's vertex update, sphere and "
+                    "plane contacts (precision double | float)", "", &loom::symplectic_euler::spec()},
+                   [](const loom::Params& p) { return loom::cuda::make_cuda_symplectic_euler(p); });
   r.add_integrator({PluginKind::Integrator, "baraff_witkin", "cuda", "1.0",
                     "Baraff-Witkin implicit step assembled and solved on the GPU (needs solver filtered_pcg)", "",
                     &loom::baraff_witkin_spec()},

@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "loom/material.hpp"
+#include "se_update.hpp"
 
 namespace loom::symplectic_euler {
 
@@ -13,6 +14,7 @@ const ParamSpec& spec() {
         "vertex order of the fused spring step: rcm renumbers the vertices internally (reverse Cuthill-McKee) so "
         "that springs join nearby vertices; results stay in the mesh's numbering. auto: rcm for meshes of at least "
         "16384 vertices whose spring span it shrinks 4x or more; none: the mesh's order");
+    declare_device_keys(s);  // precision, host_sync_every: backend cuda (one spec for both backends)
     return s;
   }();
   return spec;
@@ -98,24 +100,8 @@ void SymplecticEuler::generic_step(Scene& scene, double h) {
   const double* w = s.inv_mass.data();
   const double g0 = scene.gravity[0], g1 = scene.gravity[1], g2 = scene.gravity[2];
 #pragma omp parallel for schedule(static) if (n >= kParallelMinVertices)
-  for (Index i = 0; i < n; ++i) {
-    const double wi = w[i];
-    double* xi = x + 3 * i;
-    double* vi = v + 3 * i;
-    if (wi != 0.0) {
-      const double* fi = f + 3 * i;
-      vi[0] += h * (wi * fi[0] + g0);
-      vi[1] += h * (wi * fi[1] + g1);
-      vi[2] += h * (wi * fi[2] + g2);
-      xi[0] += h * vi[0];
-      xi[1] += h * vi[1];
-      xi[2] += h * vi[2];
-    } else {
-      // Pinned: prescribed velocity; a fixed pin (v = 0) is not touched at all, bit for bit.
-      for (int c = 0; c < 3; ++c)
-        if (vi[c] != 0.0) xi[c] += h * vi[c];
-    }
-  }
+  for (Index i = 0; i < n; ++i)
+    se_update_vertex(x + 3 * i, v + 3 * i, f + 3 * i, w[i], h, g0, g1, g2);  // se_update.hpp, shared with cuda
 }
 
 }  // namespace loom::symplectic_euler
