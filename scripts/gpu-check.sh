@@ -6,18 +6,21 @@
 #   cmake --preset default -DLOOM_GPU_TESTS=ON -DLOOM_BUILD_BENCH=ON
 #   cmake --build build --target loom loom_backend_cuda loom_material_mass_spring loom_material_gnatv \
 #       loom_integrator_harmonic_oscillation loom_integrator_rk4 loom_integrator_baraff_witkin \
-#       loom_integrator_symplectic_euler loom_solver_eigen_pcg loom_solver_eigen_ldlt test_cuda_gpu table1_gpu
+#       loom_integrator_symplectic_euler loom_solver_eigen_pcg loom_solver_eigen_ldlt test_cuda_gpu \
+#       test_cuda_pcg_gpu table1_gpu
 #   bash tools/gpu-bundle.sh .gpu        (packs build/ into .gpu/; tools/README.md says where it comes from)
 # On the GPU machine, from the repository root (the scenes, materials and data/ are read from it):
 #   bash scripts/gpu-check.sh [BUNDLE=.gpu] [OUT=$OUT or gpu-results] [SECONDS_PER_SCENE=90]
 #
 # Writes into OUT:
 #   nvidia-smi.txt                the device
-#   test_cuda_gpu.{txt,xml}       the `gpu` tests (CUDA against CPU, the boundary, bending, colliders)
+#   test_cuda_gpu.{txt,xml}       the `gpu` tests (CUDA against CPU: HO, RK4, symplectic Euler, Baraff-Witkin;
+#                                 the material boundary, bending, colliders, device memory)
+#   test_cuda_pcg_gpu.{txt,xml}   the `gpu` PCG test (CPU and CUDA filtered_pcg give the same iterates)
 #   scenes.csv                    every shipped scene with backend: cuda (self_collision removed), one frame
 #                                 of 20 steps, against backend: cpu: status, max |x_gpu - x_cpu| relative to
 #                                 max |x_cpu| and to the largest displacement; scenes/<name>/ holds the logs
-#   table1_gpu.{json,txt}         the GPU Table 1 benchmark (HO, RK4; double, float; copy bandwidth) and
+#   table1_gpu.{json,txt}         the GPU Table 1 benchmark (HO, RK4, symplectic Euler; double, float; copy bandwidth) and
 #                                 the Baraff-Witkin wool steps
 #   summary.txt                   one line per part with its exit status
 # Exit status: 0 when the tests pass (not skipped) and every accepted scene agrees, else 1.
@@ -38,11 +41,18 @@ note() { echo "$*" | tee -a "$summary"; }
 note "start $(date -u +%FT%TZ) on $(hostname)"
 
 # ---- 1. the gpu tests (they skip, with the reason, when no device is usable)
-timeout 300 bash "$bundle/run.sh" test_cuda_gpu --gtest_output=xml:"$out/test_cuda_gpu.xml" > "$out/test_cuda_gpu.txt" 2>&1
-rc=$?
-skipped=$(grep -c -E '^\[  SKIPPED \]|no usable CUDA device' "$out/test_cuda_gpu.txt" || true)
-note "test_cuda_gpu: exit $rc, $(grep -E '^\[  PASSED  \]|^\[  FAILED  \]' "$out/test_cuda_gpu.txt" | head -2 | tr '\n' ' ') skipped lines: $skipped"
-if [ "$rc" -ne 0 ] || [ "$skipped" -gt 0 ]; then status=1; fi
+for t in test_cuda_gpu test_cuda_pcg_gpu; do
+  if [ ! -x "$bundle/bin/$t" ]; then
+    note "$t: not in the bundle (build it with -DLOOM_GPU_TESTS=ON, then tools/gpu-bundle.sh)"
+    status=1
+    continue
+  fi
+  timeout 300 bash "$bundle/run.sh" "$t" --gtest_output=xml:"$out/$t.xml" > "$out/$t.txt" 2>&1
+  rc=$?
+  skipped=$(grep -c -E '^\[  SKIPPED \]|no usable CUDA device' "$out/$t.txt" || true)
+  note "$t: exit $rc, $(grep -E '^\[  PASSED  \]|^\[  FAILED  \]' "$out/$t.txt" | head -2 | tr '\n' ' ') skipped lines: $skipped"
+  if [ "$rc" -ne 0 ] || [ "$skipped" -gt 0 ]; then status=1; fi
+done
 
 # ---- 2. shipped scenes, backend cuda against backend cpu, one frame of 20 steps
 # max over the vertices of |a - b| (OBJ v lines), relative to max |b| and to max |b - b0|.
@@ -95,7 +105,7 @@ for scene in scenes/*.yaml; do
 done
 note "scenes: $(grep -c ',agrees,' "$out/scenes.csv") agree, $(grep -c ',differs,' "$out/scenes.csv") differ, $(grep -c ',refused,' "$out/scenes.csv") refused, $(grep -c '_failed_' "$out/scenes.csv") failed"
 
-# ---- 3. benchmarks: Table 1 on the GPU (HO, RK4, double and float, copy bandwidth) and BW wool
+# ---- 3. benchmarks: Table 1 on the GPU (HO, RK4, SE, double and float, copy bandwidth) and BW wool
 timeout 400 bash "$bundle/run.sh" table1_gpu --benchmark_repetitions=3 --benchmark_report_aggregates_only=true \
   --benchmark_min_time=0.2 --benchmark_out_format=json --benchmark_out="$out/table1_gpu.json" > "$out/table1_gpu.txt" 2>&1
 note "table1_gpu: exit $?"

@@ -1,9 +1,8 @@
-// Kang & Cho 2011 Table 1 on the GPU (issue 17): HO (velocity variant) and RK4 steps of the
+// Kang & Cho 2011 Table 1 on the GPU (issue 17): HO (velocity variant), RK4 and symplectic Euler steps of the
 // CUDA backend on the six Table 1 grids (kang_cho_table1 stencil, hanging, k = 2000), double
 // and float, beside the paper's GTX 590 frame rates; and a Baraff-Witkin step of the hanging
 // wool (gnatv, cusparse_pcg) at 128^2, 256^2 and 512^2. Built by nvcc against the real module
 // (bench/cuda/CMakeLists.txt: target table1_gpu, with -DLOOM_GPU_TESTS=ON); it needs a GPU.
-// There is no symplectic Euler on the device (the backend has HO, RK4 and Baraff-Witkin).
 //
 // The state stays on the device (host_sync_every far beyond the run); every iteration is one
 // step followed by a device synchronisation, so a step's time includes its launch latency.
@@ -20,6 +19,8 @@
 //        S (18 + 12T) + N (4 + 13T) + N 6T (the spring kernel's reads of x and v)
 //   RK4  4 force passes of S (18 + 12T) + N (4 + 9T) (springs as above, v also read, f written)
 //        + 4 stage passes over w, f, x, v, xs, vs, ax, av (read and written): 4 N 40T
+//   SE   1 force pass as in RK4, S (18 + 12T) + N (4 + 9T), + 1 vertex pass: w (T), f (3T), x and v
+//        read and written (12T): N 16T
 //
 //   bash .gpu/run.sh table1_gpu --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
 #include <benchmark/benchmark.h>
@@ -123,6 +124,7 @@ std::unique_ptr<Scene> table1_scene(int n) {
 
 double ho_bytes(double T, double N, double S) { return S * (18 + 12 * T) + N * (4 + 13 * T) + N * 6 * T; }
 double rk4_bytes(double T, double N, double S) { return 4 * (S * (18 + 12 * T) + N * (4 + 9 * T)) + 4 * N * 40 * T; }
+double se_bytes(double T, double N, double S) { return S * (18 + 12 * T) + N * (4 + 9 * T) + N * 16 * T; }
 
 void set_counters(benchmark::State& st, const Row& r, double springs, double bytes) {
   const double it = static_cast<double>(st.iterations());
@@ -149,14 +151,18 @@ void BM_DeviceCopy(benchmark::State& st) {
   st.counters["best_GB/s"] = copy_bandwidth() * 1e-9;
 }
 
-template <bool Rk4>
+enum StepKind { kHo = 0, kRk4 = 1, kSe = 2 };
+
+template <int Kind>
 void BM_Step(benchmark::State& st) {
   const Row& r = rows()[st.range(0)];
   const bool fl = st.range(1) != 0;
   const lc::Precision prec = fl ? lc::Precision::Float : lc::Precision::Double;
   auto sc = table1_scene(r.n);
   const double S = static_cast<double>(sc->material->springs()->size());
-  auto integ = Rk4 ? lc::make_cuda_rk4(prec, kNoSync) : lc::make_cuda_ho(lc::HoVariantD::Velocity, prec, kNoSync);
+  auto integ = Kind == kRk4  ? lc::make_cuda_rk4(prec, kNoSync)
+               : Kind == kSe ? lc::make_cuda_symplectic_euler(prec, kNoSync)
+                             : lc::make_cuda_ho(lc::HoVariantD::Velocity, prec, kNoSync);
   const double h = 1e-6;
   integ->prepare(*sc, h);
   for (int k = 0; k < 3; ++k) integ->step(*sc, h);  // warm-up
@@ -166,7 +172,7 @@ void BM_Step(benchmark::State& st) {
     lc::seam_synchronize();
   }
   const double T = fl ? 4 : 8, N = static_cast<double>(sc->state.size());
-  set_counters(st, r, S, Rk4 ? rk4_bytes(T, N, S) : ho_bytes(T, N, S));
+  set_counters(st, r, S, Kind == kRk4 ? rk4_bytes(T, N, S) : Kind == kSe ? se_bytes(T, N, S) : ho_bytes(T, N, S));
 }
 
 void rows_args(benchmark::internal::Benchmark* b) {
@@ -218,8 +224,9 @@ void BM_CudaBwWool(benchmark::State& st) {
 }  // namespace
 
 BENCHMARK(BM_DeviceCopy)->Unit(benchmark::kMicrosecond)->UseRealTime();
-BENCHMARK(BM_Step<false>)->Name("BM_CudaHoStep")->Apply(rows_args);
-BENCHMARK(BM_Step<true>)->Name("BM_CudaRk4Step")->Apply(rows_args);
+BENCHMARK(BM_Step<kHo>)->Name("BM_CudaHoStep")->Apply(rows_args);
+BENCHMARK(BM_Step<kRk4>)->Name("BM_CudaRk4Step")->Apply(rows_args);
+BENCHMARK(BM_Step<kSe>)->Name("BM_CudaSeStep")->Apply(rows_args);
 BENCHMARK(BM_CudaBwWool)
     ->ArgsProduct({{128, 256, 512}, {0, 1}})
     ->ArgNames({"n", "float"})
