@@ -17,6 +17,7 @@
 #include "cuda_integrators.hpp"
 #include "cuda_test_state.hpp"
 #include "gnatv_material.hpp"
+#include "loom/bending.hpp"
 #include "loom/mesh.hpp"
 #include "loom/scene.hpp"
 #include "mass_spring.hpp"
@@ -150,15 +151,18 @@ TEST(CudaSymplecticEuler, ShippedDrapedBallFloatTracksDouble) {
 }
 
 // Any material with a device description: GNATV wool (triangles, no springs: the CPU plugin's
-// generic path) and a damped mass-spring cloth (the CPU plugin's fused path), two pinned corners.
+// generic path), GNATV wool with hinge bending (BentMaterial: triangles plus a Hinge block) and a
+// damped mass-spring cloth (the CPU plugin's fused path), two pinned corners.
 TEST(CudaSymplecticEuler, DeviceDescribedMaterialsMatchTheCpuBackend) {
   struct Case {
     const char* what;
-    bool wool;
+    bool wool, bent;
     double h;
     int steps;
   };
-  for (const Case& c : {Case{"gnatv wool", true, 2e-5, 60}, Case{"damped mass_spring", false, 1e-4, 100}}) {
+  std::vector<double> unbent_wool_x;  // the first case's CPU result
+  for (const Case& c : {Case{"gnatv wool", true, false, 2e-5, 60}, Case{"bent gnatv wool", true, true, 2e-5, 60},
+                        Case{"damped mass_spring", false, false, 1e-4, 100}}) {
     auto make = [&] {
       auto sc = std::make_unique<Scene>();
       sc->source = "<test>";
@@ -167,7 +171,10 @@ TEST(CudaSymplecticEuler, DeviceDescribedMaterialsMatchTheCpuBackend) {
         sc->material = std::make_unique<gnatv::GnatvMaterial>(
             Params::from_string("material_file: " + std::string(LOOM_SOURCE_DIR) + "/materials/wool.yaml\n", "<test>"),
             sc->mesh);
-      else
+      if (c.bent)
+        sc->material = std::make_unique<BentMaterial>(std::move(sc->material), sc->mesh,
+                                                      read_bending_options(Params::from_string("stiffness: 0.02\n")));
+      if (!c.wool)
         sc->material = std::make_unique<mass_spring::MassSpringMaterial>(
             Params::from_string("stiffness: {structural: 2000, shear: 1500, bend: 100}\ndamping: 0.2\ndensity: 0.1\n",
                                 "<test>"),
@@ -182,6 +189,12 @@ TEST(CudaSymplecticEuler, DeviceDescribedMaterialsMatchTheCpuBackend) {
     loom_cuda_test::run(ci, *cpu, c.h, c.steps);
     loom_cuda_test::run(*di, *dev, c.h, c.steps);
     EXPECT_EQ(ci.fused(), !c.wool) << c.what;
+    if (c.wool && !c.bent) unbent_wool_x = cpu->state.x;
+    if (c.bent) {  // the hinges matter over this run, so a device run without them would fail below
+      const double bending = rel_diff(cpu->state.x, unbent_wool_x);
+      std::printf("bending changes x by %.3g relative\n", bending);
+      EXPECT_GT(bending, 1e-9);
+    }
     EXPECT_GT(rel_diff(cpu->state.x, cpu->mesh.positions), 1e-5) << c.what;  // it moved
     EXPECT_LE(rel_diff(dev->state.x, cpu->state.x), 1e-12) << c.what;
     EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), 1e-10) << c.what;
