@@ -1,4 +1,5 @@
 #include "loom/collider.hpp"
+#include "loom/section_specs.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -234,7 +235,7 @@ ColliderSet ColliderSet::parse(const Params& list, const std::string& base_dir) 
   if (!list.valid()) return set;
   if (!list.is_sequence()) list.fail("must be a list of colliders, e.g. colliders: [{type: plane, point: [0,0,0], normal: [0,1,0]}].");
   for (std::size_t k = 0; k < list.size(); ++k) {
-    const Params p = list.at(k);
+    const Params p = with_section_spec(list.at(k), "colliders");  // its keys: section_specs.cpp
     if (!p.is_map()) p.fail("a collider is a mapping with 'type' (sphere, plane or mesh).");
     Collider c;
     const std::string type = p.get_choice("type", "", {"sphere", "plane", "mesh"});

@@ -3,6 +3,7 @@
 #include <string>
 
 #include "loom/collider.hpp"
+#include "loom/section_specs.hpp"
 
 namespace loom {
 
@@ -52,7 +53,7 @@ RigidMotion parse_rigid_motion(const Params& m, const std::vector<std::string>& 
     if (!keys.is_sequence() || keys.size() == 0)
       m.fail("keyframes need 'keys': a list of {t, translate: [x,y,z], angle} sorted by t.");
     for (std::size_t q = 0; q < keys.size(); ++q) {
-      Params kp = keys.at(q);
+      const Params kp = with_section_spec(keys.at(q), "motion_keys");
       if (!kp.is_map()) kp.fail("a key is a mapping {t: seconds, translate: [x, y, z], angle: radians}.");
       RigidMotion::Key key{kp.require_double("t"), read_vec3(kp, "translate", {0, 0, 0}, false), kp.get("angle", 0.0)};
       if (!std::isfinite(key.t) || !std::isfinite(key.angle)) kp.fail("t and angle must be finite numbers.");

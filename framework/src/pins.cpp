@@ -1,4 +1,5 @@
 #include "loom/pins.hpp"
+#include "loom/section_specs.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -242,7 +243,7 @@ PinSet PinSet::parse(const Params& list, const Mesh& mesh, State& state) {
     list.fail("must be a list, e.g. pins: [top_corners] or pins: [{name: clamp, vertices: [0, 31], motion: {type: translate, velocity: [0.01, 0, 0]}}].");
   std::vector<int> owner(static_cast<std::size_t>(mesh.num_vertices()), -1);
   for (std::size_t k = 0; k < list.size(); ++k) {
-    Params e = list.at(k);
+    const Params e = with_section_spec(list.at(k), "pins");  // its keys: section_specs.cpp
     if (!e.is_scalar() && !e.is_map())
       e.fail("a pin entry is a group name (top_corners, ...) or a mapping {name, group | vertices | box, motion}.");
     PinGroup g;

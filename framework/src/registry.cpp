@@ -45,10 +45,9 @@ std::vector<std::string> section_keys(PluginKind k) {
   return sec ? sec->keys() : std::vector<std::string>{};
 }
 
-/// The Params a factory reads: with the plugin's spec attached when it declares one.
-Params view(const Params& p, const std::shared_ptr<const ParamSpec>& spec) {
-  return spec ? p.with_spec(spec.get()) : p;
-}
+/// The Params a factory reads: with the plugin's spec attached when it declares one, and with
+/// none when it does not (not the framework section's spec the scene builder read through).
+Params view(const Params& p, const std::shared_ptr<const ParamSpec>& spec) { return p.with_spec(spec.get()); }
 }  // namespace
 
 void Registry::add_material(PluginInfo info, MaterialFactory f) {

@@ -11,6 +11,7 @@
 #include "loom/memory_estimate.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/pins.hpp"
+#include "loom/section_specs.hpp"
 #include "loom/text.hpp"
 
 namespace fs = std::filesystem;
@@ -70,20 +71,21 @@ std::string memory_line(const Params& root, long long vertices) {
 
 Mesh mesh(const Params& root, const std::string& base_dir, const std::function<void(long long)>& before_allocating) {
   Mesh m;
-  Params mesh = root.child("mesh");
+  const Params mesh = with_section_spec(root.child("mesh"), "mesh");  // its keys: section_specs.cpp
   if (!mesh.valid()) root.fail("missing 'mesh' section. Fix: add mesh: {grid: {nx: 32, ny: 32, width: 1, height: 1}} or mesh: {obj: file.obj}.");
   if (!mesh.is_map()) mesh.fail("must be a mapping with 'grid' or 'obj'.");
   const bool has_grid = mesh.has("grid"), has_obj = mesh.has("obj");
   if (has_grid == has_obj) mesh.fail("give exactly one of 'grid' or 'obj'.");
   if (has_grid) {
-    Params g = mesh.child("grid");
-    if (!g.is_map()) g.fail("must be a mapping like {nx: 32, ny: 32, width: 1.0, height: 1.0}.");
-    const auto nx = g.require_int("nx"), ny = g.require_int("ny");
-    if (nx < 2 || ny < 2 || nx > 20000 || ny > 20000) g.fail("nx and ny must be in [2, 20000] (got " + std::to_string(nx) + " x " + std::to_string(ny) + ").");
-    const double w = g.get_positive("width", 1.0), h = g.get_positive("height", 1.0);
-    const std::string plane = g.get_choice("plane", "xy", {"xy", "xz"});
-    const std::string diag = g.get_choice("diagonals", "alternate", {"alternate", "uniform"});
-    g.check_unused();
+    const ParamReader g = ParamReader(mesh, mesh_section_spec()).section("grid");
+    if (!g.params().is_map()) g.params().fail("must be a mapping like {nx: 32, ny: 32, width: 1.0, height: 1.0}.");
+    // nx and ny are checked together (one message for both); the spec declares the same range.
+    const auto nx = g.params().require_int("nx"), ny = g.params().require_int("ny");
+    if (nx < 2 || ny < 2 || nx > 20000 || ny > 20000) g.params().fail("nx and ny must be in [2, 20000] (got " + std::to_string(nx) + " x " + std::to_string(ny) + ").");
+    const double w = g.number("width"), h = g.number("height");
+    const std::string plane = g.text("plane");
+    const std::string diag = g.text("diagonals");
+    g.params().check_unused();
     before_allocating(static_cast<long long>(nx) * ny);  // before the grid allocates anything
     m = make_grid(static_cast<Index>(nx), static_cast<Index>(ny), w, h,
                   plane == "xy" ? GridPlane::XY : GridPlane::XZ, diag == "alternate");
@@ -93,7 +95,7 @@ Mesh mesh(const Params& root, const std::string& base_dir, const std::function<v
     if (!fs::exists(file)) o.fail("OBJ file '" + file + "' not found. Fix: paths are relative to the scene file's folder.");
     m = read_obj(file);
     before_allocating(static_cast<long long>(m.num_vertices()));
-    const double scale = mesh.get_positive("scale", 1.0);
+    const double scale = ParamReader(mesh, mesh_section_spec()).number("scale");
     for (double& c : m.positions) c *= scale;
   }
   mesh.check_unused();
@@ -101,7 +103,7 @@ Mesh mesh(const Params& root, const std::string& base_dir, const std::function<v
 }
 
 std::string material(const Params& root, Scene& sc, PluginLoader& loader) {
-  Params mat = root.child("material");
+  const Params mat = with_section_spec(root.child("material"), "material");  // type, fabric, bending (+ the plugin's keys)
   if (!mat.is_map()) root.fail("missing 'material' section. Fix: add material: {type: mass_spring, ...}.");
   const std::string material_name = mat.require_string("type");
   try {
@@ -120,7 +122,7 @@ std::string material(const Params& root, Scene& sc, PluginLoader& loader) {
   const Params fabric_bending = apply_fabric(mat, material_name);  // measured-fabric library (loom/fabric_library.hpp)
   const Params bending = mat.has("bending") ? mat.child("bending") : fabric_bending;  // hinge bending (loom/bending.hpp)
   sc.material = loader.registry().make_material(material_name, material_on_backend ? sc.backend : "cpu", mat, sc.mesh);
-  sc.material = add_bending(std::move(sc.material), bending, sc.mesh, sc.backend);
+  sc.material = add_bending(std::move(sc.material), with_section_spec(bending, "bending"), sc.mesh, sc.backend);
   return material_name;
 }
 
@@ -137,6 +139,8 @@ void state(const Params& root, Scene& sc, const std::string& material_name) {
                "; masses must be finite and > 0. Fix: check density / vertex_mass, and that every vertex belongs to a triangle.");
   st.update_inverse_masses();
 
+  // The keys below are declared in scene_section_spec (root carries it); their messages give
+  // examples, so they are read here rather than through a ParamReader.
   // ---- initial shape: positions scaled about the centroid (rest shape unchanged) ----
   Params iscale = root.child("initial_scale");
   if (iscale.valid()) {
@@ -172,9 +176,9 @@ void selections(const Params& root, Scene& sc) {
   if (mscale.valid()) {
     if (!mscale.is_sequence()) mscale.fail("must be a list like [{vertices: [0, 5], factor: 1.0e6}].");
     for (std::size_t k = 0; k < mscale.size(); ++k) {
-      Params e = mscale.at(k);
+      const Params e = with_section_spec(mscale.at(k), "mass_scale");
       if (!e.is_map()) e.fail("an entry is {vertices: [...], factor: f}, {group: name, factor: f} or {box: {min: [..], max: [..]}, factor: f}.");
-      const double factor = e.get_positive("factor", 1.0);
+      const double factor = ParamReader(e, mass_scale_entry_spec()).number("factor");
       const std::vector<Index> vs = select_vertices(sc.mesh, e);
       e.check_unused();
       for (Index i : vs) {
@@ -209,16 +213,16 @@ void colliders(const Params& root, Scene& sc, const std::string& base_dir) {
     const Params list = root.child("colliders");
     for (std::size_t c = 0; c < sc.colliders.size(); ++c)
       if (sc.colliders.colliders()[c].thickness > size)
-        list.at(c).child("thickness").fail("the contact offset " + fmt(sc.colliders.colliders()[c].thickness) +
+        with_section_spec(list.at(c), "colliders").child("thickness").fail("the contact offset " + fmt(sc.colliders.colliders()[c].thickness) +
                                            " m is larger than the whole cloth (" + fmt(size) +
                                            " m across). Fix: give the thickness in metres (a few millimetres is usual).");
   }
-  sc.self_collision = SelfCollision::parse(root.child("self_collision"), sc.mesh, st.x);
+  sc.self_collision = SelfCollision::parse(with_section_spec(root.child("self_collision"), "self_collision"), sc.mesh, st.x);
 }
 
 IntegratorChoice integrator(const Params& root, Scene& sc, PluginLoader& loader, const std::string& material_name) {
   IntegratorChoice c;
-  Params integ = root.child("integrator");
+  const Params integ = with_section_spec(root.child("integrator"), "integrator");  // type, dt, substeps, frame_time (+ the plugin's)
   if (!integ.is_map()) root.fail("missing 'integrator' section. Fix: add integrator: {type: symplectic_euler, dt: 0.001, substeps: 10}.");
   const ParamReader integ_keys(integ, integrator_section_spec());  // the framework's keys (param_spec.cpp)
   c.name = integ_keys.text("type");
@@ -258,8 +262,12 @@ IntegratorChoice integrator(const Params& root, Scene& sc, PluginLoader& loader,
 
 std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const IntegratorNeeds& needs,
                    const std::string& integrator_name, bool notes) {
-  Params solver = root.child("solver");
   if (needs.linear_solver) {
+    // The section's keys: type (section_specs.cpp) and one block per solver of this build.
+    ParamSpec spec = solver_section_spec();
+    for (const auto& nm : loader.names(PluginKind::Solver))
+      if (!spec.find(nm)) spec.open_map(nm).framework().help("keys of solver " + nm + ": loom plugins --params " + nm);
+    const Params solver = root.child("solver").with_spec(&spec);
     if (!solver.valid())
       root.fail("integrator '" + integrator_name + "' is implicit and needs a linear solver. Fix: add "
                 "solver: {type: eigen_pcg} (or a list: solver: {type: [cholmod, eigen_ldlt]}).");
@@ -271,6 +279,8 @@ std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const In
     else
       (solver.is_map() ? solver : root).fail("solver needs 'type': a solver name or a list of names (first available is used).");
     if (names.empty()) type.fail("the solver list is empty.");
+    for (const auto& nm : names)  // a listed solver this build lacks may have its block too
+      if (!spec.find(nm)) spec.open_map(nm).framework();
     std::string chosen;
     std::vector<std::string> skipped;
     for (const auto& nm : names) {
@@ -308,7 +318,7 @@ std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const In
     }
     sc.solver = loader.registry().make_solver(chosen, sc.backend, sp);
     return chosen;
-  } else if (solver.valid()) {
+  } else if (const Params solver = root.child("solver"); solver.valid()) {  // ignored: its keys are not read
     if (solver.is_map())
       for (const auto& k : solver.keys()) solver.mark_used(k);
     if (is_output_rank() && notes)
@@ -319,35 +329,34 @@ std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const In
 }
 
 void output_and_guards(const Params& root, int& frames, OutputOptions& output_options, GuardOptions& guard_options) {
-  frames = root.get("frames", 60);
-  if (frames < 0) root.child("frames").fail("must be >= 0.");
-  Params out = root.child("output");
+  frames = ParamReader(root, scene_section_spec()).int32("frames");
+  const Params out = with_section_spec(root.child("output"), "output");
   if (out.valid()) {
     if (!out.is_map()) out.fail("must be a mapping like {dir: out/run, obj: true, stats: true}.");
-    output_options.dir = out.get("dir", std::string());
-    output_options.obj = out.get("obj", true);
-    output_options.stats = out.get("stats", true);
-    output_options.every = out.get("every", 1);
-    if (output_options.every < 1) out.child("every").fail("must be >= 1 (write every n-th frame).");
-    output_options.pc2 = out.get("pc2", false);
-    output_options.uvs = out.get("uvs", false);
-    output_options.normals = out.get("normals", false);
-    output_options.lossless = out.get("lossless", false);
-    output_options.vtk = out.get("vtk", false);
-    output_options.velocities = out.get("velocities", false);
-    output_options.restart = out.get("restart", true);
+    const ParamReader r(out, output_section_spec());  // defaults: OutputOptions's, through the spec
+    output_options.dir = r.text("dir");
+    output_options.obj = r.flag("obj");
+    output_options.stats = r.flag("stats");
+    output_options.every = r.int32("every");
+    output_options.pc2 = r.flag("pc2");
+    output_options.uvs = r.flag("uvs");
+    output_options.normals = r.flag("normals");
+    output_options.lossless = r.flag("lossless");
+    output_options.vtk = r.flag("vtk");
+    output_options.velocities = r.flag("velocities");
+    output_options.restart = r.flag("restart");
     if (output_options.velocities && !output_options.vtk && !output_options.pc2)
       out.child("velocities").fail("velocities are written into the ParaView frames (vtk: true) and/or velocity.pc2 "
                                    "beside run.pc2 (pc2: true). Fix: turn one of them on.");
     out.check_unused();
   }
-  Params guard = root.child("guard");
+  const Params guard = with_section_spec(root.child("guard"), "guard");
   if (guard.valid()) {
     if (!guard.is_map()) guard.fail("must be a mapping like {max_velocity: 1000, max_strain: 10}.");
-    guard_options.max_velocity = guard.get_positive("max_velocity", guard_options.max_velocity);
-    guard_options.max_strain = guard.get_positive("max_strain", guard_options.max_strain);
-    guard_options.check_every = guard.get("check_every", 1);
-    if (guard_options.check_every < 1) guard.child("check_every").fail("must be >= 1.");
+    const ParamReader r(guard, guard_section_spec());  // defaults: GuardOptions's, through the spec
+    guard_options.max_velocity = r.number("max_velocity");
+    guard_options.max_strain = r.number("max_strain");
+    guard_options.check_every = r.int32("check_every");
     guard.check_unused();
   }
 }

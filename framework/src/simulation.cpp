@@ -25,6 +25,7 @@
 #include "loom/pins.hpp"
 #include "loom/restart.hpp"
 #include "loom/run_output.hpp"
+#include "loom/section_specs.hpp"
 #include "loom/vtk_output.hpp"
 #include "loom/threads.hpp"
 #include "loom/thread_controller.hpp"
@@ -96,7 +97,9 @@ void Simulation::check_memory(const Params& root, long long vertices) {
   memory_line_ = scene_build::memory_line(root, vertices);
 }
 
-void Simulation::build(const Params& root, const std::string& base_dir, PluginLoader& loader) {
+void Simulation::build(const Params& scene, const std::string& base_dir, PluginLoader& loader) {
+  // Every key the stages read is declared (loom/section_specs.hpp): an undeclared read throws.
+  const Params root = with_section_spec(scene, "scene");
   if (!root.is_map()) root.fail("a scene file must be a YAML mapping with mesh, material, integrator, ... sections.");
   scene_ = std::make_unique<Scene>();
   Scene& sc = *scene_;
@@ -108,7 +111,7 @@ void Simulation::build(const Params& root, const std::string& base_dir, PluginLo
   resolved_yaml_ = root.dump();
   base_dir_ = base_dir.empty() ? std::string(".") : base_dir;
 
-  sc.backend = root.get_choice("backend", "cpu", {"cpu", "cuda"});
+  sc.backend = ParamReader(root, scene_section_spec()).text("backend");
   if (configure_threads(root.child("threads"), sc) && usable_cores() > 1)
     thread_ctl_ = std::make_unique<ThreadController>(sc.threads, usable_cores());
 

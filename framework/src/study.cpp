@@ -1,4 +1,5 @@
 #include "loom/study.hpp"
+#include "loom/section_specs.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -200,7 +201,7 @@ StudyCombo parse_combo(const Params& c) {
 StudyPlan parse_study(const std::string& study_file) {
   StudyPlan plan;
   plan.file = study_file;
-  Params study = Params::from_file(study_file);
+  const Params study = with_section_spec(Params::from_file(study_file), "study");  // its keys: section_specs.cpp
   if (!study.is_map()) study.fail("a study file is a mapping with times, steps, combos (and reference).");
   study.child("description");
   study.child("stability");  // read by loom study --stability
@@ -240,7 +241,7 @@ StudyPlan parse_study(const std::string& study_file) {
   Params cp = study.child("combos");
   if (!cp.is_sequence() || cp.size() == 0)
     study.fail("missing 'combos': a list of {name, set: {integrator.type: ..., ...}}.");
-  for (std::size_t k = 0; k < cp.size(); ++k) plan.combos.push_back(parse_combo(cp.at(k)));
+  for (std::size_t k = 0; k < cp.size(); ++k) plan.combos.push_back(parse_combo(with_section_spec(cp.at(k), "study_combos")));
   plan.combos_where = cp;
   study.check_unused();
   return plan;
@@ -249,13 +250,13 @@ StudyPlan parse_study(const std::string& study_file) {
 StabilityPlan parse_stability(const std::string& study_file) {
   StabilityPlan plan;
   plan.file = study_file;
-  Params study = Params::from_file(study_file);
+  const Params study = with_section_spec(Params::from_file(study_file), "study");
   if (!study.is_map()) study.fail("a study file is a mapping with a 'stability' section (and the work-precision part).");
   // The work-precision part's sections are declared keys of the file (parse_study checks
   // them); anything else at the top level is a typo.
   for (const char* k : {"description", "times", "steps", "reference", "combos", "max_seconds_per_run", "max_strain"})
     study.child(k);
-  Params st = study.child("stability");
+  const Params st = with_section_spec(study.child("stability"), "stability");
   if (!st.is_map())
     study.fail("no 'stability' section. Fix: add stability: {combos: [...], sweep: {key: material.stiffness, "
                "values: [2e3, 2e5]}, horizon: 0.5, h_min: 1e-7, h_max: 0.05}.");
@@ -270,7 +271,7 @@ StabilityPlan parse_stability(const std::string& study_file) {
   plan.max_seconds = st.get_positive("max_seconds_per_run", 60.0);
   Params cp = st.child("combos");
   if (!cp.is_sequence() || cp.size() == 0) st.fail("missing 'combos': a list of {name, set: {integrator.type: ...}}.");
-  for (std::size_t k = 0; k < cp.size(); ++k) plan.combos.push_back(parse_combo(cp.at(k)));
+  for (std::size_t k = 0; k < cp.size(); ++k) plan.combos.push_back(parse_combo(with_section_spec(cp.at(k), "study_combos")));
   Params sw = st.child("sweep");
   if (sw.valid()) {
     plan.key = sw.require_string("key");
