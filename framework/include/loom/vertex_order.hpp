@@ -18,6 +18,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <cstdlib>
 #include <span>
@@ -183,62 +184,50 @@ inline double mean_spring_span(std::span<const Index> si, std::span<const Index>
   return sum / static_cast<double>(si.size());
 }
 
-/// out[D k + e] = in[D perm[k] + e] (user -> internal), converting the scalar if U != T.
-template <int D, class T, class U>
-void gather_vertices(const VertexOrder& o, const U* in, T* out) {
+namespace detail {
+
+// The one permuting copy: for each of the `Arrays` (in, out) pairs, in one pass (one parallel
+// region), D values per vertex between the user's numbering and the internal one; ToUser false
+// gathers (out[D k + e] = in[D perm[k] + e]), true scatters (out[D perm[k] + e] = in[D k + e]).
+template <int D, bool ToUser, std::size_t Arrays, class T, class U>
+void permute_vertices(const VertexOrder& o, const std::array<const U*, Arrays>& in, const std::array<T*, Arrays>& out) {
   const Index n = static_cast<Index>(o.perm.size());
   const Index* P = o.perm.data();
   for_vertex_ranges(n, [=](Index v0, Index v1) {
     for (Index k = v0; k < v1; ++k) {
-      const std::size_t a = static_cast<std::size_t>(D) * static_cast<std::size_t>(P[k]);
-      for (int e = 0; e < D; ++e) out[static_cast<std::size_t>(D) * k + e] = static_cast<T>(in[a + e]);
+      const std::size_t user = static_cast<std::size_t>(D) * static_cast<std::size_t>(P[k]);
+      const std::size_t internal = static_cast<std::size_t>(D) * static_cast<std::size_t>(k);
+      const std::size_t from = ToUser ? internal : user, to = ToUser ? user : internal;
+      for (std::size_t j = 0; j < Arrays; ++j)
+        for (int e = 0; e < D; ++e) out[j][to + e] = static_cast<T>(in[j][from + e]);
     }
   });
+}
+
+}  // namespace detail
+
+/// out[D k + e] = in[D perm[k] + e] (user -> internal), converting the scalar if U != T.
+template <int D, class T, class U>
+void gather_vertices(const VertexOrder& o, const U* in, T* out) {
+  detail::permute_vertices<D, false, 1, T, U>(o, {in}, {out});
 }
 
 /// out[D perm[k] + e] = in[D k + e] (internal -> user).
 template <int D, class T, class U>
 void scatter_vertices(const VertexOrder& o, const U* in, T* out) {
-  const Index n = static_cast<Index>(o.perm.size());
-  const Index* P = o.perm.data();
-  for_vertex_ranges(n, [=](Index v0, Index v1) {
-    for (Index k = v0; k < v1; ++k) {
-      const std::size_t a = static_cast<std::size_t>(D) * static_cast<std::size_t>(P[k]);
-      for (int e = 0; e < D; ++e) out[a + e] = static_cast<T>(in[static_cast<std::size_t>(D) * k + e]);
-    }
-  });
+  detail::permute_vertices<D, true, 1, T, U>(o, {in}, {out});
 }
 
 /// Positions and velocities (3 per vertex) user -> internal, in one pass (one parallel region).
 template <class T, class U>
 void gather_state(const VertexOrder& o, const U* x, const U* v, T* xo, T* vo) {
-  const Index n = static_cast<Index>(o.perm.size());
-  const Index* P = o.perm.data();
-  for_vertex_ranges(n, [=](Index v0, Index v1) {
-    for (Index k = v0; k < v1; ++k) {
-      const std::size_t a = 3 * static_cast<std::size_t>(P[k]), b = 3 * static_cast<std::size_t>(k);
-      for (int e = 0; e < 3; ++e) {
-        xo[b + e] = static_cast<T>(x[a + e]);
-        vo[b + e] = static_cast<T>(v[a + e]);
-      }
-    }
-  });
+  detail::permute_vertices<3, false, 2, T, U>(o, {x, v}, {xo, vo});
 }
 
 /// Positions and velocities internal -> user, in one pass.
 template <class T, class U>
 void scatter_state(const VertexOrder& o, const U* x, const U* v, T* xo, T* vo) {
-  const Index n = static_cast<Index>(o.perm.size());
-  const Index* P = o.perm.data();
-  for_vertex_ranges(n, [=](Index v0, Index v1) {
-    for (Index k = v0; k < v1; ++k) {
-      const std::size_t a = 3 * static_cast<std::size_t>(P[k]), b = 3 * static_cast<std::size_t>(k);
-      for (int e = 0; e < 3; ++e) {
-        xo[a + e] = static_cast<T>(x[b + e]);
-        vo[a + e] = static_cast<T>(v[b + e]);
-      }
-    }
-  });
+  detail::permute_vertices<3, true, 2, T, U>(o, {x, v}, {xo, vo});
 }
 
 }  // namespace loom
