@@ -29,6 +29,14 @@ std::vector<double> finite3(const Params& p, const std::string& what, const std:
   return v;
 }
 
+// Optional section `name` of the scene with its spec attached (section_specs.cpp); when given
+// it must be a mapping (`example` shows one).
+Params optional_section(const Params& root, const std::string& name, const std::string& example) {
+  const Params p = with_section_spec(root.child(name), name);
+  if (p.valid() && !p.is_map()) p.fail("must be a mapping like " + example + ".");
+  return p;
+}
+
 }  // namespace
 
 void apply_overrides(Params& root, const std::vector<std::string>& overrides) {
@@ -330,33 +338,15 @@ std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const In
 
 void output_and_guards(const Params& root, int& frames, OutputOptions& output_options, GuardOptions& guard_options) {
   frames = ParamReader(root, scene_section_spec()).int32("frames");
-  const Params out = with_section_spec(root.child("output"), "output");
-  if (out.valid()) {
-    if (!out.is_map()) out.fail("must be a mapping like {dir: out/run, obj: true, stats: true}.");
-    const ParamReader r(out, output_section_spec());  // defaults: OutputOptions's, through the spec
-    output_options.dir = r.text("dir");
-    output_options.obj = r.flag("obj");
-    output_options.stats = r.flag("stats");
-    output_options.every = r.int32("every");
-    output_options.pc2 = r.flag("pc2");
-    output_options.uvs = r.flag("uvs");
-    output_options.normals = r.flag("normals");
-    output_options.lossless = r.flag("lossless");
-    output_options.vtk = r.flag("vtk");
-    output_options.velocities = r.flag("velocities");
-    output_options.restart = r.flag("restart");
+  if (const Params out = optional_section(root, "output", "{dir: out/run, obj: true, stats: true}"); out.valid()) {
+    output_section_fields().read(out, output_options);  // every key, defaults OutputOptions's
     if (output_options.velocities && !output_options.vtk && !output_options.pc2)
       out.child("velocities").fail("velocities are written into the ParaView frames (vtk: true) and/or velocity.pc2 "
                                    "beside run.pc2 (pc2: true). Fix: turn one of them on.");
     out.check_unused();
   }
-  const Params guard = with_section_spec(root.child("guard"), "guard");
-  if (guard.valid()) {
-    if (!guard.is_map()) guard.fail("must be a mapping like {max_velocity: 1000, max_strain: 10}.");
-    const ParamReader r(guard, guard_section_spec());  // defaults: GuardOptions's, through the spec
-    guard_options.max_velocity = r.number("max_velocity");
-    guard_options.max_strain = r.number("max_strain");
-    guard_options.check_every = r.int32("check_every");
+  if (const Params guard = optional_section(root, "guard", "{max_velocity: 1000, max_strain: 10}"); guard.valid()) {
+    guard_section_fields().read(guard, guard_options);  // every key, defaults GuardOptions's
     guard.check_unused();
   }
 }

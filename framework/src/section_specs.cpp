@@ -59,40 +59,44 @@ const ParamSpec& mesh_section_spec() {
   return s;
 }
 
-const ParamSpec& output_section_spec() {
-  static const ParamSpec s = [] {
-    const OutputOptions d;
-    ParamSpec s("output", "files a run writes (loom run --out DIR sets dir)");
-    s.text("dir", "").default_text("none (no files)").framework().help("output folder");
-    s.flag("obj", d.obj).framework().help("one OBJ per written frame");
-    s.flag("stats", d.stats).framework().help("stats.csv: energies, strain, cost per frame");
-    s.integer("every", d.every).range(ParamRange::closed(1, 1e9)).framework().help("write every n-th frame");
-    s.flag("pc2", d.pc2).framework().help("run.pc2 point cache beside rest.obj (Blender)");
-    s.flag("uvs", d.uvs).framework().help("OBJ frames carry texture coordinates (vt)");
-    s.flag("normals", d.normals).framework().help("OBJ frames carry normals (vn)");
-    s.flag("lossless", d.lossless).framework().help("OBJ coordinates in full double precision");
-    s.flag("vtk", d.vtk).framework().help("ParaView frames (frame_NNNNN.vtu) and run.pvd");
-    s.flag("velocities", d.velocities).framework().help("per-vertex velocities in the .vtu frames / velocity.pc2");
-    s.flag("restart", d.restart).framework().help("restart.bin after every frame (loom run --resume)");
-    return s;
+const ParamFields<OutputOptions>& output_section_fields() {
+  static const ParamFields<OutputOptions> fields = [] {
+    using O = OutputOptions;
+    ParamFields<O> f("output", "files a run writes (loom run --out DIR sets dir)");
+    f.text("dir", &O::dir).default_text("none (no files)").framework().help("output folder");
+    f.flag("obj", &O::obj).framework().help("one OBJ per written frame");
+    f.flag("stats", &O::stats).framework().help("stats.csv: energies, strain, cost per frame");
+    f.integer("every", &O::every).range(ParamRange::closed(1, 1e9)).framework().help("write every n-th frame");
+    f.flag("pc2", &O::pc2).framework().help("run.pc2 point cache beside rest.obj (Blender)");
+    f.flag("uvs", &O::uvs).framework().help("OBJ frames carry texture coordinates (vt)");
+    f.flag("normals", &O::normals).framework().help("OBJ frames carry normals (vn)");
+    f.flag("lossless", &O::lossless).framework().help("OBJ coordinates in full double precision");
+    f.flag("vtk", &O::vtk).framework().help("ParaView frames (frame_NNNNN.vtu) and run.pvd");
+    f.flag("velocities", &O::velocities).framework().help("per-vertex velocities in the .vtu frames / velocity.pc2");
+    f.flag("restart", &O::restart).framework().help("restart.bin after every frame (loom run --resume)");
+    return f;
   }();
-  return s;
+  return fields;
 }
 
-const ParamSpec& guard_section_spec() {
-  static const ParamSpec s = [] {
-    const GuardOptions d;
-    ParamSpec s("guard", "divergence guards: the run stops with exit code 3 when one trips");
-    s.number("max_velocity", d.max_velocity).range(ParamRange::positive()).units("m/s").framework().help(
+const ParamSpec& output_section_spec() { return output_section_fields().spec(); }
+
+const ParamFields<GuardOptions>& guard_section_fields() {
+  static const ParamFields<GuardOptions> fields = [] {
+    using O = GuardOptions;
+    ParamFields<O> f("guard", "divergence guards: the run stops with exit code 3 when one trips");
+    f.number("max_velocity", &O::max_velocity).range(ParamRange::positive()).units("m/s").framework().help(
         "largest vertex speed");
-    s.number("max_strain", d.max_strain).range(ParamRange::positive()).framework().help(
+    f.number("max_strain", &O::max_strain).range(ParamRange::positive()).framework().help(
         "largest element strain (relative), checked once per frame");
-    s.integer("check_every", d.check_every).range(ParamRange::closed(1, 1e9)).framework().help(
+    f.integer("check_every", &O::check_every).range(ParamRange::closed(1, 1e9)).framework().help(
         "steps between the NaN / speed checks");
-    return s;
+    return f;
   }();
-  return s;
+  return fields;
 }
+
+const ParamSpec& guard_section_spec() { return guard_section_fields().spec(); }
 
 const ParamSpec& self_collision_section_spec() {
   static const ParamSpec s = [] {

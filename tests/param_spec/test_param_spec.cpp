@@ -16,6 +16,7 @@
 #include <stdexcept>
 
 #include "loom/mesh.hpp"
+#include "loom/param_fields.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/registry.hpp"
 #include "loom/section_specs.hpp"
@@ -665,4 +666,45 @@ TEST(SectionSpecs, AnUndeclaredReadOfAFrameworkSectionThrows) {
   const std::string t = loom::params_table(plugins().reg, "colliders", false);
   for (const char* k : {"radius", "friction.kinetic", "motion.angular_velocity", "rad/s"})
     EXPECT_NE(t.find(k), std::string::npos) << k << "\n" << t;
+}
+
+// ParamFields (loom/param_fields.hpp): one line declares a key (default = the member's default)
+// and reads it into the member; read(p, o) leaves the members it does not bind alone.
+TEST(ParamFields, DeclaresFromTheMembersAndReadsIntoThem) {
+  struct Opts {
+    double tolerance = 1e-6;
+    int iterations = 50;
+    bool warm = true;
+    std::string name = "x";
+    std::string mode = "fast";
+    int not_a_key = 7;
+  };
+  loom::ParamFields<Opts> f("opts");
+  f.number("tolerance", &Opts::tolerance).range(ParamRange::positive());
+  f.integer("iterations", &Opts::iterations).range(ParamRange::closed(1, 100));
+  f.flag("warm", &Opts::warm);
+  f.text("name", &Opts::name);
+  f.choice("mode", &Opts::mode, {"fast", "exact"});
+  const ParamSpec& s = f.spec();
+  ASSERT_EQ(s.keys(), (std::vector<std::string>{"tolerance", "iterations", "warm", "name", "mode"}));
+  EXPECT_EQ(s.find("tolerance")->default_number, 1e-6);
+  EXPECT_EQ(s.find("iterations")->default_number, 50);
+  EXPECT_TRUE(s.find("warm")->default_bool);
+  EXPECT_EQ(s.find("mode")->default_string, "fast");
+  const Opts d = f.read(Params::from_string("{}", "o.yaml"));
+  EXPECT_EQ(d.tolerance, 1e-6);
+  EXPECT_EQ(d.iterations, 50);
+  Opts o;
+  o.not_a_key = 3;
+  f.read(Params::from_string("tolerance: 0.5\niterations: 9\nwarm: false\nname: y\nmode: exact\n", "o.yaml"), o);
+  EXPECT_EQ(o.tolerance, 0.5);
+  EXPECT_EQ(o.iterations, 9);
+  EXPECT_FALSE(o.warm);
+  EXPECT_EQ(o.name, "y");
+  EXPECT_EQ(o.mode, "exact");
+  EXPECT_EQ(o.not_a_key, 3);
+  const std::string e = error_of([&] { f.read(Params::from_string("iterations: 0\n", "o.yaml")); });
+  EXPECT_NE(e.find("o.yaml:1"), std::string::npos) << e;
+  EXPECT_NE(e.find("[1, 100]"), std::string::npos) << e;
+  EXPECT_NE(error_of([&] { f.read(Params::from_string("mode: slow\n", "o.yaml")); }).find("fast, exact"), std::string::npos);
 }

@@ -16,14 +16,21 @@
 #include <utility>
 #include <vector>
 
+#include "loom/param_fields.hpp"
 #include "loom/param_spec.hpp"
 
 namespace loom {
+
+struct OutputOptions;  // loom/simulation.hpp
+struct GuardOptions;
 
 const ParamSpec& scene_section_spec();          ///< the top-level keys
 const ParamSpec& mesh_section_spec();
 const ParamSpec& output_section_spec();
 const ParamSpec& guard_section_spec();
+/// The output and guard keys bound to their options' members (the spec and the reader in one).
+const ParamFields<OutputOptions>& output_section_fields();
+const ParamFields<GuardOptions>& guard_section_fields();
 const ParamSpec& self_collision_section_spec();
 const ParamSpec& solver_section_spec();         ///< `type`; the builder adds one open block per solver name
 const ParamSpec& bending_section_spec();        ///< material.bending (loom/bending.hpp)

@@ -16,6 +16,7 @@
 
 #include "loom/clock.hpp"
 #include "loom/kernels/bsr_ops.hpp"
+#include "loom/param_fields.hpp"
 #include "loom/solver_common.hpp"
 
 namespace loom {
@@ -115,41 +116,36 @@ void petsc_ensure_initialized() {
   std::atexit(finalize_petsc_at_exit);
 }
 
-const ParamSpec& PetscSolverOptions::spec() {
-  static const ParamSpec spec = [] {
-    const PetscSolverOptions d;
-    ParamSpec s("petsc", "PETSc KSP on the bs=3 projected system, distributed under mpirun");
-    s.choice("ksp", d.ksp, {"cg", "cr", "minres", "gmres", "fgmres", "bcgs", "pipecg", "preonly"}).help("KSP type");
-    s.choice("pc", d.pc, {"jacobi", "bjacobi", "gamg", "none", "sor", "ilu", "icc", "hypre", "boomeramg", "cholesky", "lu"})
+namespace {
+
+// The keys of petsc, each bound to its PetscSolverOptions member (loom/param_fields.hpp).
+const ParamFields<PetscSolverOptions>& petsc_fields() {
+  static const ParamFields<PetscSolverOptions> fields = [] {
+    using O = PetscSolverOptions;
+    ParamFields<O> f("petsc", "PETSc KSP on the bs=3 projected system, distributed under mpirun");
+    f.choice("ksp", &O::ksp, {"cg", "cr", "minres", "gmres", "fgmres", "bcgs", "pipecg", "preonly"}).help("KSP type");
+    f.choice("pc", &O::pc, {"jacobi", "bjacobi", "gamg", "none", "sor", "ilu", "icc", "hypre", "boomeramg", "cholesky", "lu"})
         .help("PC type");
-    s.choice("near_null_space", d.near_null_space, {"auto", "rigid", "none"}).help(
+    f.choice("near_null_space", &O::near_null_space, {"auto", "rigid", "none"}).help(
         "rigid-body modes for gamg/hypre (auto: when the integrator passes positions)");
-    s.number("tolerance", d.tolerance).range(ParamRange::positive()).help(
+    f.number("tolerance", &O::tolerance).range(ParamRange::positive()).help(
         "relative residual |S(b - A dv)| / |S(b - A z)|");
-    s.integer("max_iterations", d.max_iterations).range(ParamRange::closed(1, 1e8)).help(
+    f.integer("max_iterations", &O::max_iterations).range(ParamRange::closed(1, 1e8)).help(
         "iterations before the solve counts as failed");
-    s.integer("reuse_preconditioner_steps", d.reuse_preconditioner_steps).range(ParamRange::closed(1, 1e6))
+    f.integer("reuse_preconditioner_steps", &O::reuse_preconditioner_steps).range(ParamRange::closed(1, 1e6))
         .units("steps").help("rebuild the preconditioner every N steps (1 = every step)");
-    s.text("options", d.options).help("PETSc options, e.g. \"-ksp_monitor -pc_gamg_threshold 0.01\"");
-    s.choice("matrix", d.matrix, {"auto", "baij", "aij"}).help("matrix format (auto: BAIJ, AIJ for gamg/hypre)");
-    return s;
+    f.text("options", &O::options).help("PETSc options, e.g. \"-ksp_monitor -pc_gamg_threshold 0.01\"");
+    f.choice("matrix", &O::matrix, {"auto", "baij", "aij"}).help("matrix format (auto: BAIJ, AIJ for gamg/hypre)");
+    return f;
   }();
-  return spec;
+  return fields;
 }
 
-PetscSolverOptions PetscSolverOptions::from_params(const Params& p) {
-  PetscSolverOptions o;
-  const ParamReader r(p, spec());
-  o.ksp = r.text("ksp");
-  o.pc = r.text("pc");
-  o.near_null_space = r.text("near_null_space");
-  o.tolerance = r.number("tolerance");
-  o.max_iterations = r.int32("max_iterations");
-  o.reuse_preconditioner_steps = r.int32("reuse_preconditioner_steps");
-  o.options = r.text("options");
-  o.matrix = r.text("matrix");
-  return o;
-}
+}  // namespace
+
+const ParamSpec& PetscSolverOptions::spec() { return petsc_fields().spec(); }
+
+PetscSolverOptions PetscSolverOptions::from_params(const Params& p) { return petsc_fields().read(p); }
 
 struct PetscSolver::Impl {
   PetscSolverOptions opt;

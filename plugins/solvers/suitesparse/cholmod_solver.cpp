@@ -13,6 +13,7 @@
 #include <cholmod.h>
 
 #include "loom/clock.hpp"
+#include "loom/param_fields.hpp"
 #include "loom/solver_common.hpp"
 
 extern "C" {
@@ -70,36 +71,33 @@ void apply_blas_threads(int requested, Index vertices) {
 
 }  // namespace
 
-const ParamSpec& CholmodOptions::spec() {
-  static const ParamSpec spec = [] {
-    const CholmodOptions d;
-    ParamSpec s("cholmod", "SuiteSparse CHOLMOD Cholesky of the projected system");
-    s.number("tolerance", d.tolerance).range(ParamRange::positive()).help(
+namespace {
+
+// The keys of cholmod, each bound to its CholmodOptions member (loom/param_fields.hpp).
+const ParamFields<CholmodOptions>& cholmod_fields() {
+  static const ParamFields<CholmodOptions> fields = [] {
+    using O = CholmodOptions;
+    ParamFields<O> f("cholmod", "SuiteSparse CHOLMOD Cholesky of the projected system");
+    f.number("tolerance", &O::tolerance).range(ParamRange::positive()).help(
         "relative residual |S(b - A dv)| / |S(b - A z)| a solve with a reused factor must reach");
-    s.integer("reuse_factorization_steps", d.reuse_factorization_steps).range(ParamRange::closed(1, 1e6))
+    f.integer("reuse_factorization_steps", &O::reuse_factorization_steps).range(ParamRange::closed(1, 1e6))
         .units("steps").help("refactor every N steps (1 = every step); in between PCG with the old factor");
-    s.integer("max_iterations", d.max_iterations).range(ParamRange::closed(0, 100000)).help(
+    f.integer("max_iterations", &O::max_iterations).range(ParamRange::closed(0, 100000)).help(
         "PCG iterations with a stale factor before refactoring");
-    s.choice("ordering", d.ordering, {"auto", "amd", "metis", "nesdis", "natural"}).help("fill-reducing ordering");
-    s.choice("factorization", d.factorization, {"supernodal", "simplicial", "auto"}).help("CHOLMOD factorization kind");
-    s.integer("blas_threads", d.blas_threads).range(ParamRange::closed(0, 1024)).units("threads").help(
+    f.choice("ordering", &O::ordering, {"auto", "amd", "metis", "nesdis", "natural"}).help("fill-reducing ordering");
+    f.choice("factorization", &O::factorization, {"supernodal", "simplicial", "auto"}).help("CHOLMOD factorization kind");
+    f.integer("blas_threads", &O::blas_threads).range(ParamRange::closed(0, 1024)).units("threads").help(
         "OpenBLAS threads (0: $OPENBLAS_NUM_THREADS if set, else 1 below 10000 vertices and the OpenMP count above)");
-    return s;
+    return f;
   }();
-  return spec;
+  return fields;
 }
 
-CholmodOptions CholmodOptions::from_params(const Params& p) {
-  CholmodOptions o;
-  const ParamReader r(p, spec());
-  o.tolerance = r.number("tolerance");
-  o.reuse_factorization_steps = r.int32("reuse_factorization_steps");
-  o.max_iterations = r.int32("max_iterations");
-  o.ordering = r.text("ordering");
-  o.factorization = r.text("factorization");
-  o.blas_threads = r.int32("blas_threads");
-  return o;
-}
+}  // namespace
+
+const ParamSpec& CholmodOptions::spec() { return cholmod_fields().spec(); }
+
+CholmodOptions CholmodOptions::from_params(const Params& p) { return cholmod_fields().read(p); }
 
 struct CholmodSolver::Impl {
   CholmodOptions opt;
