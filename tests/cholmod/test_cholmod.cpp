@@ -46,6 +46,24 @@ SolveReport factor_and_solve(LinearSolver& solver, const System& s, std::vector<
   return solver.solve(s.A, s.S, s.b, s.z, dv);
 }
 
+// `steps` factorize-and-solve steps of one solver on a matrix that drifts as positions do in a
+// simulation (x scaled by 1 + rate * step, then reassembled); check(step, report, dv) sees each
+// converged solve.
+template <class Check>
+void drifting_solves(System& s, CholmodSolver& solver, int steps, double rate, Check check) {
+  solver.analyze_pattern(s.A, s.S);
+  for (int step = 0; step < steps; ++step) {
+    for (double& xi : s.x) xi *= 1.0 + rate * step;
+    testsys::assemble(s, true);
+    SolveReport f;
+    ASSERT_TRUE(solver.factorize(s.A, s.S, f)) << f.message;
+    std::vector<double> dv(3 * s.n, 0.0);
+    const SolveReport rep = solver.solve(s.A, s.S, s.b, s.z, dv);
+    ASSERT_TRUE(rep.converged) << rep.message;
+    check(step, rep, dv);
+  }
+}
+
 }  // namespace
 
 TEST(Cholmod, RandomNetworksAgreeWithDenseLdlt) {
@@ -166,24 +184,15 @@ TEST(Cholmod, ReusedFactorMeetsToleranceAndRefactorsEveryN) {
   o.reuse_factorization_steps = 3;
   o.tolerance = 1e-12;
   CholmodSolver solver(o);
-  solver.analyze_pattern(s.A, s.S);
   int stale_solves = 0;
-  for (int step = 0; step < 7; ++step) {
-    // The matrix drifts from step to step, as positions do in a simulation.
-    for (double& xi : s.x) xi *= 1.0 + 0.002 * step;
-    testsys::assemble(s, true);
-    SolveReport f;
-    ASSERT_TRUE(solver.factorize(s.A, s.S, f)) << f.message;
-    std::vector<double> dv(3 * s.n, 0.0);
-    const SolveReport rep = solver.solve(s.A, s.S, s.b, s.z, dv);
-    ASSERT_TRUE(rep.converged) << rep.message;
+  drifting_solves(s, solver, 7, 0.002, [&](int step, const SolveReport& rep, const std::vector<double>& dv) {
     EXPECT_LE(rep.residual, 1e-12);
     if (step % 3 != 0) {
       EXPECT_GT(rep.iterations, 1) << "step " << step;  // refined with the stale factor
       ++stale_solves;
     }
     expect_solution_ok(s, dv, 1e-9);
-  }
+  });
   EXPECT_EQ(stale_solves, 4);
   EXPECT_EQ(solver.numeric_factorizations(), 3);  // steps 0, 3, 6
 }
@@ -286,16 +295,8 @@ TEST(Cholmod, StaleFactorPreconditionsPcgWithPinsAndContacts) {
   o.reuse_factorization_steps = 4;
   o.tolerance = 1e-11;
   CholmodSolver solver(o);
-  solver.analyze_pattern(s.A, s.S);
   int stale = 0;
-  for (int step = 0; step < 4; ++step) {
-    for (double& xi : s.x) xi *= 1.0 + 0.003 * step;
-    testsys::assemble(s, true);
-    SolveReport f;
-    ASSERT_TRUE(solver.factorize(s.A, s.S, f)) << f.message;
-    std::vector<double> dv(3 * s.n, 0.0);
-    const SolveReport rep = solver.solve(s.A, s.S, s.b, s.z, dv);
-    ASSERT_TRUE(rep.converged) << rep.message;
+  drifting_solves(s, solver, 4, 0.003, [&](int step, const SolveReport& rep, const std::vector<double>& dv) {
     EXPECT_LE(rep.residual, 1e-11);
     if (step > 0) {
       EXPECT_GT(rep.iterations, 1) << "step " << step;
@@ -323,7 +324,7 @@ TEST(Cholmod, StaleFactorPreconditionsPcgWithPinsAndContacts) {
     s.S.apply_complement(c);
     for (std::size_t i = 0; i < c.size(); ++i) cerr = std::max(cerr, std::abs(c[i] - s.z[i]));
     EXPECT_LT(cerr, 1e-14);
-  }
+  });
   EXPECT_EQ(stale, 3);
   EXPECT_EQ(solver.numeric_factorizations(), 1);
 }
