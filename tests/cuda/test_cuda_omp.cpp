@@ -83,20 +83,23 @@ using loom_cuda_test::run;
 }  // namespace
 
 // ---------------------------------------------------------------- seam
-#ifdef LOOM_CUDA_OMP_STANDIN
-TEST(CudaSeam, IsTheThrustOpenMpStandIn) {
-  EXPECT_STREQ(lc::seam_name(), "thrust-omp");
+// The device check that backend: cuda makes before it allocates, on either seam (the real one,
+// the Thrust-OpenMP stand-in): require_device passes exactly when the seam counts a device, and
+// otherwise refuses the scene with the fix.
+TEST(CudaSeam, RequireDeviceAgreesWithTheDeviceCount) {
   std::string why;
-  EXPECT_EQ(lc::seam_device_count(why), 1);
-  EXPECT_NO_THROW(lc::seam_require_device("<test>"));
+  if (lc::seam_device_count(why) > 0) {
+    EXPECT_NO_THROW(lc::seam_require_device("<test>"));
+    return;
+  }
+  try {
+    lc::seam_require_device("<test>");
+    ADD_FAILURE() << "no device (" << why << "), but require_device passed";
+  } catch (const loom::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("<test>: "), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("Fix: set backend: cpu"), std::string::npos) << e.what();
+  }
 }
-#else
-TEST(CudaSeam, IsTheRealCudaSeamWithADevice) {
-  EXPECT_STREQ(lc::seam_name(), "cuda");
-  std::string why;
-  EXPECT_GE(lc::seam_device_count(why), 1) << why;
-}
-#endif
 
 TEST(CudaSeam, BsrSpmvMatchesTheCpuProduct) {
   const Mesh mesh = make_grid(9, 8, 1.0, 1.0);
