@@ -4,18 +4,10 @@
 #include <filesystem>
 #include <fstream>
 
+#include "common/input_error.hpp"
 #include "loom/registry.hpp"
 
-namespace {
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const loom::InputError& e) {
-    return e.what();
-  }
-  return "";
-}
-}  // namespace
+using loom_test::error_of;
 
 TEST(Loader, LoadsOnlyTheNamedModule) {
   loom::Registry reg;

@@ -2,21 +2,13 @@
 
 #include <cmath>
 
+#include "common/input_error.hpp"
 #include "loom/params.hpp"
 
 using loom::InputError;
 using loom::Params;
 
-namespace {
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
-}  // namespace
+using loom_test::error_of;
 
 TEST(Params, TypedReadsAndDefaults) {
   Params p = Params::from_string("a: 1.5\nb: 3\nc: true\nd: hello\ne: [1, 2, 3]\n", "t.yaml");

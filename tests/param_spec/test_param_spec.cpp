@@ -21,6 +21,7 @@
 #include "loom/registry.hpp"
 #include "loom/section_specs.hpp"
 #include "loom/simulation.hpp"
+#include "common/input_error.hpp"
 #include "loom/study.hpp"
 
 namespace fs = std::filesystem;
@@ -32,14 +33,7 @@ using loom::ParamSpec;
 
 namespace {
 
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "";
-}
+using loom_test::error_of;
 
 ParamSpec example_spec() {
   ParamSpec s("example");
@@ -193,6 +187,8 @@ Loaded& plugins() {
   static Loaded l;
   return l;
 }
+
+std::string build_scene(const std::string& yaml);  // below
 
 // A YAML value for a declared key: its default, or a value inside its range.
 std::string value_for(const loom::ParamDecl& d) {
@@ -366,16 +362,7 @@ TEST(SectionSpecs, EveryDeclaredKeyIsReadAndNoOtherKey) {
   const fs::path obj = fs::temp_directory_path() / "loom_section_specs_square.obj";
   std::ofstream(obj) << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n";
   loom::Simulation::set_notes(false);
-  auto build = [&](const std::string& yaml) -> std::string {
-    try {
-      loom::Simulation::from_string(yaml, "scene.yaml", LOOM_SOURCE_DIR, {}, *l.loader);
-    } catch (const InputError& e) {
-      return e.what();
-    } catch (const std::logic_error& e) {  // a stage read a key its section does not declare
-      ADD_FAILURE() << e.what() << "\n" << yaml;
-    }
-    return "";
-  };
+  auto build = build_scene;
   const std::string rest = "material: {type: mass_spring}\nintegrator: {type: symplectic_euler, dt: 0.001}\n";
   const std::string grid = "mesh: {grid: {nx: 4, ny: 4}}\n";
   struct Section {
