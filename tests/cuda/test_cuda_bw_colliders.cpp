@@ -16,6 +16,7 @@
 
 #include "baraff_witkin.hpp"
 #include "cuda_integrators.hpp"
+#include "cuda_test_compare.hpp"
 #include "device_pcg.hpp"
 #include "eigen_pcg.hpp"
 #include "gnatv_material.hpp"
@@ -28,15 +29,7 @@ namespace lc = loom::cuda;
 
 namespace {
 
-double rel_diff(const std::vector<double>& a, const std::vector<double>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    num = std::max(num, std::fabs(a[k] - b[k]));
-    den = std::max(den, std::fabs(b[k]));
-  }
-  return den > 0 ? num / den : num;
-}
+using loom_cuda_test::rel_diff;
 
 Params scene_file(const std::string& name) {
   return Params::from_file(std::string(LOOM_SOURCE_DIR) + "/scenes/" + name);

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "cuda_integrators.hpp"
+#include "cuda_test_compare.hpp"
 #include "ho_integrator.hpp"
 #include "loom/mesh.hpp"
 #include "loom/scene.hpp"
@@ -24,15 +25,7 @@ namespace lc = loom::cuda;
 
 namespace {
 
-double rel_diff(const std::vector<double>& a, const std::vector<double>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    num = std::max(num, std::fabs(a[k] - b[k]));
-    den = std::max(den, std::fabs(b[k]));
-  }
-  return den > 0 ? num / den : num;
-}
+using loom_cuda_test::rel_diff;
 
 /// The colliders of a shipped scene file.
 ColliderSet shipped_colliders(const std::string& scene) {

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "cuda_integrators.hpp"
+#include "cuda_test_compare.hpp"
 #include "cuda_test_state.hpp"
 #include "device_model.hpp"
 #include "device_pcg.hpp"
@@ -36,23 +37,9 @@ using lc::DVec;
 
 namespace {
 
-double rel_diff(const std::vector<double>& a, const std::vector<double>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    num = std::max(num, std::fabs(a[k] - b[k]));
-    den = std::max(den, std::fabs(b[k]));
-  }
-  return den > 0 ? num / den : num;
-}
+using loom_cuda_test::rel_diff;
 
-template <class T>
-std::vector<double> to_host(const DVec<T>& d) {
-  std::vector<double> h;
-  std::vector<T> stage;
-  lc::download(d, h, stage);
-  return h;
-}
+using loom_cuda_test::to_host;
 
 // ---------------------------------------------------------------- an out-of-tree material
 // Springs on the mesh edges (edges along x damped, the others not: two Spring blocks) plus
