@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "cuda_integrators.hpp"
+#include "cuda_test_compare.hpp"
 #include "cuda_test_state.hpp"
 #include "gnatv_material.hpp"
 #include "loom/bending.hpp"
@@ -29,15 +30,7 @@ using loom::symplectic_euler::SymplecticEuler;
 
 namespace {
 
-double rel_diff(const std::vector<double>& a, const std::vector<double>& b) {
-  EXPECT_EQ(a.size(), b.size());
-  double num = 0, den = 0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    num = std::max(num, std::fabs(a[k] - b[k]));
-    den = std::max(den, std::fabs(b[k]));
-  }
-  return den > 0 ? num / den : num;
-}
+using loom_cuda_test::rel_diff;
 
 const std::string kScene = "draped_ball_symplectic_euler.yaml";
 
