@@ -8,7 +8,7 @@
 // step moves to and from memory), GB/s = bytes x fps, bw_frac = GB/s / triad bandwidth of this
 // machine with the same thread count (measured at start-up, best of 5, 3 x 128 MB arrays).
 //
-//   OMP_PROC_BIND=close OMP_PLACES=cores build/bin/table1 --benchmark_repetitions=3 \
+//   OMP_PROC_BIND=close OMP_PLACES=cores build/bin/table1 --benchmark_repetitions=3
 //     --benchmark_report_aggregates_only=true --benchmark_min_time=0.3
 #include <benchmark/benchmark.h>
 
