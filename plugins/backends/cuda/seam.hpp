@@ -11,9 +11,6 @@
 
 namespace loom::cuda {
 
-/// "cuda" or "thrust-omp".
-const char* seam_name();
-
 /// Number of usable devices; on failure 0 with the reason in `error`. The OpenMP build
 /// always has one (the host).
 int seam_device_count(std::string& error);

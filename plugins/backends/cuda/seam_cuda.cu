@@ -10,8 +10,6 @@
 
 namespace loom::cuda {
 
-const char* seam_name() { return "cuda"; }
-
 int seam_device_count(std::string& error) {
   int count = 0;
   const cudaError_t e = cudaGetDeviceCount(&count);

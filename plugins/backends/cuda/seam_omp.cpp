@@ -11,8 +11,6 @@
 
 namespace loom::cuda {
 
-const char* seam_name() { return "thrust-omp"; }
-
 int seam_device_count(std::string& error) {
   error.clear();
   return 1;
