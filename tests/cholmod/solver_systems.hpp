@@ -241,4 +241,19 @@ inline double rel_diff(std::span<const double> a, const Eigen::VectorXd& ref) {
   return std::sqrt(num / den);
 }
 
+/// The preconditioner tests' set: two random spring networks (pins, 1- and 2-direction
+/// constraints, nonzero z, masses over 3 decades), the hanging mass-spring cloth (pinned
+/// corners), and a cloth with random contacts.
+inline std::vector<System> preconditioner_systems() {
+  std::vector<System> v;
+  v.push_back(random_network(150, 3));
+  v.push_back(random_network(200, 8, 0.01, 0.3, 2));
+  v.push_back(cloth(12));
+  System c = cloth(14, 1e-3, 1e4, 2);
+  std::mt19937_64 rng(5);
+  random_constraints(c, rng, 0.05, 0.1, 0.05, true);  // contacts on a cloth
+  v.push_back(std::move(c));
+  return v;
+}
+
 }  // namespace loom::testsys

@@ -474,7 +474,9 @@ TEST(HoStorage, TableAndDirectAgreeBitwise) {
       HoIntegrator ho(var, table == 1);
       ho.prepare(*scene, 1e-4);
       EXPECT_EQ(ho.springs().table, table == 1);
-      if (table) EXPECT_LE(ho.springs().t_l0.size(), 20u);
+      if (table) {
+        EXPECT_LE(ho.springs().t_l0.size(), 20u);
+      }
       for (int st = 0; st < 50; ++st) ho.step(*scene, 1e-4);
       res[table] = scene->state.x;
       res[table].insert(res[table].end(), scene->state.v.begin(), scene->state.v.end());

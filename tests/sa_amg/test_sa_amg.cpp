@@ -46,21 +46,8 @@ loom::PcgOptions amg_pcg(double tol, int modes = 6, int maxit = 500) {
   return o;
 }
 
-// The test systems: random spring networks (pins, 1- and 2-direction constraints, nonzero z,
-// masses over 3 decades) and the hanging mass-spring cloth (pinned corners).
-std::vector<ts::System> systems() {
-  std::vector<ts::System> v;
-  v.push_back(ts::random_network(150, 3));
-  v.push_back(ts::random_network(200, 8, 0.01, 0.3, 2));
-  v.push_back(ts::cloth(12));
-  {
-    ts::System c = ts::cloth(14, 1e-3, 1e4, 2);
-    std::mt19937_64 rng(5);
-    ts::random_constraints(c, rng, 0.05, 0.1, 0.05, true);  // contacts on a cloth
-    v.push_back(std::move(c));
-  }
-  return v;
-}
+// The test systems: ts::preconditioner_systems() (solver_systems.hpp).
+std::vector<ts::System> systems() { return ts::preconditioner_systems(); }
 
 // Dense matrix of x -> S M S x (columns: the V-cycle applied to S e_k).
 Eigen::MatrixXd dense_preconditioner(SaAmg& M, const loom::Filter& S, Index n) {
@@ -558,7 +545,9 @@ TEST(SaAmg, SweepCountsPerLevelStaySpdMonotoneAndExact) {
           EXPECT_LE(ea, prev * (1 + 1e-9) + 1e-14) << "iteration " << k << " n " << s.n;
           prev = ea;
           converged = rep.converged;
-          if (converged) EXPECT_LT(ts::rel_diff(dv, ref), 1e-7) << "n " << s.n;
+          if (converged) {
+            EXPECT_LT(ts::rel_diff(dv, ref), 1e-7) << "n " << s.n;
+          }
         }
         EXPECT_TRUE(converged) << "sweeps " << fine << "/" << coarse << " n " << s.n;
       }

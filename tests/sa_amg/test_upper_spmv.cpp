@@ -18,17 +18,7 @@ namespace {
 using loom::Index;
 namespace ts = loom::testsys;
 
-std::vector<ts::System> systems() {
-  std::vector<ts::System> v;
-  v.push_back(ts::random_network(150, 3));
-  v.push_back(ts::random_network(200, 8, 0.01, 0.3, 2));
-  v.push_back(ts::cloth(12));
-  ts::System c = ts::cloth(14, 1e-3, 1e4, 2);
-  std::mt19937_64 rng(5);
-  ts::random_constraints(c, rng, 0.05, 0.1, 0.05, true);
-  v.push_back(std::move(c));
-  return v;
-}
+std::vector<ts::System> systems() { return ts::preconditioner_systems(); }
 
 loom::SolveReport solve(ts::System& s, loom::PcgOptions o, std::vector<double>& dv, bool& upper_used) {
   loom::EigenPcg p(o);

@@ -337,6 +337,38 @@ TEST(SelfCollisionResponse, APinnedTriangleDrivenThroughFreeClothPushesItAndTheF
   EXPECT_EQ(bare.last_stats().frozen, 3);
 }
 
+namespace {
+
+// The shaken sheet of the list-completeness tests: options, a state at rest with 1 g
+// vertices, and one random shake per step (every `fast`-th vertex moves 4x as far).
+SelfCollision::Options shaken_sheet_options(double thickness, double refresh_fraction) {
+  SelfCollision::Options o;
+  o.thickness = thickness;
+  o.friction = 0.2;
+  o.refresh_fraction = refresh_fraction;
+  return o;
+}
+
+State shaken_sheet_state(const Mesh& mesh) {
+  State s;
+  s.resize(mesh.num_vertices());
+  for (Index i = 0; i < mesh.num_vertices(); ++i) s.mass[i] = 1e-3;
+  s.update_inverse_masses();
+  s.x = mesh.positions;
+  return s;
+}
+
+void shake(State& s, std::mt19937& rng, std::normal_distribution<double>& N, Index fast, double h) {
+  for (Index i = 0; i < s.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double dx = (i % fast == 0 ? 0.006 : 0.0015) * N(rng);
+      s.x[3 * i + k] += dx;
+      s.v[3 * i + k] = dx / h;
+    }
+}
+
+}  // namespace
+
 TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTheThickness) {
   // A 10 x 10 sheet shaken at random step after step (most vertices slow, every 17th fast), so
   // that vertices leave their reach at different steps. After each resolve(), every
@@ -348,16 +380,8 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
   const auto edges = mesh.edges();
   const double th = 0.006, h = 0.01;
   for (const double fraction : {1.0, 0.0}) {
-    SelfCollision::Options o;
-    o.thickness = th;
-    o.friction = 0.2;
-    o.refresh_fraction = fraction;
-    SelfCollision sc(o, mesh);
-    State s;
-    s.resize(nv);
-    for (Index i = 0; i < nv; ++i) s.mass[i] = 1e-3;
-    s.update_inverse_masses();
-    s.x = mesh.positions;
+    SelfCollision sc(shaken_sheet_options(th, fraction), mesh);
+    State s = shaken_sheet_state(mesh);
     std::mt19937 rng(23);
     std::normal_distribution<double> N(0.0, 1.0);
     Index refreshed = 0, rebuilds = 0, near_pairs = 0;
@@ -365,12 +389,7 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
     for (int step = 0; step < 150; ++step) {
       const std::vector<double> x0 = s.x;
       sc.begin_step(s);
-      for (Index i = 0; i < nv; ++i)
-        for (int k = 0; k < 3; ++k) {
-          const double dx = (i % 17 == 0 ? 0.006 : 0.0015) * N(rng);
-          s.x[3 * i + k] += dx;
-          s.v[3 * i + k] = dx / h;
-        }
+      shake(s, rng, N, 17, h);
       sc.resolve(s, h);
       refreshed += sc.last_stats().refreshed;
       rebuilds += sc.last_stats().rebuilds;
@@ -499,16 +518,8 @@ TEST(SelfCollisionBvh, ListsHoldExactlyThePairsWithinThicknessPlusReachesAfterRe
   const auto edges = mesh.edges();
   const double th = 0.006, h = 0.01;
   for (const double fraction : {1.0, 0.0}) {
-    SelfCollision::Options o;
-    o.thickness = th;
-    o.friction = 0.2;
-    o.refresh_fraction = fraction;
-    SelfCollision sc(o, mesh);
-    State s;
-    s.resize(nv);
-    for (Index i = 0; i < nv; ++i) s.mass[i] = 1e-3;
-    s.update_inverse_masses();
-    s.x = mesh.positions;
+    SelfCollision sc(shaken_sheet_options(th, fraction), mesh);
+    State s = shaken_sheet_state(mesh);
     std::mt19937 rng(29);
     std::normal_distribution<double> N(0.0, 1.0);
     Index refreshed = 0;
@@ -517,12 +528,7 @@ TEST(SelfCollisionBvh, ListsHoldExactlyThePairsWithinThicknessPlusReachesAfterRe
     std::vector<double> X, reach;
     for (int step = 0; step < 120; ++step) {
       sc.begin_step(s);
-      for (Index i = 0; i < nv; ++i)
-        for (int k = 0; k < 3; ++k) {
-          const double dx = (i % 13 == 0 ? 0.006 : 0.0015) * N(rng);
-          s.x[3 * i + k] += dx;
-          s.v[3 * i + k] = dx / h;
-        }
+      shake(s, rng, N, 13, h);
       sc.resolve(s, h);
       if (!sc.last_stats().rebuilt) continue;
       refreshed += sc.last_stats().refreshed;

@@ -522,25 +522,21 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
         const T* l0 = P.l0 + off;
         const T* kx = P.kx + off;
         const T* kv = P.kv + off;
-        if (G.step == 1) {
+        // One run with its stride (1 or 2) and uniform-constant flag as template arguments.
+        const auto run = [&]<int Step>() {
           if (uni)
-            ho_window_impulses<T, Vi, Table, true, 1, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z, VX,
-                                                          VY, VZ, w, Gi, Gj, Qi, Qj);
+            ho_window_impulses<T, Vi, Table, true, Step, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z,
+                                                             VX, VY, VZ, w, Gi, Gj, Qi, Qj);
           else
-            ho_window_impulses<T, Vi, Table, false, 1, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z, VX,
-                                                           VY, VZ, w, Gi, Gj, Qi, Qj);
-          ho_window_scatter<T, 1, Bk>(G.len, a, G.off, DX, DY, DZ, Gi, Gj);
-          if constexpr (kPos) ho_window_scatter<T, 1, Bk>(G.len, a, G.off, PX, PY, PZ, Qi, Qj);
-        } else {
-          if (uni)
-            ho_window_impulses<T, Vi, Table, true, 2, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z, VX,
-                                                          VY, VZ, w, Gi, Gj, Qi, Qj);
-          else
-            ho_window_impulses<T, Vi, Table, false, 2, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z, VX,
-                                                           VY, VZ, w, Gi, Gj, Qi, Qj);
-          ho_window_scatter<T, 2, Bk>(G.len, a, G.off, DX, DY, DZ, Gi, Gj);
-          if constexpr (kPos) ho_window_scatter<T, 2, Bk>(G.len, a, G.off, PX, PY, PZ, Qi, Qj);
-        }
+            ho_window_impulses<T, Vi, Table, false, Step, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z,
+                                                              VX, VY, VZ, w, Gi, Gj, Qi, Qj);
+          ho_window_scatter<T, Step, Bk>(G.len, a, G.off, DX, DY, DZ, Gi, Gj);
+          if constexpr (kPos) ho_window_scatter<T, Step, Bk>(G.len, a, G.off, PX, PY, PZ, Qi, Qj);
+        };
+        if (G.step == 1)
+          run.template operator()<1>();
+        else
+          run.template operator()<2>();
       }
       for (; qfin < B.vertex_end; ++qfin) {
         const Index l = qfin - ws;
