@@ -102,8 +102,10 @@ struct Cloth {
   HoSprings<float> fs;
   std::vector<float> fx, fv, fw, fdv, fx0;
   // the fused spring path (symplectic Euler, RK4)
-  SpringSweep<double> sweep;
+  SpringSweep<double> sweep;          // grouped and windowed when it pays (the plugins' default)
   SpringSweep<float> fsweep;
+  SpringSweep<double> sweep_plain;    // one spring at a time (build(..., false))
+  SpringSweep<float> fsweep_plain;
   Index springs() const { return ho.springs().size(); }
 };
 
@@ -141,6 +143,8 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   update_ho_coefficients(c->fs, HoVariant::Velocity, c->fw.data(), static_cast<float>(c->h));
   c->sweep.build(sc.state.size(), *sc.material->springs());
   c->fsweep.convert_from(c->sweep);
+  c->sweep_plain.build(sc.state.size(), *sc.material->springs(), false);
+  c->fsweep_plain.convert_from(c->sweep_plain);
   return *c;
 }
 
@@ -307,8 +311,10 @@ void BM_Rk4Step_float(benchmark::State& st) {
   set_counters(st, r, threads, rk4_bytes(4, n, c.springs()));
 }
 
+// kind 0: the default sweep (grouped and windowed, loom/spring_groups.hpp), 1: plain (one spring
+// at a time, what the step ran before), 2: blocked (plain order, forces of 128 springs by one loop).
 template <class T>
-void se_bench(benchmark::State& st, bool is_float, bool blocked = false) {
+void se_bench(benchmark::State& st, bool is_float, int kind = 0) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -319,8 +325,10 @@ void se_bench(benchmark::State& st, bool is_float, bool blocked = false) {
   std::vector<T> w(c.scene.state.inv_mass.begin(), c.scene.state.inv_mass.end());
   const T g[3] = {T(0), T(-9.81), T(0)};
   SpringSweep<T>* sw = nullptr;
-  if constexpr (std::is_same_v<T, float>) sw = &c.fsweep; else sw = &c.sweep;
-  sw->blocked = blocked;
+  if constexpr (std::is_same_v<T, float>) sw = kind == 0 ? &c.fsweep : &c.fsweep_plain;
+  else sw = kind == 0 ? &c.sweep : &c.sweep_plain;
+  sw->blocked = kind == 2;
+  st.counters["window"] = static_cast<double>(sw->win_cap);
   for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
   sw->blocked = false;
   benchmark::DoNotOptimize(x.data());
@@ -328,9 +336,11 @@ void se_bench(benchmark::State& st, bool is_float, bool blocked = false) {
 }
 void BM_SeStep_double(benchmark::State& st) { se_bench<double>(st, false); }
 void BM_SeStep_float(benchmark::State& st) { se_bench<float>(st, true); }
+void BM_SeStep_double_plain(benchmark::State& st) { se_bench<double>(st, false, 1); }
+void BM_SeStep_float_plain(benchmark::State& st) { se_bench<float>(st, true, 1); }
 // The blocked sweep (forces of 128 springs by one `omp simd` loop, then scattered).
-void BM_SeStep_double_blocked(benchmark::State& st) { se_bench<double>(st, false, true); }
-void BM_SeStep_float_blocked(benchmark::State& st) { se_bench<float>(st, true, true); }
+void BM_SeStep_double_blocked(benchmark::State& st) { se_bench<double>(st, false, 2); }
+void BM_SeStep_float_blocked(benchmark::State& st) { se_bench<float>(st, true, 2); }
 
 template <class T>
 void rk4_fused_bench(benchmark::State& st, bool is_float) {
@@ -462,6 +472,8 @@ BENCHMARK(BM_Rk4Step_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_float)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double)->Apply(rows_args);
 BENCHMARK(BM_SeStep_float)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_plain)->Apply(rows_args);
+BENCHMARK(BM_SeStep_float_plain)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_blocked)->Apply(rows_args);
 BENCHMARK(BM_SeStep_float_blocked)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "loom/explicit_springs.hpp"
+#include "loom/kernels/spring.hpp"
 #include "loom/params.hpp"
 #include "symplectic_euler.hpp"
 #include "test_spring_material.hpp"
@@ -63,38 +64,57 @@ TEST(SymplecticEulerFused, MatchesGenericPathAndThreadCounts) {
 }
 
 // The blocked sweep (forces of 128 springs by one vectorised loop, then scattered) and the
-// one-spring-at-a-time sweep compute the same step up to rounding, damped and undamped, in double
-// and float, on 1 and 2 threads.
-template <class T>
-void blocked_matches_plain(bool damped, double tol) {
-  const int nx = 60;
-  const Index n = nx * nx;
-  std::vector<T> x0, v0, w;
-  for (int r = 0; r < nx; ++r)
-    for (int c = 0; c < nx; ++c) {
-      x0.insert(x0.end(), {T(0.02 * c), T(0.001 * std::sin(0.7 * c + r)), T(0.02 * r)});
-      v0.insert(v0.end(), {T(0.01 * std::sin(r + 2.0 * c)), T(0.02 * std::cos(3.0 * r - c)), T(0)});
-      w.push_back(r == nx - 1 && (c == 0 || c == nx - 1) ? T(0) : T(1000.0 / (1 + 0.5 * ((r * 7 + c * 3) % 5))));
-    }
+// grouped, windowed sweep (loom/spring_groups.hpp) against the one-spring-at-a-time sweep: the
+// same step up to rounding, damped and undamped, in double and float; the same bits on 1 and 2
+// threads. The grid carries duplicate springs on some pairs (as the kang_cho_table1 stencil
+// does), stride-2 bending springs and two pinned corners.
+struct SweepCloth {
+  Index n = 0;
   SpringSet s;
+  std::vector<double> x0, v0, w;
+};
+SweepCloth sweep_cloth(int nx, bool damped) {
+  SweepCloth c;
+  c.n = nx * nx;
   for (int r = 0; r < nx; ++r)
-    for (int c = 0; c < nx; ++c) {
-      const int a = r * nx + c;
-      const double cd = damped ? 0.02 : 0.0;
-      if (c + 1 < nx) s.add(a, a + 1, 0.02, 2000, cd, SpringClass::Structural);
-      if (r + 1 < nx) s.add(a + nx, a, 0.02, 2000, cd, SpringClass::Structural);
-      if (c + 1 < nx && r + 1 < nx) s.add(a, a + nx + 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
-      if (c + 2 < nx) s.add(a, a + 2, 0.04, 50, 0.0, SpringClass::Bend);
+    for (int col = 0; col < nx; ++col) {
+      c.x0.insert(c.x0.end(), {0.02 * col, 0.001 * std::sin(0.7 * col + r), 0.02 * r});
+      c.v0.insert(c.v0.end(), {0.01 * std::sin(r + 2.0 * col), 0.02 * std::cos(3.0 * r - col), 0.0});
+      c.w.push_back(r == nx - 1 && (col == 0 || col == nx - 1) ? 0.0 : 1000.0 / (1 + 0.5 * ((r * 7 + col * 3) % 5)));
     }
-  SpringSweep<double> base;
-  base.build(n, s);
+  for (int r = 0; r < nx; ++r)
+    for (int col = 0; col < nx; ++col) {
+      const int a = r * nx + col;
+      const double cd = damped ? 0.02 : 0.0;
+      if (col + 1 < nx) c.s.add(a, a + 1, 0.02, 2000, cd, SpringClass::Structural);
+      if (r + 1 < nx) c.s.add(a + nx, a, 0.02, 2000, cd, SpringClass::Structural);
+      if (col + 1 < nx && r + 1 < nx) c.s.add(a, a + nx + 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+      if (col + 1 < nx && r + 1 < nx && (r + col) % 3 == 0)   // a second spring on some pairs
+        c.s.add(a + nx + 1, a, 0.02 * std::sqrt(2.0), 300, 0.0, SpringClass::Shear);
+      if (col + 2 < nx) c.s.add(a, a + 2, 0.04, 50, 0.0, SpringClass::Bend);
+    }
+  return c;
+}
+
+// mode 0: plain, 1: blocked, 2: grouped and windowed.
+template <class T>
+void sweep_matches_plain(int mode, bool damped, double tol) {
+  const SweepCloth cl = sweep_cloth(60, damped);
+  ASSERT_GE(cl.s.size(), kParallelMinSprings);
+  SpringSweep<double> plain, grouped;
+  plain.build(cl.n, cl.s, false);
+  grouped.build(cl.n, cl.s);
+  EXPECT_FALSE(plain.grouped);
+  ASSERT_TRUE(grouped.grouped);
+  ASSERT_GT(grouped.win_cap, 0);
   std::vector<T> res[3];
-  for (int run = 0; run < 3; ++run) {   // plain 1 thread, blocked 1 thread, blocked 2 threads
+  for (int run = 0; run < 3; ++run) {   // plain 1 thread, mode 1 thread, mode 2 threads
     omp_set_num_threads(run == 2 ? 2 : 1);
     SpringSweep<T> sw;
-    sw.convert_from(base);
-    sw.blocked = run > 0;
-    std::vector<T> x = x0, v = v0, f(x.size(), T(0));
+    sw.convert_from(run > 0 && mode == 2 ? grouped : plain);
+    sw.blocked = run > 0 && mode == 1;
+    std::vector<T> x(cl.x0.begin(), cl.x0.end()), v(cl.v0.begin(), cl.v0.end()), f(x.size(), T(0));
+    const std::vector<T> w(cl.w.begin(), cl.w.end());
     const T g[3] = {T(0), T(-9.81), T(0)};
     for (int st = 0; st < 30; ++st) se_step_springs<T>(sw, x.data(), v.data(), w.data(), f.data(), T(1e-4), g);
     for (T e : f) ASSERT_EQ(e, T(0));   // f is zero again on return
@@ -102,12 +122,14 @@ void blocked_matches_plain(bool damped, double tol) {
     res[run].insert(res[run].end(), v.begin(), v.end());
   }
   omp_set_num_threads(2);
-  const std::size_t m3 = x0.size();
-  double sx = 0, sv = 0;
+  const std::size_t m3 = cl.x0.size();
+  double sx = 0, sv = 0, moved = 0;
   for (std::size_t q = 0; q < m3; ++q) {
     sx = std::max(sx, std::abs(double(res[0][q])));
     sv = std::max(sv, std::abs(double(res[0][m3 + q])));
+    moved = std::max(moved, std::abs(double(res[0][q]) - cl.x0[q]));
   }
+  EXPECT_GT(moved, 1e-6);
   for (std::size_t q = 0; q < res[0].size(); ++q) {
     ASSERT_NEAR(res[1][q], res[0][q], tol * (q < m3 ? sx : sv)) << q;
     ASSERT_EQ(res[2][q], res[1][q]) << q;
@@ -116,9 +138,58 @@ void blocked_matches_plain(bool damped, double tol) {
 
 TEST(SymplecticEulerFused, BlockedSweepMatchesPlainSweep) {
   for (bool damped : {false, true}) {
-    blocked_matches_plain<double>(damped, 1e-9);
-    blocked_matches_plain<float>(damped, 1e-3);
+    sweep_matches_plain<double>(1, damped, 1e-9);
+    sweep_matches_plain<float>(1, damped, 1e-3);
   }
+}
+
+TEST(SymplecticEulerFused, WindowedSweepMatchesPlainSweep) {
+  for (bool damped : {false, true}) {
+    sweep_matches_plain<double>(2, damped, 1e-9);
+    sweep_matches_plain<float>(2, damped, 1e-3);
+  }
+}
+
+// One force pass of the windowed sweep: fin is called exactly once per vertex, with the force of
+// an independent per-spring sum over the original spring set (kernels::spring_force, the set's
+// order) to rounding; f is zero again on return.
+TEST(SymplecticEulerFused, WindowedForcesPerVertex) {
+  for (bool damped : {false, true}) {
+    const SweepCloth cl = sweep_cloth(70, damped);
+    std::vector<double> ref(cl.x0.size(), 0.0);
+    for (Index q = 0; q < cl.s.size(); ++q) {
+      const Index a = cl.s.i[q], b = cl.s.j[q];
+      double fi[3];
+      if (damped)
+        kernels::spring_force_damped(&cl.x0[3 * a], &cl.x0[3 * b], &cl.v0[3 * a], &cl.v0[3 * b], cl.s.stiffness[q],
+                                     cl.s.rest_length[q], cl.s.damping[q], fi);
+      else
+        kernels::spring_force(&cl.x0[3 * a], &cl.x0[3 * b], cl.s.stiffness[q], cl.s.rest_length[q], fi);
+      for (int e = 0; e < 3; ++e) {
+        ref[3 * a + e] += fi[e];
+        ref[3 * b + e] -= fi[e];
+      }
+    }
+    double scale = 0;
+    for (double e : ref) scale = std::max(scale, std::abs(e));
+    ASSERT_GT(scale, 0.0);
+    for (int threads : {1, 2}) {
+      omp_set_num_threads(threads);
+      SpringSweep<double> sw;
+      sw.build(cl.n, cl.s);
+      ASSERT_TRUE(sw.grouped);
+      std::vector<double> f(cl.x0.size(), 0.0), got(cl.x0.size(), 0.0);
+      std::vector<int> calls(static_cast<std::size_t>(cl.n), 0);
+      sw.forces(cl.x0.data(), cl.v0.data(), f.data(), [&](Index q, const double* fq) {
+        ++calls[q];
+        for (int e = 0; e < 3; ++e) got[3 * q + e] = fq[e];
+      });
+      for (Index q = 0; q < cl.n; ++q) ASSERT_EQ(calls[q], 1) << q;
+      for (double e : f) ASSERT_EQ(e, 0.0);
+      for (std::size_t q = 0; q < ref.size(); ++q) ASSERT_NEAR(got[q], ref[q], 1e-12 * scale) << q;
+    }
+  }
+  omp_set_num_threads(2);
 }
 
 // reorder: the fused step in the RCM order equals the step in the mesh's order to rounding,

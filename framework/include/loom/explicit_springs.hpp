@@ -15,6 +15,19 @@
 // fin after the cross springs. fin may write x[q] and v[q] (the sweep never reads them again in
 // this pass). f must be zero on entry and is zero again on return. Per-vertex sums are
 // deterministic for a fixed layout (any thread count gives the same bits).
+//
+// Grouped, windowed sweep (the default when it applies; loom/spring_groups.hpp, the same grouping
+// and window as harmonic_oscillation's): each part's interior springs are stored as segments of
+// springs (i0 + step r, i0 + step r + off) per block of 64 vertices; the part's live vertices are
+// copied once into a structure-of-arrays window (x, y, z, the force sums, and v when some spring
+// is damped), a segment's forces are computed by one vectorised loop with unit-stride (or
+// stride-2) loads and no gathers, then added to the window's sums, and a vertex is handed to fin
+// from the window as soon as its block is done. Per-spring arithmetic is block_forces' (one sqrt
+// and one division per spring); only the order of the additions into a vertex differs from the
+// one-spring-at-a-time sweep, so the two agree to rounding (tests/symplectic_euler,
+// SymplecticEulerFused.WindowedSweepMatchesPlainSweep). Used when grouping pays (segments average
+// at least 4 springs) and the window fits (live span <= kSpringWinMaxSpan); build(..., false)
+// keeps the plain sweep.
 #pragma once
 
 #include <algorithm>
@@ -25,11 +38,55 @@
 
 #include "loom/common.hpp"
 #include "loom/kernels/spring.hpp"
+#include "loom/spring_groups.hpp"
 #include "loom/spring_layout.hpp"
 #include "loom/springs.hpp"
 #include "loom/traversal.hpp"
 
 namespace loom {
+
+/// Forces of a segment's springs (a + Step r, a + Step r + off), r < len, in window coordinates,
+/// into F (3 x Bk, structure of arrays): the arithmetic of SpringSweep::block_forces.
+template <class T, bool Damped, int Step, Index Bk>
+inline void sweep_segment_forces(Index len, Index a, Index off, const T* __restrict K, const T* __restrict L0,
+                                 const T* __restrict C, const T* __restrict X, const T* __restrict Y,
+                                 const T* __restrict Z, const T* __restrict VX, const T* __restrict VY,
+                                 const T* __restrict VZ, T* __restrict F) {
+  const T tiny = std::numeric_limits<T>::min();
+#pragma omp simd
+  for (Index r = 0; r < len; ++r) {
+    const Index p = a + Step * r, q = p + off;
+    const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
+    const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+    using std::sqrt;
+    const T il = T(1) / sqrt(l2 + tiny);   // see block_forces: no compare, same value for l2 > 0
+    T sc = K[r] * (T(1) - L0[r] * il);
+    if constexpr (Damped) {
+      const T du = d0 * (VX[q] - VX[p]) + d1 * (VY[q] - VY[p]) + d2 * (VZ[q] - VZ[p]);
+      sc += C[r] * du * il * il;
+    }
+    F[r] = sc * d0;
+    F[Bk + r] = sc * d1;
+    F[2 * Bk + r] = sc * d2;
+  }
+}
+
+/// Adds +F at window vertices a + Step r, then -F at a + off + Step r (two passes: the ranges
+/// may overlap).
+template <class T, int Step, Index Bk>
+inline void sweep_segment_scatter(Index len, Index a, Index off, T* __restrict FX, T* __restrict FY,
+                                  T* __restrict FZ, const T* __restrict F) {
+  for (Index r = 0; r < len; ++r) {
+    FX[a + Step * r] += F[r];
+    FY[a + Step * r] += F[Bk + r];
+    FZ[a + Step * r] += F[2 * Bk + r];
+  }
+  for (Index r = 0; r < len; ++r) {
+    FX[a + off + Step * r] -= F[r];
+    FY[a + off + Step * r] -= F[Bk + r];
+    FZ[a + off + Step * r] -= F[2 * Bk + r];
+  }
+}
 
 template <class T>
 struct SpringSweep {
@@ -43,8 +100,19 @@ struct SpringSweep {
   /// simd`: gathers of x, v; one sqrt and one division per lane) into a buffer, then scattered.
   /// false (default): one spring at a time, which measured faster on the earlier benchmark
   /// machine (docs/plugins/mass_spring.md); bench table1 times both (SeStep_*_blocked).
+  /// (Only for the plain sweep: a grouped sweep ignores it.)
   bool blocked = false;
   static constexpr Index kSweepBlock = 128;
+  // Grouped, windowed sweep (loom/spring_groups.hpp): on when grouped (then win_cap > 0).
+  bool grouped = false;
+  std::vector<SpringSegment> segs;
+  std::vector<SpringBlock> blocks;
+  std::vector<Index> part_block;
+  std::vector<Index> block_need;
+  Index win_span = 0, win_cap = 0;
+  /// Per part: x, y, z, the three force sums, and vx, vy, vz (damped only), win_cap each.
+  static constexpr int kWinArrays = 9;
+  mutable std::vector<T> win;
 
   Index size() const { return static_cast<Index>(i.size()); }
   bool damped() const { return !c.empty(); }
@@ -52,7 +120,8 @@ struct SpringSweep {
   bool parallel() const { return size() >= kParallelMinSprings && traversal_threads() > 1; }
 
   /// Build from a spring set over nv vertices (any order, either endpoint first).
-  void build(Index nv, const SpringSet& set) {
+  /// allow_grouping = false keeps the plain sweep (tests and benchmarks compare the two).
+  void build(Index nv, const SpringSet& set, bool allow_grouping = true) {
     n = nv;
     SpringSet s = set;
     layout = SpringLayout(nv, s);
@@ -72,6 +141,7 @@ struct SpringSweep {
       l0[q] = static_cast<T>(s.rest_length[q]);
       if (any_damped) c[q] = static_cast<T>(s.damping[q]);
     }
+    group(allow_grouping);
     is_deferred.assign(static_cast<std::size_t>(nv), 0);
     for (Index q = layout.colour_begin(0); q < S; ++q) is_deferred[i[q]] = is_deferred[j[q]] = 1;
     deferred.clear();
@@ -92,12 +162,24 @@ struct SpringSweep {
     deferred = o.deferred;
     n = o.n;
     blocked = o.blocked;
+    grouped = o.grouped;
+    segs = o.segs;
+    blocks = o.blocks;
+    part_block = o.part_block;
+    block_need = o.block_need;
+    win_span = o.win_span;
+    win_cap = o.win_cap;
+    win.assign(o.win.size(), T(0));
   }
 
   /// Spring forces at (x, v) accumulated into f, with fin(q, f + 3q) per completed vertex
   /// (see the top of this file). v is read only when some spring is damped.
   template <class Fin>
   void forces(const T* x, const T* v, T* f, Fin&& fin) const {
+    if (grouped) {
+      damped() ? run_window<true>(x, v, f, fin) : run_window<false>(x, v, f, fin);
+      return;
+    }
     if (damped())
       blocked ? run<true, true>(x, v, f, fin) : run<true, false>(x, v, f, fin);
     else
@@ -105,6 +187,140 @@ struct SpringSweep {
   }
 
  private:
+  /// Store the interior springs grouped (when it pays and the window fits) and plan the window.
+  void group(bool allow) {
+    grouped = false;
+    segs.clear();
+    blocks.clear();
+    part_block.clear();
+    block_need.clear();
+    win_span = win_cap = 0;
+    win.clear();
+    if (!allow) return;
+    SpringGroups g;
+    const std::vector<Index> perm = group_springs(layout, i, j, g);
+    if (!g.grouped) return;
+    grouped = true;
+    segs = std::move(g.segs);
+    blocks = std::move(g.blocks);
+    part_block = std::move(g.part_block);
+    plan_spring_window(layout, *this);
+    if (win_cap == 0) {   // live span too large: keep the plain sweep (springs unpermuted)
+      grouped = false;
+      segs.clear();
+      blocks.clear();
+      part_block.clear();
+      return;
+    }
+    apply_spring_perm(perm, i);
+    apply_spring_perm(perm, j);
+    apply_spring_perm(perm, k);
+    apply_spring_perm(perm, l0);
+    if (!c.empty()) apply_spring_perm(perm, c);
+    win.assign(static_cast<std::size_t>(layout.parts()) * kWinArrays * static_cast<std::size_t>(win_cap), T(0));
+  }
+
+  /// The grouped, windowed sweep (see the top of this file).
+  template <bool Damped, class Fin>
+  void run_window(const T* x, const T* v, T* f, Fin& fin) const {
+    constexpr Index Bk = kSpringGroupBlock;
+    const Index* I = i.data();
+    const Index* J = j.data();
+    const T* K = k.data();
+    const T* L0 = l0.data();
+    const T* C = c.data();
+    const std::uint8_t* def = is_deferred.data();
+    auto sweep = [&](int p) {
+      const Index cap = win_cap;
+      T* base = win.data() + static_cast<std::size_t>(p) * kWinArrays * static_cast<std::size_t>(cap);
+      T* A[kWinArrays];
+      for (int e = 0; e < kWinArrays; ++e) A[e] = base + static_cast<std::size_t>(e) * static_cast<std::size_t>(cap);
+      T* const X = A[0];
+      T* const Y = A[1];
+      T* const Z = A[2];
+      T* const FX = A[3];
+      T* const FY = A[4];
+      T* const FZ = A[5];
+      T* const VX = A[6];
+      T* const VY = A[7];
+      T* const VZ = A[8];
+      const int narr = Damped ? 9 : 6;
+      Index ws = layout.part_vertex_begin(p), fill = ws, qfin = ws;
+      alignas(64) T F[3 * Bk];
+      for (Index bk = part_block[p]; bk < part_block[p + 1]; ++bk) {
+        const SpringBlock& B = blocks[bk];
+        const Index need = block_need[bk];
+        window_make_room(A, narr, cap, need, qfin, fill, ws);
+        for (; fill < need; ++fill) {
+          const std::size_t o = 3 * static_cast<std::size_t>(fill);
+          const Index l = fill - ws;
+          X[l] = x[o];
+          Y[l] = x[o + 1];
+          Z[l] = x[o + 2];
+          FX[l] = FY[l] = FZ[l] = T(0);
+          if constexpr (Damped) {
+            VX[l] = v[o];
+            VY[l] = v[o + 1];
+            VZ[l] = v[o + 2];
+          }
+        }
+        for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
+          const SpringSegment& G = segs[sg];
+          const Index a = G.i0 - ws;
+          const T* Cg = Damped ? C + G.begin : nullptr;
+          if (G.step == 1) {
+            sweep_segment_forces<T, Damped, 1, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX, VY,
+                                                   VZ, F);
+            sweep_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+          } else {
+            sweep_segment_forces<T, Damped, 2, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX, VY,
+                                                   VZ, F);
+            sweep_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+          }
+        }
+        for (; qfin < B.vertex_end; ++qfin) {
+          const Index l = qfin - ws;
+          if (def[qfin]) {   // cross springs add to it later: hand the sums to f
+            T* fq = f + 3 * static_cast<std::size_t>(qfin);
+            fq[0] += FX[l];
+            fq[1] += FY[l];
+            fq[2] += FZ[l];
+          } else {
+            const T fq[3] = {FX[l], FY[l], FZ[l]};
+            fin(qfin, fq);
+          }
+        }
+      }
+    };
+    auto cross = [&](Index k0, Index k1) {
+      for (Index q = k0; q < k1; ++q) {
+        T fi[3];
+        one_spring<Damped>(q, I, J, K, L0, C, x, v, fi);
+        T* fa = f + 3 * static_cast<std::size_t>(I[q]);
+        T* fb = f + 3 * static_cast<std::size_t>(J[q]);
+        for (int e = 0; e < 3; ++e) {
+          fa[e] += fi[e];
+          fb[e] -= fi[e];
+        }
+      }
+    };
+    traverse_parts(layout, parallel(), sweep, cross, static_cast<Index>(deferred.size()), [&](Index r) {
+      T* fq = f + 3 * static_cast<std::size_t>(deferred[r]);
+      fin(deferred[r], static_cast<const T*>(fq));
+      fq[0] = fq[1] = fq[2] = T(0);
+    });
+  }
+
+  template <bool Damped>
+  static void one_spring(Index q, const Index* I, const Index* J, const T* K, const T* L0, const T* C, const T* x,
+                         const T* v, T fi[3]) {
+    const std::size_t a = 3 * static_cast<std::size_t>(I[q]), b = 3 * static_cast<std::size_t>(J[q]);
+    if constexpr (Damped)
+      kernels::spring_force_damped(x + a, x + b, v + a, v + b, K[q], L0[q], C[q], fi);
+    else
+      kernels::spring_force(x + a, x + b, K[q], L0[q], fi);
+  }
+
   /// Forces on the lower endpoints of springs [s, s + m) into F (3 per spring), vectorised.
   template <bool Damped>
   static void block_forces(Index m, const Index* __restrict I, const Index* __restrict J, const T* __restrict K,
@@ -145,13 +361,7 @@ struct SpringSweep {
       fin(q, fq);
       fq[0] = fq[1] = fq[2] = T(0);
     };
-    auto spring = [&](Index q, T fi[3]) {
-      const std::size_t a = 3 * static_cast<std::size_t>(I[q]), b = 3 * static_cast<std::size_t>(J[q]);
-      if constexpr (Damped)
-        kernels::spring_force_damped(x + a, x + b, v + a, v + b, K[q], L0[q], C[q], fi);
-      else
-        kernels::spring_force(x + a, x + b, K[q], L0[q], fi);
-    };
+    auto spring = [&](Index q, T fi[3]) { one_spring<Damped>(q, I, J, K, L0, C, x, v, fi); };
     auto sweep_blocked = [&](int p) {
       const Index ve = layout.part_vertex_end(p);
       const Index se = layout.part_spring_end(p);

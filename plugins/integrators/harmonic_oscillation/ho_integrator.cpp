@@ -82,73 +82,23 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
     for (Index q = layout.part_spring_begin(p) + 1; q < layout.part_spring_end(p); ++q)
       if (out.i[q] < out.i[q - 1])
         throw std::logic_error("harmonic_oscillation: spring layout part not sorted by lower endpoint");
-  // Grouped traversal: within each part, blocks of kHoVertexBlock vertices (by lower endpoint),
-  // springs ordered by (block, offset, i), cut into segments of consecutive i.
-  out.segs.clear();
-  out.blocks.clear();
-  out.part_block.assign(static_cast<std::size_t>(layout.parts()) + 1, 0);
+  // Grouped traversal (loom/spring_groups.hpp): within each part, blocks of kHoVertexBlock
+  // vertices (by lower endpoint), springs ordered by (block, offset, i), cut into segments of
+  // consecutive i.
   {
-    const HoSprings<double> saved = out;   // restored when grouping does not pay
-    std::vector<Index> perm;
-    for (int p = 0; p < layout.parts(); ++p) {
-      const Index sb = layout.part_spring_begin(p), se = layout.part_spring_end(p);
-      const Index vb = layout.part_vertex_begin(p), ve = layout.part_vertex_end(p);
-      perm.resize(static_cast<std::size_t>(se - sb));
-      std::iota(perm.begin(), perm.end(), sb);
-      auto blk = [&](Index q) { return (out.i[q] - vb) / kHoVertexBlock; };
-      // duplicate pairs (i, j) (some stencils carry two springs on a pair) get ranks 0, 1, ...
-      // so that each copy joins its own run of consecutive i
-      std::vector<Index> rank(static_cast<std::size_t>(se - sb), 0);
-      std::stable_sort(perm.begin(), perm.end(), [&](Index a, Index b) {
-        return out.i[a] != out.i[b] ? out.i[a] < out.i[b] : out.j[a] < out.j[b];
-      });
-      for (std::size_t r = 1; r < perm.size(); ++r)
-        if (out.i[perm[r]] == out.i[perm[r - 1]] && out.j[perm[r]] == out.j[perm[r - 1]])
-          rank[perm[r] - sb] = rank[perm[r - 1] - sb] + 1;
-      std::stable_sort(perm.begin(), perm.end(), [&](Index a, Index b) {
-        const Index ba = blk(a), bb = blk(b);
-        if (ba != bb) return ba < bb;
-        const Index oa = out.j[a] - out.i[a], ob = out.j[b] - out.i[b];
-        if (oa != ob) return oa < ob;
-        if (rank[a - sb] != rank[b - sb]) return rank[a - sb] < rank[b - sb];
-        return out.i[a] < out.i[b];
-      });
-      auto apply = [&](auto& arr) {
-        using E = typename std::decay_t<decltype(arr)>::value_type;
-        std::vector<E> tmp(perm.size());
-        for (std::size_t r = 0; r < perm.size(); ++r) tmp[r] = arr[perm[r]];
-        std::copy(tmp.begin(), tmp.end(), arr.begin() + sb);
-      };
-      apply(out.i);
-      apply(out.j);
-      apply(out.l0);
-      apply(out.k);
-      apply(out.c);
-      out.part_block[p] = static_cast<Index>(out.blocks.size());
-      Index q = sb;
-      for (Index v0 = vb; v0 < ve; v0 += kHoVertexBlock) {
-        const Index v1 = std::min<Index>(v0 + kHoVertexBlock, ve);
-        const Index seg_begin = static_cast<Index>(out.segs.size());
-        while (q < se && out.i[q] < v1) {
-          HoSprings<double>::Segment g{q, 1, out.i[q], out.j[q] - out.i[q], 1};
-          ++q;
-          // the step (1 or 2) is fixed by the second spring
-          if (q < se && out.i[q] < v1 && out.j[q] - out.i[q] == g.off && out.i[q] - g.i0 == 2) g.step = 2;
-          while (q < se && out.i[q] < v1 && out.j[q] - out.i[q] == g.off && out.i[q] == g.i0 + g.step * g.len &&
-                 g.len < kHoVertexBlock) {
-            ++g.len;
-            ++q;
-          }
-          out.segs.push_back(g);
-        }
-        out.blocks.push_back({v1, seg_begin, static_cast<Index>(out.segs.size())});
-      }
-    }
-    out.part_block[layout.parts()] = static_cast<Index>(out.blocks.size());
-    const Index interior = layout.colour_begin(0);
-    out.grouped = allow_grouping && !out.segs.empty() && interior >= 4 * static_cast<Index>(out.segs.size());
-    if (!out.grouped) {
-      out = saved;
+    SpringGroups g;
+    const std::vector<Index> perm = group_springs(layout, out.i, out.j, g);
+    out.grouped = allow_grouping && g.grouped;
+    if (out.grouped) {
+      apply_spring_perm(perm, out.i);
+      apply_spring_perm(perm, out.j);
+      apply_spring_perm(perm, out.l0);
+      apply_spring_perm(perm, out.k);
+      apply_spring_perm(perm, out.c);
+      out.segs = std::move(g.segs);
+      out.blocks = std::move(g.blocks);
+      out.part_block = std::move(g.part_block);
+    } else {
       out.segs.clear();
       out.blocks.clear();
       out.part_block.clear();

@@ -43,14 +43,9 @@ const ParamSpec& harmonic_oscillation_spec();
 /// Reads `variant` through harmonic_oscillation_spec() (the cpu and cuda variants share it).
 HoVariant read_ho_variant(const Params& p);
 
-/// A run of springs (i0 + step r, i0 + step r + off), r < len, stored at [begin, begin + len).
-struct HoSegment {
-  Index begin, len, i0, off, step;   ///< step 1 or 2
-};
-/// A block of the grouped sweep: its segments, and the vertex bound after which vertices are final.
-struct HoBlock {
-  Index vertex_end, seg_begin, seg_end;
-};
+/// A run of springs and a block of the grouped sweep (loom/spring_groups.hpp).
+using HoSegment = SpringSegment;
+using HoBlock = SpringBlock;
 
 /// Springs in traversal order with i < j and their per-step constants. T = double in the
 /// plugin; the benchmark also builds a float copy.
@@ -92,7 +87,7 @@ struct HoSprings {
 };
 
 /// Vertices per block of the grouped traversal.
-constexpr Index kHoVertexBlock = 64;
+constexpr Index kHoVertexBlock = kSpringGroupBlock;
 
 /// Build the traversal layout and the spring arrays from a spring set over n vertices: springs
 /// in traversal order with i < j (HO is symmetric in its endpoints), sorted by i within each

@@ -28,42 +28,19 @@
 
 #include "loom/common.hpp"
 #include "loom/kernels/ho.hpp"
+#include "loom/spring_groups.hpp"
 
 namespace loom {
 
 /// Arrays per part in the window: x, v (3 each), the velocity and position accumulators (3 each).
 constexpr int kHoWinArrays = 12;
 /// Largest live span (vertices) for which the window is used; beyond it the plain grouped sweep runs.
-constexpr Index kHoWinMaxSpan = 1 << 16;
+constexpr Index kHoWinMaxSpan = kSpringWinMaxSpan;
 
-/// Window plan for grouped springs: need[bk] = 1 + the largest vertex that block bk reads (at
-/// least the block's vertex_end); win_span, the largest number of vertices live at once (from the
-/// first unfinished vertex to the farthest one read); the capacity win_cap (0 when that span is
-/// too large: window off). Any capacity >= win_span is correct.
+/// Window plan for grouped springs (loom/spring_groups.hpp, shared with the fused SE/RK4 sweep).
 template <class Springs, class Layout>
 void plan_ho_window(const Layout& layout, Springs& s) {
-  s.block_need.assign(s.blocks.size(), 0);
-  s.win_cap = 0;
-  s.win_span = 0;
-  if (!s.grouped) return;
-  Index span = 0;
-  for (int p = 0; p < layout.parts(); ++p) {
-    Index qfin = layout.part_vertex_begin(p);
-    for (Index bk = s.part_block[p]; bk < s.part_block[p + 1]; ++bk) {
-      const auto& B = s.blocks[bk];
-      Index need = B.vertex_end;
-      for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
-        const auto& G = s.segs[sg];
-        need = std::max(need, G.i0 + G.off + G.step * (G.len - 1) + 1);
-      }
-      s.block_need[bk] = need;
-      span = std::max(span, need - qfin);
-      qfin = B.vertex_end;
-    }
-  }
-  s.win_span = span;
-  if (span > kHoWinMaxSpan) return;
-  s.win_cap = std::max<Index>(1024, 4 * span);
+  plan_spring_window(layout, s);
 }
 
 /// Allocate the window scratch (parts x kHoWinArrays x cap), zeroed.

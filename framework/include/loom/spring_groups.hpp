@@ -1,0 +1,164 @@
+// Grouped, windowed spring sweeps (issue 16), shared by harmonic_oscillation (HoSprings,
+// plugins/integrators/harmonic_oscillation/ho_window.hpp) and the fused symplectic Euler / RK4
+// sweep (SpringSweep, loom/explicit_springs.hpp). Header-only.
+//
+// Grouping (group_springs): each part of a SpringLayout has its vertex range cut into blocks of
+// kSpringGroupBlock vertices; the interior springs whose lower endpoint lies in a block are
+// ordered by (offset j - i, duplicate rank, i) and cut into segments of springs
+// (i0 + step r, i0 + step r + off), r < len, step 1 or 2, stored consecutively. A segment then
+// reads its endpoints' data with unit (or 2) stride and its per-spring constants contiguously:
+// no gathers. Grouping pays when segments average at least 4 springs (grids, most meshes numbered
+// row by row or by RCM); SpringGroups::grouped says whether it does.
+//
+// Window (plan_spring_window, window_make_room): a sweep copies each vertex of a part, once, into
+// a per-part structure-of-arrays window just before the first block that reads it, runs the
+// segments there with unit stride, and finalises a vertex from the window as soon as the sweep has
+// passed it. When the next block needs a vertex beyond the window, the live vertices move to its
+// start. The capacity is 4x the largest live span of any block (at least 1024 vertices), so a move
+// copies at most a quarter of the window; spans above kSpringWinMaxSpan turn the window off.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstring>
+#include <numeric>
+#include <vector>
+
+#include "loom/common.hpp"
+#include "loom/spring_layout.hpp"
+
+namespace loom {
+
+/// A run of springs (i0 + step r, i0 + step r + off), r < len, stored at [begin, begin + len).
+struct SpringSegment {
+  Index begin, len, i0, off, step;   ///< step 1 or 2
+};
+/// A block of the grouped sweep: its segments, and the vertex bound below which vertices are final
+/// once the block is done.
+struct SpringBlock {
+  Index vertex_end, seg_begin, seg_end;
+};
+
+/// Vertices per block of the grouped traversal (and the most springs per segment).
+constexpr Index kSpringGroupBlock = 64;
+/// Largest live span (vertices) for which a window is used.
+constexpr Index kSpringWinMaxSpan = 1 << 16;
+
+/// The grouped traversal of a layout's interior springs.
+struct SpringGroups {
+  bool grouped = false;               ///< segments average at least 4 springs
+  std::vector<SpringSegment> segs;
+  std::vector<SpringBlock> blocks;
+  std::vector<Index> part_block;      ///< blocks of part p: [part_block[p], part_block[p + 1])
+};
+
+/// Group the springs (i[q] < j[q], in the layout's traversal order: each part's interior
+/// springs sorted by lower endpoint). Returns perm: the grouped order is q' -> perm[q'] (apply it
+/// to every per-spring array: a_new[q'] = a_old[perm[q']]); cross springs keep their places.
+/// The segments in g refer to positions in the grouped order.
+inline std::vector<Index> group_springs(const SpringLayout& layout, const std::vector<Index>& i,
+                                        const std::vector<Index>& j, SpringGroups& g) {
+  const Index S = static_cast<Index>(i.size());
+  std::vector<Index> perm(static_cast<std::size_t>(S));
+  std::iota(perm.begin(), perm.end(), Index(0));
+  g.segs.clear();
+  g.blocks.clear();
+  g.part_block.assign(static_cast<std::size_t>(layout.parts()) + 1, 0);
+  std::vector<Index> rank;
+  for (int p = 0; p < layout.parts(); ++p) {
+    const Index sb = layout.part_spring_begin(p), se = layout.part_spring_end(p);
+    const Index vb = layout.part_vertex_begin(p), ve = layout.part_vertex_end(p);
+    Index* P = perm.data() + sb;
+    const std::size_t m = static_cast<std::size_t>(se - sb);
+    auto blk = [&](Index q) { return (i[q] - vb) / kSpringGroupBlock; };
+    // duplicate pairs (i, j) (some stencils carry two springs on a pair) get ranks 0, 1, ... so
+    // that each copy joins its own run of consecutive i
+    rank.assign(m, 0);
+    std::stable_sort(P, P + m, [&](Index a, Index b) { return i[a] != i[b] ? i[a] < i[b] : j[a] < j[b]; });
+    for (std::size_t r = 1; r < m; ++r)
+      if (i[P[r]] == i[P[r - 1]] && j[P[r]] == j[P[r - 1]]) rank[P[r] - sb] = rank[P[r - 1] - sb] + 1;
+    std::stable_sort(P, P + m, [&](Index a, Index b) {
+      const Index ba = blk(a), bb = blk(b);
+      if (ba != bb) return ba < bb;
+      const Index oa = j[a] - i[a], ob = j[b] - i[b];
+      if (oa != ob) return oa < ob;
+      if (rank[a - sb] != rank[b - sb]) return rank[a - sb] < rank[b - sb];
+      return i[a] < i[b];
+    });
+    g.part_block[p] = static_cast<Index>(g.blocks.size());
+    auto I = [&](Index q) { return i[perm[q]]; };
+    auto O = [&](Index q) { return j[perm[q]] - i[perm[q]]; };
+    Index q = sb;
+    for (Index v0 = vb; v0 < ve; v0 += kSpringGroupBlock) {
+      const Index v1 = std::min<Index>(v0 + kSpringGroupBlock, ve);
+      const Index seg_begin = static_cast<Index>(g.segs.size());
+      while (q < se && I(q) < v1) {
+        SpringSegment s{q, 1, I(q), O(q), 1};
+        ++q;
+        // the step (1 or 2) is fixed by the second spring
+        if (q < se && I(q) < v1 && O(q) == s.off && I(q) - s.i0 == 2) s.step = 2;
+        while (q < se && I(q) < v1 && O(q) == s.off && I(q) == s.i0 + s.step * s.len && s.len < kSpringGroupBlock) {
+          ++s.len;
+          ++q;
+        }
+        g.segs.push_back(s);
+      }
+      g.blocks.push_back({v1, seg_begin, static_cast<Index>(g.segs.size())});
+    }
+  }
+  g.part_block[layout.parts()] = static_cast<Index>(g.blocks.size());
+  const Index interior = layout.colour_begin(0);
+  g.grouped = !g.segs.empty() && interior >= 4 * static_cast<Index>(g.segs.size());
+  return perm;
+}
+
+/// a_new[q] = a_old[perm[q]].
+template <class A>
+void apply_spring_perm(const std::vector<Index>& perm, A& a) {
+  A tmp(a.size());
+  for (std::size_t q = 0; q < perm.size(); ++q) tmp[q] = a[static_cast<std::size_t>(perm[q])];
+  a.swap(tmp);
+}
+
+/// Window plan for grouped springs (any struct with grouped, segs, blocks, part_block and the
+/// outputs block_need, win_span, win_cap): need[bk] = 1 + the largest vertex that block bk reads
+/// (at least the block's vertex_end); win_span, the largest number of vertices live at once
+/// (from the first unfinished vertex to the farthest one read); the capacity win_cap (0 when that
+/// span is too large: window off). Any capacity >= win_span is correct.
+template <class Springs>
+void plan_spring_window(const SpringLayout& layout, Springs& s) {
+  s.block_need.assign(s.blocks.size(), 0);
+  s.win_cap = 0;
+  s.win_span = 0;
+  if (!s.grouped) return;
+  Index span = 0;
+  for (int p = 0; p < layout.parts(); ++p) {
+    Index qfin = layout.part_vertex_begin(p);
+    for (Index bk = s.part_block[p]; bk < s.part_block[p + 1]; ++bk) {
+      const auto& B = s.blocks[bk];
+      Index need = B.vertex_end;
+      for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
+        const auto& G = s.segs[sg];
+        need = std::max(need, G.i0 + G.off + G.step * (G.len - 1) + 1);
+      }
+      s.block_need[bk] = need;
+      span = std::max(span, need - qfin);
+      qfin = B.vertex_end;
+    }
+  }
+  s.win_span = span;
+  if (span > kSpringWinMaxSpan) return;
+  s.win_cap = std::max<Index>(1024, 4 * span);
+}
+
+/// Before a block that reads vertices up to need - 1: when need lies beyond the window
+/// [ws, ws + cap), move the live vertices [qfin, fill) of the narr arrays A to the start (ws = qfin).
+template <class T>
+inline void window_make_room(T* const* A, int narr, Index cap, Index need, Index qfin, Index fill, Index& ws) {
+  if (need <= ws + cap) return;
+  const std::size_t sh = static_cast<std::size_t>(qfin - ws), cnt = static_cast<std::size_t>(fill - qfin);
+  for (int e = 0; e < narr; ++e) std::memmove(A[e], A[e] + sh, cnt * sizeof(T));
+  ws = qfin;
+}
+
+}  // namespace loom
