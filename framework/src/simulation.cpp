@@ -437,6 +437,8 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   };
   if (write && !resuming) write_file_atomic((fs::path(output_.dir) / "scene.yaml").string(), scene_text);
   if (!resuming) emit(0);
+  // `threads: auto` probes only while the steps left can repay a probe (loom/thread_controller.hpp)
+  if (thread_ctl_) thread_ctl_->set_run_steps(thread_ctl_->steps() + static_cast<long>(frames_ - first_frame) * substeps_);
   for (int f = first_frame + 1; f <= frames_; ++f) {
     step_seconds_ = 0;
     steps_in_frame_ = 0;

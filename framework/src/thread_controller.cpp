@@ -21,6 +21,7 @@ double ThreadController::median(const double* v, int n) {
 }
 
 void ThreadController::record(double t) {
+  ++steps_;
   elapsed_ += t;
   since_decision_ += t;
   ++steps_since_decision_;
@@ -70,7 +71,28 @@ void ThreadController::on_sample(double s, int steps) {
     const bool drifted = m > cfg_.drift * ref_ || m * cfg_.drift < ref_;
     need = std::max(cfg_.min_interval, next_loss_ / ((drifted ? 2.0 : 1.0) * cfg_.overhead));
   }
-  if (since_decision_ >= need) start_probe();
+  if (since_decision_ < need) return;
+  if (probe_pays(m)) {
+    start_probe();
+  } else {   // wait a full interval before asking again (the answer only gets worse as the run ends)
+    ++skipped_;
+    since_decision_ = 0;
+  }
+}
+
+bool ThreadController::probe_pays(double m) const {
+  if (run_steps_ <= 0) return true;
+  // The probe's length in steps: `samples` samples of each other count, at the larger of its
+  // known steps per sample and the chosen count's.
+  int sps = 1;
+  for (int k = 0; k < ncand_; ++k)
+    if (cand_[k] == chosen_) sps = std::max(1, steps_per_sample_[k]);
+  double len = 0;
+  for (int k = 0; k < ncand_; ++k)
+    if (cand_[k] != chosen_) len += cfg_.samples * std::max(sps, steps_per_sample_[k]);
+  const double left = static_cast<double>(run_steps_ - steps_) - len;
+  const double cost = std::max(next_loss_, (cfg_.reject_factor - 1.0) * m * len);
+  return left > 0 && cfg_.repay_gain * m * left >= cost;
 }
 
 void ThreadController::start_probe() {

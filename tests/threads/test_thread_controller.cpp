@@ -225,3 +225,73 @@ TEST(ThreadController, CorrectsAWrongStartUpGuessEarly) {
   EXPECT_GE(steps, 1 + 10 + 3);
   EXPECT_LE(steps, 1 + 11 + 3);
 }
+
+// Run length known (Simulation::run passes frames x steps per frame): a probe starts only when
+// a count 10% faster over the steps left after it would win back what it may cost (a count 1.5x
+// slower run for its whole length). Same world as CorrectsAWrongStartUpGuessEarly: 1 thread
+// 25 ms, 2 threads 14 ms; the probe is 3 samples of one step each.
+TEST(ThreadController, ShortRunIsNotProbed) {
+  // The first probe is due after 11 or 12 recorded steps (the skipped first step, then 10 step
+  // times: see above); a 3-step probe may cost 0.5 x 25 ms x 3 = 37.5 ms; 10% of 25 ms per step
+  // repays it in 15 steps, so a 25-step run (at most 11 steps left after the probe) is not
+  // probed, and runs on its start-up count throughout.
+  ThreadController c(1, 2);
+  c.set_run_steps(25);
+  for (int s = 0; s < 25; ++s) {
+    EXPECT_EQ(c.threads(), 1) << s;
+    c.record(c.threads() == 2 ? 0.014 : 0.025);
+  }
+  EXPECT_EQ(c.probes(), 0);
+  EXPECT_GE(c.skipped_probes(), 1);
+  // The same run without a known length probes and switches.
+  ThreadController d(1, 2);
+  for (int s = 0; s < 25; ++s) d.record(d.threads() == 2 ? 0.014 : 0.025);
+  EXPECT_EQ(d.probes(), 1);
+  EXPECT_EQ(d.chosen(), 2);
+}
+
+TEST(ThreadController, RunLongEnoughToRepayIsProbedAsBefore) {
+  // 40 steps: at least 25 left after the first probe: 10% of 25 ms x 25 = 62.5 ms >= 37.5 ms,
+  // so it probes and switches at the same step as without a known length.
+  ThreadController c(1, 2), d(1, 2);
+  c.set_run_steps(40);
+  for (int s = 0; s < 40; ++s) {
+    c.record(c.threads() == 2 ? 0.014 : 0.025);
+    d.record(d.threads() == 2 ? 0.014 : 0.025);
+    EXPECT_EQ(c.threads(), d.threads()) << s;
+  }
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_EQ(c.probes(), 1);
+}
+
+TEST(ThreadController, NoProbesNearTheEndOfARun) {
+  // 2 threads 10 ms, 1 thread 18 ms (a probe of 1 costs 8 ms: one rejected sample); probes
+  // recur about every 0.27 s. Without a known length, find the step at which the 50th probe
+  // starts; a run that ends 12 steps after it cannot repay it (9 steps after a 3-step probe:
+  // 10% x 10 ms x 9 = 9 ms < 0.5 x 10 ms x 3 = 15 ms), so it makes the first 49 probes at the
+  // same steps and skips the 50th.
+  auto world = [](int n) { return n == 2 ? 0.010 : 0.018; };
+  ThreadController d(2, 2);
+  long p50 = -1;
+  while (p50 < 0 && d.steps() < 100000) {
+    d.record(world(d.threads()));
+    if (d.probes() == 50) p50 = d.steps();
+  }
+  ASSERT_GT(p50, 0);
+  const long total = p50 + 12;
+  ThreadController c(2, 2), e(2, 2);
+  c.set_run_steps(total);
+  double extra_c = 0, extra_e = 0;
+  for (long s = 0; s < total; ++s) {
+    extra_c += world(c.threads()) - 0.010;
+    extra_e += world(e.threads()) - 0.010;
+    c.record(world(c.threads()));
+    e.record(world(e.threads()));
+    if (s + 1 < p50) EXPECT_EQ(c.probes(), e.probes()) << s;
+  }
+  EXPECT_EQ(c.probes(), 49);
+  EXPECT_EQ(e.probes(), 50);
+  EXPECT_EQ(c.skipped_probes(), 1);
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_NEAR(extra_e - extra_c, 0.008, 1e-9);   // the skipped probe's one 1-thread step
+}

@@ -24,6 +24,12 @@
 //   probe does not bring the next one forward). When the chosen count's step time drifts by more
 //   than `drift` (1.5x either way: a competitor started or stopped, the scene changed), the next
 //   probe may come twice as early (6%).
+// - Run length: when the run's total step count is known (set_run_steps; Simulation::run gives
+//   frames x steps per frame), a probe starts only when the rest of the run can repay it: a count
+//   `repay_gain` (10%) faster over the steps left after the probe must win back what the probe may
+//   cost, taken as the larger of the expected cost above and a count `reject_factor` times slower
+//   run for the whole probe. Short runs (a few dozen steps of a slow scene, or the tail of any run)
+//   are then not probed at all and keep the start-up count. Unknown length (0): no such limit.
 // The controller is pure logic on the step times it is given (no clock of its own), so tests
 // drive it with made-up times. Simulation::step feeds it and applies threads().
 #pragma once
@@ -39,6 +45,7 @@ struct ThreadControllerConfig {
   double first_probe_steps = 10;  ///< first probe after this many (baseline) step times
   double min_interval = 0.25;     ///< later probes never sooner than this (seconds) after a decision
   double drift = 1.5;             ///< the chosen count's time changed by this factor: probe twice as early
+  double repay_gain = 0.10;       ///< with a known run length: a probe must be repaid by a count this much faster
 };
 
 class ThreadController {
@@ -55,6 +62,11 @@ class ThreadController {
   int threads() const { return current_; }
   /// Feed the wall time of the step just taken with threads().
   void record(double step_seconds);
+  /// The run's total number of steps, counted from the first record() (0: unknown, the default).
+  /// Probes then start only when the steps left can repay them (see the top of this file).
+  void set_run_steps(long total) { run_steps_ = total; }
+  long steps() const { return steps_; }              ///< steps recorded so far
+  int skipped_probes() const { return skipped_; }    ///< probes due but not started: the run is too short to repay them
 
   int probes() const { return probes_; }              ///< probes started so far
   int switches() const { return switches_; }          ///< times the chosen count changed
@@ -67,6 +79,7 @@ class ThreadController {
   static double median(const double* v, int n);
   void on_sample(double s, int steps);
   void start_probe();
+  bool probe_pays(double m) const;
   void next_candidate();
   void decide();
 
@@ -101,6 +114,8 @@ class ThreadController {
   double probe_loss_ = 0;  // extra time of this probe so far, against the baseline
   double probe_loss_total_ = 0;
   int probes_ = 0, switches_ = 0;
+  long run_steps_ = 0, steps_ = 0;
+  int skipped_ = 0;
 };
 
 }  // namespace loom
