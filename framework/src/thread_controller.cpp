@@ -47,6 +47,7 @@ void ThreadController::on_sample(double s, int steps) {
   if (probing_) {
     const int k = probe_idx_;
     meas_[k][nmeas_[k]++] = s;
+    ever_measured_[k] = true;
     steps_per_sample_[k] = std::max(steps_per_sample_[k], steps);
     if (s > cfg_.reject_factor * baseline_) rejected_[k] = true;
     if (rejected_[k] || nmeas_[k] >= cfg_.samples) {
@@ -87,11 +88,16 @@ bool ThreadController::probe_pays(double m) const {
   int sps = 1;
   for (int k = 0; k < ncand_; ++k)
     if (cand_[k] == chosen_) sps = std::max(1, steps_per_sample_[k]);
-  double len = 0;
-  for (int k = 0; k < ncand_; ++k)
-    if (cand_[k] != chosen_) len += cfg_.samples * std::max(sps, steps_per_sample_[k]);
+  double len = 0, bound = 0;
+  for (int k = 0; k < ncand_; ++k) {
+    if (cand_[k] == chosen_) continue;
+    const double lk = cfg_.samples * std::max(sps, steps_per_sample_[k]);
+    len += lk;
+    const bool unknown_up = cand_[k] > chosen_ && !ever_measured_[k];
+    bound += unknown_up ? cfg_.unmeasured_cost * m : (cfg_.reject_factor - 1.0) * m * lk;
+  }
   const double left = static_cast<double>(run_steps_ - steps_) - len;
-  const double cost = std::max(next_loss_, (cfg_.reject_factor - 1.0) * m * len);
+  const double cost = std::max(next_loss_, bound);
   return left > 0 && cfg_.repay_gain * m * left >= cost;
 }
 
@@ -105,6 +111,7 @@ void ThreadController::start_probe() {
     else steps_per_sample_[k] = 0;
   }
   const int b = baseline_idx_;
+  ever_measured_[b] = true;
   std::copy(recent_, recent_ + nrecent_, meas_[b]);
   nmeas_[b] = nrecent_;
   measured_[b] = true;

@@ -227,41 +227,74 @@ TEST(ThreadController, CorrectsAWrongStartUpGuessEarly) {
 }
 
 // Run length known (Simulation::run passes frames x steps per frame): a probe starts only when
-// a count 10% faster over the steps left after it would win back what it may cost (a count 1.5x
-// slower run for its whole length). Same world as CorrectsAWrongStartUpGuessEarly: 1 thread
-// 25 ms, 2 threads 14 ms; the probe is 3 samples of one step each.
+// a count 10% faster over the steps left after it would win back what it may cost. Alone, started
+// on 2 threads (25 ms a step), where 1 thread is faster (14 ms, a small mesh); each probe sample
+// is one step.
 TEST(ThreadController, ShortRunIsNotProbed) {
   // The first probe is due after 11 or 12 recorded steps (the skipped first step, then 10 step
-  // times: see above); a 3-step probe may cost 0.5 x 25 ms x 3 = 37.5 ms; 10% of 25 ms per step
-  // repays it in 15 steps, so a 25-step run (at most 11 steps left after the probe) is not
-  // probed, and runs on its start-up count throughout.
-  ThreadController c(1, 2);
+  // times: see CorrectsAWrongStartUpGuessEarly); a 3-step probe of 1 thread may cost
+  // 0.5 x 25 ms x 3 = 37.5 ms (1.5x slower throughout); 10% of 25 ms per step repays that in 15
+  // steps, so a 25-step run (at most 11 steps left after the probe) is not probed and runs on its
+  // start-up count throughout.
+  auto world = [](int n) { return n == 1 ? 0.014 : 0.025; };
+  ThreadController c(2, 2);
   c.set_run_steps(25);
   for (int s = 0; s < 25; ++s) {
-    EXPECT_EQ(c.threads(), 1) << s;
-    c.record(c.threads() == 2 ? 0.014 : 0.025);
+    EXPECT_EQ(c.threads(), 2) << s;
+    c.record(world(c.threads()));
   }
   EXPECT_EQ(c.probes(), 0);
   EXPECT_GE(c.skipped_probes(), 1);
   // The same run without a known length probes and switches.
-  ThreadController d(1, 2);
-  for (int s = 0; s < 25; ++s) d.record(d.threads() == 2 ? 0.014 : 0.025);
+  ThreadController d(2, 2);
+  for (int s = 0; s < 25; ++s) d.record(world(d.threads()));
   EXPECT_EQ(d.probes(), 1);
-  EXPECT_EQ(d.chosen(), 2);
+  EXPECT_EQ(d.chosen(), 1);
 }
 
 TEST(ThreadController, RunLongEnoughToRepayIsProbedAsBefore) {
   // 40 steps: at least 25 left after the first probe: 10% of 25 ms x 25 = 62.5 ms >= 37.5 ms,
   // so it probes and switches at the same step as without a known length.
-  ThreadController c(1, 2), d(1, 2);
+  auto world = [](int n) { return n == 1 ? 0.014 : 0.025; };
+  ThreadController c(2, 2), d(2, 2);
   c.set_run_steps(40);
   for (int s = 0; s < 40; ++s) {
-    c.record(c.threads() == 2 ? 0.014 : 0.025);
-    d.record(d.threads() == 2 ? 0.014 : 0.025);
+    c.record(world(c.threads()));
+    d.record(world(d.threads()));
     EXPECT_EQ(c.threads(), d.threads()) << s;
   }
-  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_EQ(c.chosen(), 1);
   EXPECT_EQ(c.probes(), 1);
+}
+
+TEST(ThreadController, BusyStartShortRunDoesNotProbeMoreThreads) {
+  // The start-up rule saw a competitor and chose 1 thread (13 ms a step); a 2-thread step waits
+  // at its barriers for a descheduled thread: 260 ms (20x, as draped_ball_rk4 measured under
+  // load). A never-measured count above the chosen one may cost 10 step times (130 ms), which a
+  // 93-step run cannot repay (10% x 13 ms x at most 81 steps = 105 ms): no probe, every step on
+  // 1 thread. Without a known length the probe runs and costs one 2-thread step (247 ms extra).
+  auto world = [](int n) { return n == 2 ? 0.260 : 0.013; };
+  ThreadController c(1, 2), d(1, 2);
+  c.set_run_steps(93);
+  double tc = 0, td = 0;
+  for (int s = 0; s < 93; ++s) {
+    EXPECT_EQ(c.threads(), 1) << s;
+    tc += world(c.threads());
+    td += world(d.threads());
+    c.record(world(c.threads()));
+    d.record(world(d.threads()));
+  }
+  EXPECT_EQ(c.probes(), 0);
+  EXPECT_EQ(d.probes(), 1);
+  EXPECT_EQ(d.chosen(), 1);
+  EXPECT_NEAR(td - tc, 0.260 - 0.013, 1e-9);
+  // A long run (1000 steps: 10% x 13 ms x 985 = 1.28 s >= 130 ms) still probes, so it can find
+  // out that the competitor has gone.
+  ThreadController e(1, 2);
+  e.set_run_steps(1000);
+  for (int s = 0; s < 1000; ++s) e.record(world(e.threads()));
+  EXPECT_GE(e.probes(), 1);
+  EXPECT_EQ(e.chosen(), 1);
 }
 
 TEST(ThreadController, NoProbesNearTheEndOfARun) {

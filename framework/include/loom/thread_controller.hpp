@@ -27,9 +27,14 @@
 // - Run length: when the run's total step count is known (set_run_steps; Simulation::run gives
 //   frames x steps per frame), a probe starts only when the rest of the run can repay it: a count
 //   `repay_gain` (10%) faster over the steps left after the probe must win back what the probe may
-//   cost, taken as the larger of the expected cost above and a count `reject_factor` times slower
-//   run for the whole probe. Short runs (a few dozen steps of a slow scene, or the tail of any run)
-//   are then not probed at all and keep the start-up count. Unknown length (0): no such limit.
+//   cost, taken as the larger of the expected cost above and the sum over the other counts of: a
+//   count `reject_factor` times slower run for its whole probe, or, for a count above the chosen
+//   one that was never measured (the start-up rule saw a competitor and started lower),
+//   `unmeasured_cost` (10) step times: one step of more threads than free cores waits at every
+//   barrier for a descheduled thread (measured under load: 20x the one-thread step on
+//   draped_ball_rk4). Short runs (a few dozen steps of a slow scene, a short run that started
+//   below the cores because the machine was busy, or the tail of any run) are then not probed and
+//   keep the start-up count. Unknown length (0): no such limit.
 // The controller is pure logic on the step times it is given (no clock of its own), so tests
 // drive it with made-up times. Simulation::step feeds it and applies threads().
 #pragma once
@@ -46,6 +51,7 @@ struct ThreadControllerConfig {
   double min_interval = 0.25;     ///< later probes never sooner than this (seconds) after a decision
   double drift = 1.5;             ///< the chosen count's time changed by this factor: probe twice as early
   double repay_gain = 0.10;       ///< with a known run length: a probe must be repaid by a count this much faster
+  double unmeasured_cost = 10;    ///< ... and a never-measured count above the chosen one may cost this many step times
 };
 
 class ThreadController {
@@ -108,6 +114,7 @@ class ThreadController {
   int steps_per_sample_[kMaxCandidates] = {};
   bool rejected_[kMaxCandidates] = {};
   bool measured_[kMaxCandidates] = {};
+  bool ever_measured_[kMaxCandidates] = {};   // measured in some probe (or the count chosen at the time)
   int probe_idx_ = 0;      // candidate index being probed
   int baseline_idx_ = 0;   // candidate index of the count that was chosen when the probe began
   double baseline_ = 0;    // its median step time
