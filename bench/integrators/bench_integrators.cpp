@@ -238,6 +238,34 @@ void ho_window_bench(benchmark::State& st, bool window) {
   HoSprings<double> s = c.ho.springs();
   if (!window) s.win_cap = 0;
   st.counters["window"] = static_cast<double>(s.win_cap);
+  // the grouped structure: segments, springs left over after whole groups of 4 (the vector
+  // loops' scalar remainders), segments with stride 2, and segments without one shared id
+  double tail = 0, step2 = 0, mixed = 0;
+  for (std::size_t g = 0; g < s.segs.size(); ++g) {
+    tail += static_cast<double>(s.segs[g].len % 4);
+    step2 += s.segs[g].step == 2 ? 1 : 0;
+    mixed += s.seg_uniform.size() == s.segs.size() && !s.seg_uniform[g] ? 1 : 0;
+  }
+  st.counters["segs"] = static_cast<double>(s.segs.size());
+  st.counters["tail_springs"] = tail;
+  st.counters["step2_segs"] = step2;
+  st.counters["mixed_segs"] = mixed;
+  double kmixed = 0, l0_float_delta_ok = 0;
+  if (s.table)
+    for (const auto& G : s.segs) {
+      bool same = true, fits = true;
+      const double base = s.t_l0[s.id[G.begin]];
+      for (Index r = 0; r < G.len; ++r) {
+        const std::size_t id = s.id[G.begin + r], id0 = s.id[G.begin];
+        same = same && s.t_kx[id] == s.t_kx[id0] && s.t_kv[id] == s.t_kv[id0];
+        const double d = s.t_l0[id] - base;
+        fits = fits && static_cast<double>(static_cast<float>(d)) == d && base + d == s.t_l0[id];
+      }
+      kmixed += same ? 0 : 1;
+      l0_float_delta_ok += fits ? 1 : 0;
+    }
+  st.counters["k_mixed_segs"] = kmixed;
+  st.counters["l0_delta_ok_segs"] = l0_float_delta_ok;
   std::vector<double> x = c.x0, v(x.size(), 0.0), dv(x.size(), 0.0);
   const std::array<double, 3> g{0.0, -9.81, 0.0};
   for (auto _ : st)
@@ -343,7 +371,7 @@ void BM_SeStep_double_blocked(benchmark::State& st) { se_bench<double>(st, false
 void BM_SeStep_float_blocked(benchmark::State& st) { se_bench<float>(st, true, 2); }
 
 template <class T>
-void rk4_fused_bench(benchmark::State& st, bool is_float) {
+void rk4_fused_bench(benchmark::State& st, bool is_float, bool plain = false) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -354,7 +382,8 @@ void rk4_fused_bench(benchmark::State& st, bool is_float) {
   std::vector<T> w(c.scene.state.inv_mass.begin(), c.scene.state.inv_mass.end());
   const std::array<T, 3> g{T(0), T(-9.81), T(0)};
   const SpringSweep<T>* sw = nullptr;
-  if constexpr (std::is_same_v<T, float>) sw = &c.fsweep; else sw = &c.sweep;
+  if constexpr (std::is_same_v<T, float>) sw = plain ? &c.fsweep_plain : &c.fsweep;
+  else sw = plain ? &c.sweep_plain : &c.sweep;
   for (auto _ : st)
     rk4_step_springs<T>(*sw, x.data(), v.data(), w.data(), g, static_cast<T>(c.h), xs.data(), vs.data(), f.data(),
                         ax.data(), av.data(), [](int) {});
@@ -363,6 +392,8 @@ void rk4_fused_bench(benchmark::State& st, bool is_float) {
 }
 void BM_Rk4Fused_double(benchmark::State& st) { rk4_fused_bench<double>(st, false); }
 void BM_Rk4Fused_float(benchmark::State& st) { rk4_fused_bench<float>(st, true); }
+// RK4's fused stages on the plain sweep (what they ran before the grouped, windowed sweep)
+void BM_Rk4Fused_double_plain(benchmark::State& st) { rk4_fused_bench<double>(st, false, true); }
 
 // The Table 1 cloth with its vertices numbered in a random order (fixed seed): HO with the
 // mesh's order (reorder: none) and with the RCM order (reorder: rcm, which also copies x and v
@@ -478,6 +509,7 @@ BENCHMARK(BM_SeStep_double_blocked)->Apply(rows_args);
 BENCHMARK(BM_SeStep_float_blocked)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
+BENCHMARK(BM_Rk4Fused_double_plain)->Apply(rows_args);
 BENCHMARK(BM_HoStep_shuffled_none)->Apply(rows_args);
 BENCHMARK(BM_HoStep_shuffled_rcm)->Apply(rows_args);
 
