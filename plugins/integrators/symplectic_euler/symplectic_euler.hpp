@@ -29,6 +29,8 @@ class SymplecticEuler final : public Integrator {
   bool fused() const { return sweep_source_ != nullptr; }
   /// Whether the fused path runs in an internal vertex order (key `reorder`).
   bool reordered() const { return !order_.identity(); }
+  /// Whether the fused path runs the grouped, windowed sweep (loom/spring_groups.hpp).
+  bool windowed() const { return fused() && sweep_.grouped; }
   ReorderMode reorder_mode() const { return reorder_; }
 
  private:
