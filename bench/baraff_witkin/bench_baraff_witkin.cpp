@@ -12,7 +12,7 @@
 // from 2 dv(n-1) - dv(n-2); *_saved: each system also solved from dv = 0, untimed, for the
 // counter iters_saved = cold minus warm (or extrapolated) iterations per solve; *_sweeps2,
 // *_coarse2, *_hierarchy2: cycle variants of NUMERICS.md 3.6; *_upperspmv: the PCG's SpMV from
-// the upper triangle instead of the full rows),
+// the upper triangle instead of the full rows; *_floatspmv: from a float copy of A),
 // with a timing wrapper around the solver: setup_ms (the first factorize: aggregation and
 // patterns + values), factorize_ms and solve_ms per step, iters per step, step_ms.
 //   bench_baraff_witkin --benchmark_filter=bw_solver --benchmark_counters_tabular=true
@@ -199,6 +199,10 @@ std::vector<SolverVariant> variants() {
   amg.upper_triangle_spmv = true;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_upperspmv", false, amg});
   amg.upper_triangle_spmv = false;
+  // The PCG's SpMV from a float copy of A (float_spmv.hpp): half the matrix bytes of the SpMV.
+  amg.float_spmv = true;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_floatspmv", false, amg});
+  amg.float_spmv = false;
   // Cycle variants (issue 15, NUMERICS.md 3.6): a second Gauss-Seidel sweep on every level or
   // on the coarse levels only, and the coarse levels recomputed every 2nd step.
   amg.amg.smoothing_sweeps = 2;

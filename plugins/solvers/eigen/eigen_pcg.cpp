@@ -43,6 +43,8 @@ ParamSpec make_pcg_spec(const char* name, const char* summary) {
         "iterations before the solve counts as failed");
     s.choice("preconditioner", precond_name(d.preconditioner), {"none", "jacobi", "block_jacobi", "sa_amg"}).help(
         "sa_amg: smoothed-aggregation multigrid V-cycle (options under sa_amg)");
+    s.choice("spmv_storage", d.float_spmv ? "float" : "double", {"double", "float"}).backends({"cpu"}).help(
+        "precision of the copy of A read by the iteration's SpMV (vectors, sums, start and stopping rule stay double)");
     s.integer("parallel_min_rows", d.parallel_min_rows).range(ParamRange::closed(0, 1e9)).units("vertices").backends({"cpu"}).help(
         "loops run on all OpenMP threads from this many block rows on");
     ParamSpec a("sa_amg");
@@ -101,6 +103,7 @@ PcgOptions parse_pcg_options(const Params& p, const ParamSpec& spec, const std::
     return o;
   }
   o.parallel_min_rows = static_cast<Index>(r.integer("parallel_min_rows"));
+  o.float_spmv = r.text("spmv_storage") == "float";
   o.preconditioner = pc == "none"     ? PcgPreconditioner::None
                      : pc == "jacobi" ? PcgPreconditioner::Jacobi
                      : pc == "sa_amg" ? PcgPreconditioner::SaAmg
@@ -150,7 +153,9 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
   const Index n = n_;
   const PcgPreconditioner pc = options_.preconditioner;
   use_upper_ = false;
-  if (options_.upper_triangle_spmv) {
+  if (options_.float_spmv) {
+    float_copy_values(A.values(), af_, n >= options_.parallel_min_rows);
+  } else if (options_.upper_triangle_spmv) {
     if (upper_pattern_ != &P || upper_nnz_ != P.nnz_blocks()) {  // a new pattern: allocates, once
       upper_.analyze(P);
       upper_pattern_ = &P;
@@ -236,6 +241,7 @@ struct CpuPcgOps {
   const double* pinv;   // 9 per vertex (null with amg)
   amg::SaAmg* amg;      // the V-cycle (null without)
   const UpperTriangleSpmv* upper;  // the SpMV from the upper triangle (null: full rows)
+  const float* af;      // the SpMV from A's values in float (null: double)
   bool par;
   Index n;
 
@@ -270,7 +276,9 @@ struct CpuPcgOps {
 #pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
     for (Index i = 0; i < n; ++i) {
       const std::size_t o = 3 * static_cast<std::size_t>(i);
-      if (upper)
+      if (af)
+        block_row_multiply3f(rp, col, af, cp, i, qp + o);
+      else if (upper)
         upper->row(A, cp, i, qp + o);
       else
         block_row_multiply3(rp, col, val, cp, i, qp + o);
@@ -342,8 +350,9 @@ SolveReport EigenPcg::solve(const BsrMatrix& A, const Filter& S, std::span<const
   if (b.size() != N || z.size() != N || dv.size() != N)
     throw std::invalid_argument(name_ + ": vector sizes do not match the matrix");
   const bool use_amg = options_.preconditioner == PcgPreconditioner::SaAmg;
+  const bool use_float = options_.float_spmv && af_.size() == A.values().size() + 4;
   CpuPcgOps ops{A, S, b, z, pinv_.data(), use_amg ? amg_.get() : nullptr, use_upper_ ? &upper_ : nullptr,
-                n_ >= options_.parallel_min_rows, n_};
+                use_float ? af_.data() : nullptr, n_ >= options_.parallel_min_rows, n_};
   pcg::Settings set;
   set.tolerance = options_.tolerance;
   set.max_iterations = options_.max_iterations;

@@ -11,6 +11,7 @@
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "sa_amg.hpp"
+#include "float_spmv.hpp"
 #include "upper_spmv.hpp"
 
 namespace loom {
@@ -31,6 +32,12 @@ struct PcgOptions {
   /// Off by default: on one thread of this machine it was not faster than the full rows
   /// (docs/plugins/solvers.md); the benchmark's `_upperspmv` variant measures it.
   bool upper_triangle_spmv = false;
+  /// true (`spmv_storage: float`): the iteration's SpMV q = S A c reads a float copy of A's
+  /// values, written at every factorize() (float_spmv.hpp); c, q, the residuals, the iterates
+  /// and every sum stay double, and the start and the stopping rule use the double A (the true
+  /// residual), so the answer still meets `tolerance` on A. Takes precedence over
+  /// upper_triangle_spmv. Off by default (docs/plugins/solvers.md has what it saves).
+  bool float_spmv = false;
 };
 
 /// The keys of filtered_pcg (cpu and cuda): tolerance, max_iterations, preconditioner (none |
@@ -69,6 +76,7 @@ class EigenPcg final : public LinearSolver {
   const BsrPattern* upper_pattern_ = nullptr;
   Index upper_nnz_ = -1;
   bool use_upper_ = false;  // A symmetric to rounding at the last factorize
+  std::vector<float> af_;   // float_spmv: A's values in float, 9 per block, 4 zeros of padding
 
  public:
   /// Whether the last factorize() found A symmetric and the SpMV uses its upper triangle.
