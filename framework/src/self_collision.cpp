@@ -1195,6 +1195,24 @@ void SelfCollision::resolve(State& s, double h) {
 
 namespace loom {
 
+namespace {
+// Largest |u_a - u_b| over a vertex a of one side and b of the other (vertex-triangle: {0} and
+// {1, 2, 3}; edge-edge: {0, 1} and {2, 3}), u = p - q per vertex (q = nullptr: u = p).
+double relative_motion(bool vt, const Index idx[4], const double* p, const double* q) {
+  double u[4][3];
+  for (int i = 0; i < 4; ++i)
+    for (int k = 0; k < 3; ++k) u[i][k] = p[3 * idx[i] + k] - (q ? q[3 * idx[i] + k] : 0.0);
+  double m = 0;
+  for (int a = 0; a < (vt ? 1 : 2); ++a)
+    for (int b = vt ? 1 : 2; b < 4; ++b) {
+      double r[3];
+      selfcol::sub(u[a], u[b], r);
+      m = std::max(m, selfcol::dot(r, r));
+    }
+  return std::sqrt(m);
+}
+}  // namespace
+
 void SelfCollision::proximity_pairs(const double* x, const double* d, std::vector<ProximityPair>& out) {
   out.clear();
   const double th = opt_.thickness;
@@ -1229,10 +1247,15 @@ void SelfCollision::proximity_pairs(const double* x, const double* d, std::vecto
       since = std::max(moved_[idx[0]], moved_[idx[1]]) + std::max(moved_[idx[2]], moved_[idx[3]]);
     }
     if (p.dist_ref - since - step >= th) continue;  // distance is 1-Lipschitz in each vertex
+    // Tighter, from relative motion: two elements whose vertices move by m_a (one side) and m_b
+    // (other side) change their distance by at most max |m_a - m_b| (a convex combination of
+    // these differences moves the closest points), so a falling sheet keeps its bound.
+    const double step_rel = std::min(step, relative_motion(vt, idx, d, nullptr));
+    if (p.dist_ref - std::min(since, relative_motion(vt, idx, x, ref_x_.data())) - step_rel >= th) continue;
     ProximityPair r;
     r.vt = vt;
     r.distance = pair_distance(vt, idx, x, r.w, r.normal);
-    if (r.distance - step >= th) continue;
+    if (r.distance - step_rel >= th) continue;
     for (int i = 0; i < 4; ++i) r.v[i] = idx[i];
     out.push_back(r);
   }

@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <memory>
 #include <random>
+#include <set>
 #include <vector>
 
 #include "baraff_witkin.hpp"
@@ -299,6 +300,217 @@ TEST(BwSelfContact, FrictionSlowsASlidingLayerByMuGhPerStepAndNotALandingOne) {
       before = now;
     }
   }
+}
+
+// A steady contact state makes no allocation in a step after warm-up: the contact blocks that
+// the first steps add to the pattern (the upper layer's vertices against the lower layer's, with
+// their one-rings) cover every later contact, so the pattern object, its block count and the
+// growth counters stay as they are. A 3 x 3 layer resting on a pinned 5 x 5 one under gravity,
+// still or sliding slowly (0.05 m/s, a quarter of a cell in 50 steps, frictionless).
+TEST(BwSelfContact, ASteadyContactStateMakesNoPatternGrowthAfterWarmUp) {
+  const double h = 0.01;
+  for (const double u : {0.0, 0.05}) {
+    SCOPED_TRACE(u == 0 ? "resting" : "sliding");
+    Scene sc;
+    two_layers(sc, 0.999 * kThick, 0.0, 0, 0, 3);
+    const Index nv = kN * kN, n = sc.state.size();
+    for (Index i = 0; i < nv; ++i) sc.state.pin(i);
+    sc.state.update_inverse_masses();
+    sc.gravity = {0, -9.81, 0};
+    for (Index i = nv; i < n; ++i) sc.state.v[3 * i] = u;
+    BaraffWitkin bw;
+    bw.prepare(sc, h);
+    const Index material_blocks = bw.pattern().nnz_blocks();
+    for (int step = 0; step < 5; ++step) full_step(sc, bw, h);
+    // The warm-up extended the pattern (the layers' vertices are not coupled by the material).
+    ASSERT_GE(bw.pattern_rebuilds(), 1);
+    ASSERT_GT(bw.pattern().nnz_blocks(), material_blocks);
+    const int rebuilds = bw.pattern_rebuilds(), restarts = bw.self_contact()->restarts();
+    const loom::BsrPattern* pattern = &bw.pattern();
+    const Index blocks = pattern->nnz_blocks();
+    for (int step = 0; step < 50; ++step) {
+      full_step(sc, bw, h);
+      ASSERT_GT(bw.self_contact()->stats().contacts, 0) << "step " << step;
+      EXPECT_EQ(bw.pattern_rebuilds(), rebuilds) << "step " << step;
+      EXPECT_EQ(bw.self_contact()->restarts(), restarts) << "step " << step;
+      EXPECT_EQ(&bw.pattern(), pattern) << "step " << step;
+      EXPECT_EQ(bw.pattern().nnz_blocks(), blocks) << "step " << step;
+    }
+    if (verbose())
+      std::printf("%s: material blocks %d, with contact blocks %d, pattern extensions %d\n", u == 0 ? "resting" : "sliding",
+                  static_cast<int>(material_blocks), static_cast<int>(blocks), rebuilds);
+  }
+}
+
+namespace {
+// Brute force over every non-adjacent pair of the mesh: a key per pair (vertex-triangle:
+// {0, v, sorted triangle}; edge-edge: {1, sorted edge, sorted edge} with the smaller edge
+// first), its distance, weights and normal at x, and its distance at y.
+using PairKey = std::array<Index, 5>;
+PairKey vt_key(Index v, Index a, Index b, Index c) {
+  std::array<Index, 3> t = {a, b, c};
+  std::sort(t.begin(), t.end());
+  return {0, v, t[0], t[1], t[2]};
+}
+PairKey ee_key(Index a, Index b, Index c, Index d) {
+  std::array<Index, 2> e = {std::min(a, b), std::max(a, b)}, f = {std::min(c, d), std::max(c, d)};
+  if (f < e) std::swap(e, f);
+  return {1, e[0], e[1], f[0], f[1]};
+}
+}  // namespace
+
+// SelfCollision::proximity_pairs(x, d), the pairs find() turns into contacts, against every pair
+// of the mesh (brute force): it returns every pair within the thickness at x, at x + d, or
+// whose gap linearised along its normal at x falls below the thickness (the contacts find()
+// makes), and only pairs whose distance at x less the largest relative displacement
+// max |d_a - d_b| (a vertex of each element) is below the thickness. The displacements are a
+// large common translation (5 thicknesses, a falling sheet) plus a small random relative part,
+// so a bound from the vertices' own displacements (|d_a| + |d_b|) would return far more pairs.
+TEST(BwSelfContact, ProximityPairsAreEveryPairEndingWithinTheThicknessUnderARelativeMotionBound) {
+  Scene sc;
+  two_layers(sc, 1.6 * kThick, 0.0, 11, 0.5 * kThick);
+  const Index n = sc.state.size();
+  const auto& tris = sc.mesh.triangles;
+  const Index nt = sc.mesh.num_triangles();
+  const auto edges = sc.mesh.edges();
+  std::mt19937 rng(5);
+  std::normal_distribution<double> N(0.0, 1.0);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  std::vector<double> x = sc.state.x, d(3 * n), y(3 * n);
+  std::vector<loom::ProximityPair> out;
+  std::size_t required_total = 0;
+  for (int trial = 0; trial < 12; ++trial) {
+    double T[3] = {N(rng), N(rng), N(rng)};
+    const double len = std::sqrt(T[0] * T[0] + T[1] * T[1] + T[2] * T[2]);
+    for (double& t : T) t *= 5 * kThick / len;
+    for (Index i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) d[3 * i + k] = T[k] + 0.4 * kThick * U(rng);
+    for (std::size_t k = 0; k < y.size(); ++k) y[k] = x[k] + d[k];
+    sc.self_collision->proximity_pairs(x.data(), d.data(), out);
+    std::set<PairKey> got;
+    for (const auto& p : out)
+      got.insert(p.vt ? vt_key(p.v[0], p.v[1], p.v[2], p.v[3]) : ee_key(p.v[0], p.v[1], p.v[2], p.v[3]));
+    EXPECT_EQ(got.size(), out.size()) << "trial " << trial << ": a pair returned twice";
+    std::size_t required = 0, bounded = 0;
+    auto rel = [&](const Index idx[4], bool vt) {
+      double m = 0;
+      for (int a = 0; a < (vt ? 1 : 2); ++a)
+        for (int b = vt ? 1 : 2; b < 4; ++b) {
+          double r2 = 0;
+          for (int k = 0; k < 3; ++k) r2 += std::pow(d[3 * idx[a] + k] - d[3 * idx[b] + k], 2);
+          m = std::max(m, std::sqrt(r2));
+        }
+      return m;
+    };
+    auto check = [&](const PairKey& key, const Index idx[4], bool vt, double dist, const double w[4], double dist_y) {
+      double dn = 0, nrm[3] = {0, 0, 0};
+      for (int a = 0; a < 4; ++a)
+        for (int k = 0; k < 3; ++k) nrm[k] += w[a] * x[3 * idx[a] + k];
+      const double nl = std::sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2]);
+      for (int a = 0; a < 4; ++a)
+        for (int k = 0; k < 3; ++k) dn += w[a] * d[3 * idx[a] + k] * nrm[k] / nl;
+      const bool need = dist < kThick || dist_y < kThick || dist + dn < kThick;
+      const bool may = dist - rel(idx, vt) < kThick;
+      required += need;
+      bounded += may;
+      if (need) {
+        EXPECT_TRUE(got.count(key)) << "trial " << trial << ": a pair ending within the thickness is missing";
+      }
+      if (!may) {
+        EXPECT_FALSE(got.count(key)) << "trial " << trial << ": a pair outside the relative bound is returned";
+      }
+    };
+    for (Index v = 0; v < n; ++v)
+      for (Index t = 0; t < nt; ++t) {
+        const Index idx[4] = {v, tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]};
+        if (v == idx[1] || v == idx[2] || v == idx[3]) continue;
+        double b[3], by[3];
+        const double dist = loom::selfcol::point_triangle_distance(&x[3 * v], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], b);
+        const double dy = loom::selfcol::point_triangle_distance(&y[3 * v], &y[3 * idx[1]], &y[3 * idx[2]], &y[3 * idx[3]], by);
+        const double w[4] = {1, -b[0], -b[1], -b[2]};
+        if (dist > 0) check(vt_key(idx[0], idx[1], idx[2], idx[3]), idx, true, dist, w, dy);
+      }
+    for (std::size_t e = 0; e < edges.size(); ++e)
+      for (std::size_t f = e + 1; f < edges.size(); ++f) {
+        const Index idx[4] = {edges[e][0], edges[e][1], edges[f][0], edges[f][1]};
+        if (idx[0] == idx[2] || idx[0] == idx[3] || idx[1] == idx[2] || idx[1] == idx[3]) continue;
+        double s, t;
+        const double dist = loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s, t);
+        const double dy = loom::selfcol::segment_segment_distance(&y[3 * idx[0]], &y[3 * idx[1]], &y[3 * idx[2]], &y[3 * idx[3]], s, t);
+        double s0, t0;
+        loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s0, t0);
+        const double w[4] = {-(1 - s0), -s0, 1 - t0, t0};
+        if (dist > 0) check(ee_key(idx[0], idx[1], idx[2], idx[3]), idx, false, dist, w, dy);
+      }
+    if (verbose())
+      std::printf("trial %d: %zu pairs returned, %zu required, %zu within the relative bound\n", trial, out.size(), required,
+                  bounded);
+    required_total += required;
+    x = y;  // the next trial starts where this one ended: the lists are kept, refreshed or rebuilt
+  }
+  EXPECT_GT(required_total, 100u);  // the layers are in contact: the check is not vacuous
+}
+
+// Whatever find() makes springs of, every pair within the thickness at the end of a step must
+// be respected (with the after-step response): a layer 1.2 thickness above a pinned
+// one, thrown down onto it under gravity with random velocities (0.25-0.75 thickness per step
+// downwards, up to half a thickness per step sideways), 40 full steps (implicit step and after-step response); after each,
+// brute force over every non-adjacent pair: none closer than half the thickness (the scene
+// tests' bound) and no intersecting triangle pair, while many pairs are within the thickness.
+TEST(BwSelfContact, EveryPairWithinTheThicknessAtAStepEndKeepsHalfOfIt) {
+  const double h = 0.01;
+  Scene sc;
+  two_layers(sc, 1.2 * kThick, 0.2, 13, 0.15 * kThick);
+  const Index n = sc.state.size(), nv = kN * kN;
+  for (Index i = 0; i < nv; ++i) sc.state.pin(i);
+  sc.state.update_inverse_masses();
+  sc.gravity = {0, -9.81, 0};
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  for (Index i = nv; i < n; ++i)
+    for (int k = 0; k < 3; ++k)
+      sc.state.v[3 * i + k] = k == 1 ? -kThick / h * (0.5 + 0.25 * U(rng)) : 0.5 * kThick / h * U(rng);
+  BaraffWitkin bw;
+  bw.prepare(sc, h);
+  const auto& tris = sc.mesh.triangles;
+  const Index nt = sc.mesh.num_triangles();
+  const auto edges = sc.mesh.edges();
+  std::size_t within_total = 0;
+  long long springs = 0;
+  for (int step = 1; step <= 40; ++step) {
+    full_step(sc, bw, h);
+    springs += bw.self_contact()->stats().contacts;
+    const auto& x = sc.state.x;
+    double dmin = 1e300;
+    std::size_t within = 0;
+    for (Index v = 0; v < n; ++v)
+      for (Index t = 0; t < nt; ++t) {
+        const Index* tv = &tris[3 * t];
+        if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
+        double b[3];
+        const double d = loom::selfcol::point_triangle_distance(&x[3 * v], &x[3 * tv[0]], &x[3 * tv[1]], &x[3 * tv[2]], b);
+        dmin = std::min(dmin, d);
+        within += d < kThick;
+      }
+    for (std::size_t e = 0; e < edges.size(); ++e)
+      for (std::size_t f = e + 1; f < edges.size(); ++f) {
+        const auto &E = edges[e], &F = edges[f];
+        if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+        double s, t;
+        const double d = loom::selfcol::segment_segment_distance(&x[3 * E[0]], &x[3 * E[1]], &x[3 * F[0]], &x[3 * F[1]], s, t);
+        dmin = std::min(dmin, d);
+        within += d < kThick;
+      }
+    within_total += within;
+    if (verbose())
+      std::printf("step %d: min distance / thickness %.3f, pairs within the thickness %zu, springs %d, released %d\n", step,
+                  dmin / kThick, within, static_cast<int>(bw.self_contact()->stats().contacts),
+                  static_cast<int>(bw.self_contact()->stats().released));
+    EXPECT_GE(dmin, 0.5 * kThick) << "step " << step;
+    EXPECT_EQ(loom::count_intersecting_pairs(sc.mesh, x), 0) << "step " << step;
+  }
+  EXPECT_GT(within_total, 200u);  // the layers are pressed together: the check is not vacuous
+  EXPECT_GT(springs, 0);
 }
 
 namespace {

@@ -215,10 +215,11 @@ class SelfCollision {
   void resolve(State& s, double h);
   const SelfCollisionStats& last_stats() const { return stats_; }
 
-  /// The pairs that can come within the thickness during a step: every non-adjacent
-  /// vertex-triangle and edge-edge pair whose distance at positions x (3 per vertex), less the
-  /// largest displacement of its vertices in d (a predicted step x -> x + d), is below the
-  /// thickness. Reuses the broad phase's candidates when they still cover x and x + d (else
+  /// The pairs that can end a step within the thickness: every non-adjacent vertex-triangle
+  /// and edge-edge pair whose distance at positions x (3 per vertex), less the largest relative
+  /// displacement max |d_a - d_b| of a vertex a of one element and b of the other in d (a
+  /// predicted step x -> x + d), is below the thickness (this bounds both the distance at
+  /// x + d and the gap linearised along the pair's normal from below). Reuses the broad phase's candidates when they still cover x and x + d (else
   /// refits and traverses, leaving candidates that resolve() reuses). out is cleared first.
   /// For integrators that enter self-contacts into their step (baraff_witkin).
   void proximity_pairs(const double* x, const double* d, std::vector<ProximityPair>& out);

@@ -359,7 +359,11 @@ struct BaraffWitkin::StepOps {
     scene.solver->set_coordinates(scene.state.x);
     return scene.solver->factorize(bw.A_, bw.S_, rep);
   }
-  SolveReport solve() { return scene.solver->solve(bw.A_, bw.S_, bw.b_, bw.z_, bw.dv_); }
+  SolveReport solve() {
+    SolveReport r = scene.solver->solve(bw.A_, bw.S_, bw.b_, bw.z_, bw.dv_);
+    if (bw.self_contact_) bw.self_contact_->mutable_stats().iterations += r.iterations;  // reset by find()
+    return r;
+  }
   void zero_dv() { std::fill(bw.dv_.begin(), bw.dv_.end(), 0.0); }
   bool release_pulling_contacts(double h) { return bw.release_pulling_contacts(scene, h); }
   // Self-contacts (self_contact.hpp): the pairs this step brings within the thickness become
@@ -369,16 +373,24 @@ struct BaraffWitkin::StepOps {
   bool extra_solves(bool ok, double h, F&& solve_once) {
     State& s = scene.state;
     if (ok && bw.self_contact_ && bw.self_contact_->find(*scene.self_collision, s, bw.dv_, h, *bw.pattern_)) {
+      auto& sst = bw.self_contact_->mutable_stats();
       if (!bw.self_contact_->blocks_complete()) {
+        const double tp = thread_seconds();
         bw.rebuild_pattern(scene);
         assemble(h);
+        sst.pattern_seconds = thread_seconds() - tp;
       }
+      const double ts = thread_seconds();
       bw.self_contact_->add_terms(bw.A_, bw.b_, s.v, h);
       ok = solve_once();
+      ++sst.solves;
       for (int r = 0; ok && r < ImplicitSelfContact::kMaxReleaseSolves &&
                       bw.self_contact_->release(bw.A_, bw.b_, s.v, bw.dv_, h);
-           ++r)
+           ++r) {
         ok = solve_once();
+        ++sst.solves;
+      }
+      sst.solve_seconds = thread_seconds() - ts;
     }
     return ok;
   }

@@ -2,8 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <ctime>
 
 namespace loom {
+
+double thread_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
 
 namespace {
 inline double dot3(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -35,15 +42,19 @@ void ImplicitSelfContact::prepare(const Mesh& mesh, double thickness, double fri
   reserve_.clear();
   extra_.clear();
   stats_ = {};
+  restarts_ = 0;
 }
 
 bool ImplicitSelfContact::find(SelfCollision& sc, const State& s, const std::vector<double>& dv, double h,
                                const BsrPattern& P) {
+  const double t0 = thread_seconds();
   const std::size_t N = 3 * static_cast<std::size_t>(s.size());
   for (std::size_t k = 0; k < N; ++k) d_[k] = h * (s.v[k] + dv[k]);
   sc.proximity_pairs(s.x.data(), d_.data(), pairs_);
   contacts_.clear();
   stats_ = {};
+  stats_.pairs = static_cast<Index>(pairs_.size());
+  stats_.pairs_seconds = thread_seconds() - t0;
   bool complete = true;
   const double th = thickness_;
   for (const ProximityPair& p : pairs_) {
@@ -78,6 +89,7 @@ bool ImplicitSelfContact::find(SelfCollision& sc, const State& s, const std::vec
     contacts_.push_back(c);
   }
   stats_.contacts = static_cast<Index>(contacts_.size());
+  stats_.find_seconds = thread_seconds() - t0;
   complete_ = complete;
   return !contacts_.empty();
 }
@@ -103,11 +115,16 @@ const std::vector<std::array<Index, 2>>& ImplicitSelfContact::reserve_pairs(std:
   }
   std::sort(fresh_.begin(), fresh_.end());
   fresh_.erase(std::unique(fresh_.begin(), fresh_.end()), fresh_.end());
-  if (reserve_.size() + fresh_.size() > limit) reserve_.clear();  // keep the pattern from growing without bound
+  // The union with the blocks kept from earlier extensions: a contact state that comes back, or
+  // a contact that slides within the one-rings kept, finds its blocks without a new extension.
   const std::size_t old = reserve_.size();
   reserve_.insert(reserve_.end(), fresh_.begin(), fresh_.end());
   std::inplace_merge(reserve_.begin(), reserve_.begin() + static_cast<std::ptrdiff_t>(old), reserve_.end());
   reserve_.erase(std::unique(reserve_.begin(), reserve_.end()), reserve_.end());
+  if (reserve_.size() > limit) {  // keep the pattern from growing without bound: restart from the current contacts
+    reserve_.assign(fresh_.begin(), fresh_.end());
+    ++restarts_;
+  }
   return reserve_;
 }
 

@@ -36,6 +36,9 @@
 
 namespace loom {
 
+/// CPU time of the calling thread (s), for the counters of one-thread probes.
+double thread_seconds();
+
 class ImplicitSelfContact {
  public:
   /// kappa: the spring stiffness relative to the pair's effective mass over h^2. The gap error
@@ -66,6 +69,14 @@ class ImplicitSelfContact {
     Index released = 0;   ///< springs released after the first solve (pulling)
     Index friction = 0;   ///< pairs that received a friction impulse
     int stop_passes = 0;  ///< projected Gauss-Seidel passes of stop_approach
+    int solves = 0;       ///< solves with springs in this step (the first and those after releases)
+    int iterations = 0;   ///< linear iterations of those solves
+    Index pairs = 0;             ///< pairs that SelfCollision::proximity_pairs returned to find()
+    // CPU seconds of the calling thread (thread_seconds()), for one-thread probes:
+    double pairs_seconds = 0;    ///< find(): SelfCollision::proximity_pairs
+    double find_seconds = 0;     ///< find(): the pairs and the contacts
+    double pattern_seconds = 0;  ///< extending the pattern (rebuild, bind, analyse), when it happened
+    double solve_seconds = 0;    ///< the solves with springs (assembly of the terms included)
   };
 
   /// Vertex one-rings from the mesh, the thickness and friction; work arrays sized.
@@ -81,9 +92,10 @@ class ImplicitSelfContact {
   bool find(SelfCollision& sc, const State& s, const std::vector<double>& dv, double h, const BsrPattern& P);
   bool blocks_complete() const { return complete_; }
   /// The contact blocks the pattern should hold (beyond the material's): the current contacts'
-  /// pairs and their one-ring, added to the pairs kept from earlier rebuilds (dropped once they
-  /// outnumber `limit`).
+  /// pairs and their one-ring, added to the pairs kept from earlier extensions; when the union
+  /// outnumbers `limit`, only the current contacts' (a restart, counted by restarts()).
   const std::vector<std::array<Index, 2>>& reserve_pairs(std::size_t limit);
+  int restarts() const { return restarts_; }
   /// Block positions of the contacts and the blocks of P the material does not have.
   /// Returns whether P holds every block the contacts need.
   bool bind(const BsrPattern& P, const BsrPattern& material);
@@ -111,6 +123,7 @@ class ImplicitSelfContact {
 
   const std::vector<Contact>& contacts() const { return contacts_; }
   const Stats& stats() const { return stats_; }
+  Stats& mutable_stats() { return stats_; }
   double thickness() const { return thickness_; }
   /// The contact force on every vertex at positions x (3n, zero first), for the spring model
   /// of the current contacts: f_a = -k C(x) w_a n (tests compare its finite differences with
@@ -127,6 +140,7 @@ class ImplicitSelfContact {
   std::vector<std::array<Index, 3>> extra_;   ///< (block position, row, column) of non-material blocks
   Stats stats_;
   bool complete_ = true;
+  int restarts_ = 0;
 };
 
 }  // namespace loom
