@@ -37,6 +37,7 @@
 #include <memory>
 #include <string>
 
+#include "baraff_witkin.hpp"
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
 #include "loom/simulation.hpp"
@@ -224,6 +225,104 @@ void BM_StepSplit(benchmark::State& st) {
   st.counters["ccd_tests"] = ccd / total;
 }
 BENCHMARK(BM_StepSplit)->Args({64, 2000})->Args({128, 500})->Iterations(1)->Unit(benchmark::kMillisecond);
+
+// Where a baraff_witkin step with self-collision spends its time (one thread, the thread's CPU
+// clock per step; the phases inside the step are the integrator's and the self-collision
+// code's own steady-clock timers, so read them as shares): from the draped state, `steps`
+// steps of the scene's cloth stepped by a linked BaraffWitkin (defaults: implicit self-contact
+// on) followed by the after-step response, as Simulation::step does. Counters per step:
+// without_ms (the same state and scene without self_collision), with_ms, the integrator's step
+// (bw_ms) split into find_ms (the pairs and contacts: SelfCollision::proximity_pairs and the
+// contact set), pattern_ms (pattern extensions), spring_solve_ms (the solves with springs),
+// the rest of the step; resolve_ms (the after-step response) split into broad/narrow/response;
+// and work counts: contacts, solves with springs, their iterations and the first solve's,
+// pattern_growths, candidates.
+//   OMP_NUM_THREADS=1 LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_BwStepSplit
+void BM_BwStepSplit(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const int steps = static_cast<int>(st.range(1));
+  omp_set_num_threads(1);
+  loom::Simulation::set_notes(false);
+  const double h = 2.0e-3;
+  double without = 0;
+  {
+    auto sim = loom::Simulation::from_string(scene(n, "baraff_witkin", false), "bench.yaml", ".", {"threads=1"}, loader());
+    sim->scene().state = draped(n);
+    omp_set_num_threads(1);
+    for (int k = 0; k < 2; ++k) sim->step();
+    const double t0 = thread_cpu_seconds();
+    for (int k = 0; k < steps; ++k) sim->step();
+    without = (thread_cpu_seconds() - t0) / steps;
+  }
+  double with = 0, bw_t = 0, resolve = 0, find = 0, pattern = 0, spring_solve = 0, broad = 0, narrow = 0, response = 0;
+  double pairs_t = 0, pairs = 0, material_blocks = 0, pattern_blocks = 0;
+  double contacts = 0, solves = 0, spring_its = 0, all_its = 0, growths = 0, candidates = 0, impulses = 0;
+  for (auto _ : st) {
+    auto sim = loom::Simulation::from_string(scene(n, "baraff_witkin", true), "bench.yaml", ".", {"threads=1"}, loader());
+    omp_set_num_threads(1);
+    loom::Scene& sc = sim->scene();
+    sc.state = draped(n);
+    loom::BaraffWitkin bw;
+    bw.prepare(sc, h);
+    auto one = [&](bool count) {
+      const double t0 = thread_cpu_seconds();
+      sc.self_collision->begin_step(sc.state);
+      const int g0 = bw.pattern_rebuilds();
+      bw.step(sc, h);
+      const double t1 = thread_cpu_seconds();
+      sc.self_collision->resolve(sc.state, h);
+      const double t2 = thread_cpu_seconds();
+      if (!count) return;
+      with += t2 - t0;
+      bw_t += t1 - t0;
+      resolve += t2 - t1;
+      const auto& c = bw.self_contact()->stats();
+      find += c.find_seconds;
+      pairs_t += c.pairs_seconds;
+      pairs += c.pairs;
+      pattern += c.pattern_seconds;
+      spring_solve += c.solve_seconds;
+      contacts += c.contacts;
+      solves += c.solves;
+      spring_its += c.iterations;
+      all_its += bw.last_step().linear_iterations;
+      growths += bw.pattern_rebuilds() - g0;
+      const auto& s = sc.self_collision->last_stats();
+      broad += s.broad_seconds;
+      narrow += s.narrow_seconds;
+      response += s.response_seconds;
+      candidates += static_cast<double>(s.candidates_vt + s.candidates_ee);
+      impulses += static_cast<double>(s.proximity + s.ccd_collisions);
+    };
+    material_blocks = static_cast<double>(bw.pattern().nnz_blocks());
+    for (int k = 0; k < 2; ++k) one(false);
+    for (int k = 0; k < steps; ++k) one(true);
+    pattern_blocks = static_cast<double>(bw.pattern().nnz_blocks());
+  }
+  const double total = static_cast<double>(st.iterations()) * steps;
+  st.counters["without_ms"] = 1e3 * without;
+  st.counters["with_ms"] = 1e3 * with / total;
+  st.counters["bw_ms"] = 1e3 * bw_t / total;
+  st.counters["find_ms"] = 1e3 * find / total;
+  st.counters["pairs_ms"] = 1e3 * pairs_t / total;
+  st.counters["pairs"] = pairs / total;
+  st.counters["pattern_ms"] = 1e3 * pattern / total;
+  st.counters["spring_solve_ms"] = 1e3 * spring_solve / total;
+  st.counters["resolve_ms"] = 1e3 * resolve / total;
+  st.counters["broad_ms"] = 1e3 * broad / total;
+  st.counters["narrow_ms"] = 1e3 * narrow / total;
+  st.counters["response_ms"] = 1e3 * response / total;
+  st.counters["contacts"] = contacts / total;
+  st.counters["solves"] = solves / total;
+  st.counters["spring_its"] = spring_its / total;
+  st.counters["first_its"] = (all_its - spring_its) / total;
+  st.counters["pattern_growths"] = growths / total;
+  st.counters["material_blocks"] = static_cast<double>(material_blocks);
+  st.counters["pattern_blocks"] = static_cast<double>(pattern_blocks);
+  st.counters["candidates"] = candidates / total;
+  st.counters["impulses"] = impulses / total;
+}
+BENCHMARK(BM_BwStepSplit)->Args({64, 40})->Args({128, 12})->Args({256, 2})->Iterations(1)->Unit(benchmark::kMillisecond);
 
 // ---------------------------------------------------------------------------------------------
 // Broad phase alone, BVH against a uniform-grid spatial hash, on the draped cloth: find every
