@@ -1013,6 +1013,24 @@ Index SelfCollision::freeze_pass(State& s) {
   return frozen;
 }
 
+namespace {
+// Largest |u_a - u_b| over a vertex a of one side and b of the other (vertex-triangle: {0} and
+// {1, 2, 3}; edge-edge: {0, 1} and {2, 3}), u = p - q per vertex (q = nullptr: u = p).
+double relative_motion(bool vt, const Index idx[4], const double* p, const double* q) {
+  double u[4][3];
+  for (int i = 0; i < 4; ++i)
+    for (int k = 0; k < 3; ++k) u[i][k] = p[3 * idx[i] + k] - (q ? q[3 * idx[i] + k] : 0.0);
+  double m = 0;
+  for (int a = 0; a < (vt ? 1 : 2); ++a)
+    for (int b = vt ? 1 : 2; b < 4; ++b) {
+      double r[3];
+      selfcol::sub(u[a], u[b], r);
+      m = std::max(m, selfcol::dot(r, r));
+    }
+  return std::sqrt(m);
+}
+}  // namespace
+
 void SelfCollision::resolve(State& s, double h) {
   stats_ = SelfCollisionStats{};
   auto t0 = Clock::now();
@@ -1128,8 +1146,10 @@ void SelfCollision::resolve(State& s, double h) {
         pair_vertices(vt, p, idx);
         if (p.dist_ref - bound(vt, idx) > tol) continue;
         // Tighter for a near pair: its distance at the step's start less the motion in the step
-        // (d as the responses have changed it so far).
-        if (use_near && near_dist_[r] >= 0 && near_dist_[r] - step_bound(vt, idx) > tol) continue;
+        // (d as the responses have changed it so far), absolute or relative (max |d_a - d_b|).
+        if (use_near && near_dist_[r] >= 0 &&
+            near_dist_[r] - std::min(step_bound(vt, idx), relative_motion(vt, idx, d_.data(), nullptr)) > tol)
+          continue;
         ++stats_.ccd_tests;
         double t;
         if (!pair_ccd(vt, idx, tol, t)) continue;
@@ -1194,24 +1214,6 @@ void SelfCollision::resolve(State& s, double h) {
 }  // namespace loom
 
 namespace loom {
-
-namespace {
-// Largest |u_a - u_b| over a vertex a of one side and b of the other (vertex-triangle: {0} and
-// {1, 2, 3}; edge-edge: {0, 1} and {2, 3}), u = p - q per vertex (q = nullptr: u = p).
-double relative_motion(bool vt, const Index idx[4], const double* p, const double* q) {
-  double u[4][3];
-  for (int i = 0; i < 4; ++i)
-    for (int k = 0; k < 3; ++k) u[i][k] = p[3 * idx[i] + k] - (q ? q[3 * idx[i] + k] : 0.0);
-  double m = 0;
-  for (int a = 0; a < (vt ? 1 : 2); ++a)
-    for (int b = vt ? 1 : 2; b < 4; ++b) {
-      double r[3];
-      selfcol::sub(u[a], u[b], r);
-      m = std::max(m, selfcol::dot(r, r));
-    }
-  return std::sqrt(m);
-}
-}  // namespace
 
 void SelfCollision::proximity_pairs(const double* x, const double* d, std::vector<ProximityPair>& out) {
   out.clear();
