@@ -157,29 +157,28 @@ Collider::Contact Collider::query(const Frame& f, const double xp[3]) const {
 }
 
 Collider::Contact Collider::query(const Frame& f, const double xp[3], double cutoff) const {
-  const Vec3 x{xp[0], xp[1], xp[2]};
   Contact ct{};
   if (shape != Shape::Mesh) {  // sphere, plane: the shared kernel (loom/kernels/contact.hpp)
     ct.distance = kernels::contact_query(contact_shape(f), xp, ct.normal.data(), ct.velocity.data());
   } else {
-    // Into the body frame: y = R^T (x - c(t)) + c0; the answer back: R n, R (q - c0) + c(t).
-    const Vec3 r = sub(x, f.center);
-    const double* R = f.rot;
-    const double y[3] = {R[0] * r[0] + R[3] * r[1] + R[6] * r[2] + point[0],
-                         R[1] * r[0] + R[4] * r[1] + R[7] * r[2] + point[1],
-                         R[2] * r[0] + R[5] * r[1] + R[8] * r[2] + point[2]};
-    double nb[3], qb[3];
-    const double sd = std::isinf(cutoff) ? body->signed_distance(y, nb, qb)
-                                         : body->signed_distance(y, nb, qb, cutoff + thickness);
-    const Vec3 q{qb[0] - point[0], qb[1] - point[1], qb[2] - point[2]};
-    ct.normal = {R[0] * nb[0] + R[1] * nb[1] + R[2] * nb[2], R[3] * nb[0] + R[4] * nb[1] + R[5] * nb[2],
-                 R[6] * nb[0] + R[7] * nb[1] + R[8] * nb[2]};
-    const Vec3 arm{R[0] * q[0] + R[1] * q[1] + R[2] * q[2], R[3] * q[0] + R[4] * q[1] + R[5] * q[2],
-                   R[6] * q[0] + R[7] * q[1] + R[8] * q[2]};
-    ct.distance = sd - thickness;
-    ct.velocity = add(f.vlin, cross(f.omega, arm));
+    // The mesh query (into the body frame and back): one source with the CUDA backend.
+    ct.distance = kernels::mesh_contact_query(body->view(), mesh_placement(*this, f), xp, cutoff, ct.normal.data(),
+                                              ct.velocity.data());
   }
   return ct;
+}
+
+kernels::MeshPlacement mesh_placement(const Collider& c, const Collider::Frame& f) {
+  kernels::MeshPlacement m;
+  for (int k = 0; k < 3; ++k) {
+    m.center[k] = f.center[k];
+    m.pivot[k] = c.point[k];
+    m.omega[k] = f.omega[k];
+    m.vlin[k] = f.vlin[k];
+  }
+  for (int k = 0; k < 9; ++k) m.rot[k] = f.rot[k];
+  m.thickness = c.thickness;
+  return m;
 }
 
 int ColliderSet::resolve_contacts(State& s, double t, double h) const {

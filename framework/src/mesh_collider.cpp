@@ -46,65 +46,6 @@ std::vector<int> face_lines_of(const std::string& path) {
   return lines;
 }
 
-// Closest point on triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5), with
-// the feature it lies on: 0..2 vertex k, 3..5 edge (k, k+1) for k = feature - 3, 6 interior.
-int closest_on_triangle(const double* p, const double* a, const double* b, const double* c, double* q) {
-  double ab[3], ac[3], ap[3];
-  sub3(b, a, ab);
-  sub3(c, a, ac);
-  sub3(p, a, ap);
-  const double d1 = dot3(ab, ap), d2 = dot3(ac, ap);
-  if (d1 <= 0 && d2 <= 0) {
-    std::copy(a, a + 3, q);
-    return 0;
-  }
-  double bp[3];
-  sub3(p, b, bp);
-  const double d3 = dot3(ab, bp), d4 = dot3(ac, bp);
-  if (d3 >= 0 && d4 <= d3) {
-    std::copy(b, b + 3, q);
-    return 1;
-  }
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-    const double v = d1 / (d1 - d3);
-    for (int k = 0; k < 3; ++k) q[k] = a[k] + v * ab[k];
-    return 3;  // edge a-b
-  }
-  double cp[3];
-  sub3(p, c, cp);
-  const double d5 = dot3(ab, cp), d6 = dot3(ac, cp);
-  if (d6 >= 0 && d5 <= d6) {
-    std::copy(c, c + 3, q);
-    return 2;
-  }
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-    const double w = d2 / (d2 - d6);
-    for (int k = 0; k < 3; ++k) q[k] = a[k] + w * ac[k];
-    return 5;  // edge c-a
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-    const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    for (int k = 0; k < 3; ++k) q[k] = b[k] + w * (c[k] - b[k]);
-    return 4;  // edge b-c
-  }
-  const double denom = 1.0 / (va + vb + vc);
-  const double v = vb * denom, w = vc * denom;
-  for (int k = 0; k < 3; ++k) q[k] = a[k] + ab[k] * v + ac[k] * w;
-  return 6;
-}
-
-double box_distance2(const double* lo, const double* hi, const double* p) {
-  double d2 = 0;
-  for (int k = 0; k < 3; ++k) {
-    const double d = p[k] < lo[k] ? lo[k] - p[k] : (p[k] > hi[k] ? p[k] - hi[k] : 0.0);
-    d2 += d * d;
-  }
-  return d2;
-}
-
 }  // namespace
 
 std::shared_ptr<MeshBody> MeshBody::load(const std::string& path, double scale, const std::array<double, 3>& offset) {
@@ -269,97 +210,32 @@ Index MeshBody::build_node(Index begin, Index end, std::vector<double>& centroid
   return id;
 }
 
+kernels::MeshView MeshBody::view() const {
+  kernels::MeshView m;
+  m.x = x_.data();
+  m.tri = tri_.data();
+  m.face_n = face_n_.data();
+  m.vert_n = vert_n_.data();
+  m.edge_n = edge_n_.data();
+  m.nodes = nodes_.data();
+  m.order = order_.data();
+  m.closed = closed_ ? 1 : 0;
+  return m;
+}
+
+// The queries: one source with the CUDA backend (loom/kernels/mesh_query.hpp).
 MeshBody::Nearest MeshBody::nearest(const double p[3]) const {
   Nearest best{};
-  nearest_within(p, INFINITY, best);
+  kernels::mesh_nearest_within(view(), p, INFINITY, best);
   return best;
 }
 
-bool MeshBody::nearest_within(const double p[3], double limit2, Nearest& best) const {
-  double best_d2 = limit2;
-  int best_feature = -1;
-  Index stack[128];
-  int top = 0;
-  stack[top++] = 0;
-  while (top > 0) {
-    const Node& nd = nodes_[stack[--top]];
-    if (box_distance2(nd.lo, nd.hi, p) >= best_d2) continue;
-    if (nd.count > 0) {
-      for (Index i = nd.first; i < nd.first + nd.count; ++i) {
-        const Index t = order_[i];
-        double q[3];
-        const int f = closest_on_triangle(p, &x_[3 * tri_[3 * t]], &x_[3 * tri_[3 * t + 1]], &x_[3 * tri_[3 * t + 2]], q);
-        double d[3];
-        sub3(p, q, d);
-        const double d2 = dot3(d, d);
-        if (d2 < best_d2) {
-          best_d2 = d2;
-          best_feature = f;
-          best.face = t;
-          std::copy(q, q + 3, best.point);
-        }
-      }
-      continue;
-    }
-    // Visit the nearer child first (pushed last).
-    const Node& l = nodes_[nd.first];
-    const Node& r = nodes_[nd.right];
-    const double dl = box_distance2(l.lo, l.hi, p), dr = box_distance2(r.lo, r.hi, p);
-    if (top + 2 > 128) continue;  // depth is ~log2(n / 4) + 1: never reached for any real mesh
-    if (dl < dr) {
-      stack[top++] = nd.right;
-      stack[top++] = nd.first;
-    } else {
-      stack[top++] = nd.first;
-      stack[top++] = nd.right;
-    }
-  }
-  if (best_feature < 0) return false;
-  best.distance = std::sqrt(best_d2);
-  const double* n = best_feature < 3   ? &vert_n_[3 * tri_[3 * best.face + best_feature]]
-                    : best_feature < 6 ? &edge_n_[9 * best.face + 3 * (best_feature - 3)]
-                                       : &face_n_[3 * best.face];
-  std::copy(n, n + 3, best.normal);
-  return true;
-}
-
-double MeshBody::signed_from(const double p[3], const Nearest& nr, double normal[3], double point[3]) const {
-  double d[3];
-  sub3(p, nr.point, d);
-  const double s = dot3(d, nr.normal) < 0 ? -1.0 : 1.0;
-  std::copy(nr.point, nr.point + 3, point);
-  // The direction to the point (outward: flipped inside) is the contact normal, except on the
-  // surface itself, where the pseudo-normal is.
-  if (nr.distance > 1e-12) {
-    for (int k = 0; k < 3; ++k) normal[k] = s * d[k] / nr.distance;
-  } else {
-    std::copy(nr.normal, nr.normal + 3, normal);
-  }
-  return s * nr.distance;
-}
-
 double MeshBody::signed_distance(const double p[3], double normal[3], double point[3]) const {
-  return signed_from(p, nearest(p), normal, point);
+  return kernels::mesh_signed_distance(view(), p, normal, point, INFINITY);
 }
 
 double MeshBody::signed_distance(const double p[3], double normal[3], double point[3], double cutoff) const {
-  const Node& root = nodes_[0];
-  const double box2 = box_distance2(root.lo, root.hi, p);
-  Nearest nr{};
-  if (closed_ && box2 > 0) {
-    // Outside the box of a closed mesh is outside the body: farther than the box distance.
-    auto far = [&](double bound) {
-      for (int k = 0; k < 3; ++k) normal[k] = 0, point[k] = p[k];
-      return bound;
-    };
-    if (box2 >= cutoff * cutoff) return far(std::sqrt(box2));
-    if (!nearest_within(p, cutoff * cutoff, nr)) return far(cutoff);
-    return signed_from(p, nr, normal, point);
-  }
-  // Inside the box (or an open mesh, whose back side counts as inside): the sign needs the
-  // nearest face wherever it is.
-  if (!nearest_within(p, cutoff * cutoff, nr)) nearest_within(p, INFINITY, nr);
-  return signed_from(p, nr, normal, point);
+  return kernels::mesh_signed_distance(view(), p, normal, point, cutoff);
 }
 
 }  // namespace loom

@@ -4,7 +4,7 @@
 # first on LOOM_PLUGIN_PATH), so the device code runs on the CPU: self_collision removed, one
 # frame of a few steps, positions written lossless and compared with the same run on backend
 # cpu (relative to the largest |x|; Baraff-Witkin with filtered_pcg at 1e-13 on both). The
-# mesh-collider scene must be refused with the fix.
+# mesh-collider scene (draped_mesh_sphere_gnatv_bw) runs and is compared like the others.
 # usage: cli_scenes_omp.sh LOOM REPO_ROOT [STEPS=10]
 loom="$1"; root="$2"; steps=${3:-10}
 tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
@@ -24,14 +24,6 @@ for scene in "$root"/scenes/draped_*.yaml; do
   fi
   # shellcheck disable=SC2086
   out=$("$loom" run "$scene" --out "$tmp/$name.cuda" --set backend=cuda $common $extra 2>&1); rc=$?
-  if grep -q 'type: mesh' "$scene"; then
-    if [ "$rc" -eq 2 ] && echo "$out" | grep -q "mesh collider" && echo "$out" | grep -q "Fix:"; then
-      echo "$name: refused (mesh collider), as expected"
-    else
-      echo "$name: expected a refusal of the mesh collider with exit 2, got $rc: $out"; fail=1
-    fi
-    continue
-  fi
   [ "$rc" -eq 0 ] || { echo "$name: backend cuda failed (exit $rc): $out"; fail=1; continue; }
   # shellcheck disable=SC2086
   out=$("$loom" run "$scene" --out "$tmp/$name.cpu" $common $extra 2>&1) || { echo "$name: backend cpu failed: $out"; fail=1; continue; }

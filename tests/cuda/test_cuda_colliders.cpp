@@ -2,7 +2,8 @@
 // stand-in (and on a GPU as test_cuda_gpu): HO and RK4 runs with contacts against the CPU
 // backend, whose ColliderSet::resolve_contacts runs after each step exactly as
 // Simulation::step calls it; the shipped draped-ball ball (spinning, with friction); moving
-// planes and spheres; the refusal of mesh colliders.
+// planes and spheres; the refusal of more colliders than the kernels carry. (Mesh colliders:
+// test_cuda_mesh_colliders.cpp.)
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -163,16 +164,21 @@ TEST(CudaColliders, RefusalsNameTheFix) {
       EXPECT_NE(std::string(e.what()).find("Fix:"), std::string::npos) << e.what();
     }
   };
-  // (Baraff-Witkin with colliders runs on the device: tests/cuda/test_cuda_bw_colliders.cpp.)
-  // Mesh colliders: not on the device, for every integrator.
-  {
-    Collider mesh;
-    mesh.shape = Collider::Shape::Mesh;
-    mesh.name = "statue";
-    ColliderSet cols;
-    cols.add(mesh);
+  // (Baraff-Witkin with colliders runs on the device: tests/cuda/test_cuda_bw_colliders.cpp;
+  // mesh colliders: tests/cuda/test_cuda_mesh_colliders.cpp.)
+  // More colliders than the kernels carry (kMaxDeviceColliders = 8): refused for every integrator.
+  ColliderSet cols;
+  for (int c = 0; c < 9; ++c) {
+    Collider plane;
+    plane.name = "floor" + std::to_string(c);
+    plane.point = {0.0, -1.0 - c, 0.0};
+    cols.add(plane);
+  }
+  for (const char* which : {"ho", "rk4", "se"}) {
     auto sc = make_scene(cols, 5, 0.5, 0.0, -0.5, 0.0);
-    auto di = lc::make_cuda_rk4(lc::Precision::Double);
-    expect_refusal(*di, *sc, "collider 'statue' is a mesh collider");
+    auto di = std::string(which) == "ho"    ? lc::make_cuda_ho(lc::HoVariantD::Velocity, lc::Precision::Double)
+              : std::string(which) == "rk4" ? lc::make_cuda_rk4(lc::Precision::Double)
+                                            : lc::make_cuda_symplectic_euler(lc::Precision::Double);
+    expect_refusal(*di, *sc, "handles at most 8 colliders, the scene has 9");
   }
 }

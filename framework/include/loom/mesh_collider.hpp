@@ -15,7 +15,9 @@
 #include <string>
 #include <vector>
 
+#include "loom/collider.hpp"
 #include "loom/common.hpp"
+#include "loom/kernels/mesh_query.hpp"
 
 namespace loom {
 
@@ -30,12 +32,9 @@ class MeshBody {
   static std::shared_ptr<MeshBody> build(std::vector<double> positions, std::vector<Index> triangles,
                                          const std::string& source, const std::vector<int>& face_lines = {});
 
-  struct Nearest {
-    double point[3];   ///< nearest point on the mesh
-    double normal[3];  ///< pseudo-normal of the nearest feature (unit, outward)
-    double distance;   ///< unsigned distance
-    Index face;
-  };
+  /// point: nearest point on the mesh; normal: pseudo-normal of the nearest feature (unit,
+  /// outward); distance: unsigned; face.
+  using Nearest = kernels::MeshNearest;
   /// Nearest point on the mesh to p (body frame). No allocation.
   Nearest nearest(const double p[3]) const;
   /// Signed distance (< 0 inside / behind) and the outward unit normal at p.
@@ -55,17 +54,19 @@ class MeshBody {
   const std::array<double, 3>& box_center() const { return center_; }
   const std::string& source() const { return source_; }
 
+  /// The geometry as plain arrays (the queries run on these, loom/kernels/mesh_query.hpp; the
+  /// CUDA backend uploads the same arrays once).
+  using Node = kernels::MeshNode;
+  const std::vector<double>& face_normals() const { return face_n_; }
+  const std::vector<double>& vertex_normals() const { return vert_n_; }
+  const std::vector<double>& edge_normals() const { return edge_n_; }
+  const std::vector<Node>& nodes() const { return nodes_; }
+  const std::vector<Index>& leaf_order() const { return order_; }
+  /// Pointers into this body's arrays.
+  kernels::MeshView view() const;
+
  private:
-  struct Node {
-    double lo[3], hi[3];
-    Index first;  ///< leaf: first entry of order_; inner: left child
-    Index count;  ///< leaf: number of triangles (> 0); inner: 0
-    Index right;  ///< inner: right child
-  };
   Index build_node(Index begin, Index end, std::vector<double>& centroid);
-  // Nearest point among the faces closer than sqrt(limit2) (all faces for INFINITY); false if none.
-  bool nearest_within(const double p[3], double limit2, Nearest& out) const;
-  double signed_from(const double p[3], const Nearest& nr, double normal[3], double point[3]) const;
 
   std::vector<double> x_;
   std::vector<Index> tri_;
@@ -78,5 +79,9 @@ class MeshBody {
   bool closed_ = false;
   std::string source_;
 };
+
+/// A mesh collider's placement at a frame as the query's plain data (loom/kernels/mesh_query.hpp):
+/// what Collider::query runs on the CPU and the CUDA backend passes to its kernels.
+kernels::MeshPlacement mesh_placement(const Collider& c, const Collider::Frame& f);
 
 }  // namespace loom

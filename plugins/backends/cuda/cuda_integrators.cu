@@ -9,10 +9,10 @@
 #include "loom/incidence.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/kernels/bw_assembly.hpp"
-#include "loom/kernels/contact.hpp"
 #include "loom/kernels/ho.hpp"
 #include "loom/kernels/rk4.hpp"
 #include "bw_step.hpp"
+#include "device_colliders.hpp"
 #include "se_update.hpp"
 
 namespace loom::cuda {
@@ -26,11 +26,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr int kMaxDeviceColliders = 8;
-
 /// Checks shared by the device integrators; throws InputError with the fix. With
-/// `device_colliders` (the explicit integrators) sphere and plane colliders are resolved on
-/// the device; otherwise colliders are refused.
+/// `device_colliders` sphere, plane and mesh colliders are handled on the device; otherwise
+/// colliders are refused.
 void check_device_scene(const Scene& scene, const char* integrator, bool device_colliders) {
   seam_require_device(scene.source);
   if (!scene.colliders.empty() && !device_colliders)
@@ -38,11 +36,6 @@ void check_device_scene(const Scene& scene, const char* integrator, bool device_
                      " on backend cuda does not handle colliders (its contacts are constraints of the implicit solve, "
                      "not on the device yet). Fix: use integrator rk4 or harmonic_oscillation with backend: cuda, or "
                      "backend: cpu for baraff_witkin with colliders.");
-  for (const Collider& c : scene.colliders.colliders())
-    if (c.shape == Collider::Shape::Mesh)
-      throw InputError(scene.source + ": collider '" + c.name + "' is a mesh collider; backend cuda handles sphere and "
-                       "plane colliders only (the mesh BVH is not on the device). Fix: set backend: cpu, or replace "
-                       "it with a sphere or plane.");
   if (scene.colliders.size() > static_cast<std::size_t>(kMaxDeviceColliders))
     throw InputError(scene.source + ": backend cuda handles at most " + std::to_string(kMaxDeviceColliders) +
                      " colliders, the scene has " + std::to_string(scene.colliders.size()) +
@@ -57,13 +50,14 @@ void check_device_scene(const Scene& scene, const char* integrator, bool device_
                      "the device would not see). Fix: set backend: cpu for scenes with self_collision.");
 }
 
-/// Sphere and plane colliders on the device: after an explicit step, per vertex, the same
-/// query and response as the CPU's ColliderSet::resolve_contacts (loom/kernels/contact.hpp),
-/// colliders in scene order, pinned vertices skipped. The placements (frame_at) are computed
-/// on the host once per step and passed by value.
+/// Sphere, plane and mesh colliders on the device: after an explicit step, per vertex, the
+/// same query and response as the CPU's ColliderSet::resolve_contacts (loom/kernels/contact.hpp,
+/// loom/kernels/mesh_query.hpp; the query exact below distance 0), colliders in scene order,
+/// pinned vertices skipped. The placements (frame_at) are computed on the host once per step
+/// and passed by value.
 template <class T>
 struct ContactKernel {
-  kernels::ContactShape<T> shapes[kMaxDeviceColliders];
+  DeviceShape<T> shapes[kMaxDeviceColliders];
   int count;
   const std::uint8_t* pinned;
   T *x, *v;
@@ -74,35 +68,12 @@ struct ContactKernel {
     T* vi = v + 3LL * i;
     for (int c = 0; c < count; ++c) {
       T n[3], vs[3];
-      const T d = kernels::contact_query(shapes[c], xi, n, vs);
+      const T d = device_query(shapes[c], xi, 0.0, n, vs);
       if (d >= T(0)) continue;
-      kernels::contact_respond(xi, vi, d, n, vs, shapes[c].mu_static, shapes[c].mu_kinetic, h);
+      kernels::contact_respond(xi, vi, d, n, vs, shapes[c].s.mu_static, shapes[c].s.mu_kinetic, h);
     }
   }
 };
-
-/// The sphere and plane colliders placed at time t, as kernel data (scene order).
-template <class T>
-int fill_contact_shapes(const ColliderSet& set, double t, kernels::ContactShape<T>* out) {
-  const int count = static_cast<int>(set.size());
-  for (int c = 0; c < count; ++c) {
-    const Collider& col = set.colliders()[c];
-    const kernels::ContactShape<double> s = col.contact_shape(col.frame_at(t));
-    kernels::ContactShape<T>& o = out[c];
-    o.sphere = s.sphere;
-    for (int a = 0; a < 3; ++a) {
-      o.center[a] = static_cast<T>(s.center[a]);
-      o.normal[a] = static_cast<T>(s.normal[a]);
-      o.omega[a] = static_cast<T>(s.omega[a]);
-      o.vlin[a] = static_cast<T>(s.vlin[a]);
-    }
-    o.radius = static_cast<T>(s.radius);
-    o.thickness = static_cast<T>(s.thickness);
-    o.mu_static = static_cast<T>(s.mu_static);
-    o.mu_kinetic = static_cast<T>(s.mu_kinetic);
-  }
-  return count;
-}
 
 template <class T>
 class DeviceColliders {
@@ -110,12 +81,13 @@ class DeviceColliders {
   void prepare(const Scene& scene) {
     colliders_ = &scene.colliders;
     if (!colliders_->empty()) cuda::upload(scene.state.pinned, pinned_);
+    meshes_.prepare(scene.colliders);
   }
   bool active() const { return colliders_ && !colliders_->empty(); }
   /// Resolve contacts at time t (the end of a step of size h).
   void resolve(DeviceState<T>& ds, double t, double h) {
     ContactKernel<T> k{};
-    k.count = fill_contact_shapes(*colliders_, t, k.shapes);
+    k.count = fill_device_shapes(*colliders_, meshes_, t, k.shapes);
     k.pinned = raw(pinned_);
     k.x = raw(ds.x);
     k.v = raw(ds.v);
@@ -125,6 +97,7 @@ class DeviceColliders {
 
  private:
   const ColliderSet* colliders_ = nullptr;
+  DeviceMeshes meshes_;
   DVec<std::uint8_t> pinned_;
 };
 
@@ -136,7 +109,8 @@ std::size_t explicit_bytes(const Scene& scene, int vectors) {
   std::size_t elements = 0;
   if (scene.material)
     if (const SpringSet* s = scene.material->springs()) elements = static_cast<std::size_t>(s->size()) * (2 * sizeof(Index) + 4 * sizeof(T));
-  return sizeof(T) * (3 * n * (2 + static_cast<std::size_t>(vectors)) + 2 * n) + elements;
+  return sizeof(T) * (3 * n * (2 + static_cast<std::size_t>(vectors)) + 2 * n) + elements +
+         DeviceMeshes::bytes(scene.colliders);
 }
 
 /// Reads host_sync_every (>= 1): copy x, v back into scene.state after every n-th step.
@@ -417,7 +391,7 @@ struct SeVertexKernel {  // per vertex: the CPU plugin's update, one source (sym
 
 /// symplectic_euler on the device: forces from the device force model (any material with a
 /// device description: springs, GNATV triangles, hinges; else the host fallback), then the
-/// per-vertex update, then sphere/plane contacts at t + h (what Simulation::step does after the
+/// per-vertex update, then sphere, plane and mesh contacts at t + h (what Simulation::step does after the
 /// CPU plugin's step). One force evaluation per step.
 template <class T>
 class CudaSe final : public Integrator {
@@ -493,15 +467,19 @@ struct BwUpdate {
 // ---- Baraff-Witkin contacts on the device: the rules of the CPU plugin (BaraffWitkin::
 // set_constraints, release_pulling_contacts, apply_friction, stop_landed, project_positions in
 // plugins/integrators/baraff_witkin/baraff_witkin.cpp), one thread per vertex, one contact per
-// vertex (the deepest collider), at most kMaxDeviceColliders sphere/plane colliders.
+// vertex (the deepest collider), at most kMaxDeviceColliders sphere, plane or mesh colliders.
 // Contact flags: 0 none, 1 in contact (friction acts), 2 landing during the step (no friction).
 
 /// Matches BaraffWitkin::kContactTolerance.
 constexpr double kDeviceContactTolerance = 1e-9;
+/// Matches BaraffWitkin::kQueryCutoff: the constraint queries are exact below this distance (a
+/// mesh skips its far parts), and asked again exactly for the start distance of a vertex
+/// predicted to land.
+constexpr double kDeviceQueryCutoff = 1e-6;
 
 template <class T>
 struct BwConstraintKernel {  // S_i, z_i and the contact of vertex i; returns 1 for a collider contact
-  kernels::ContactShape<T> s0[kMaxDeviceColliders], s1[kMaxDeviceColliders];  // at the step start / end
+  DeviceShape<T> s0[kMaxDeviceColliders], s1[kMaxDeviceColliders];  // at the step start / end
   int count;
   const std::uint8_t* pinned;
   const std::uint8_t* in_contact;
@@ -538,8 +516,9 @@ struct BwConstraintKernel {  // S_i, z_i and the contact of vertex i; returns 1 
     T depth = T(0), bd = T(0), bn[3] = {T(0), T(0), T(0)}, bv[3] = {T(0), T(0), T(0)};
     for (int c = 0; c < count; ++c) {
       T n0[3], v0[3], n1[3], v1[3];
-      const T d0 = kernels::contact_query(s0[c], xi, n0, v0);
-      const T d1 = kernels::contact_query(s1[c], xp, n1, v1);
+      T d0 = device_query(s0[c], xi, kDeviceQueryCutoff, n0, v0);
+      const T d1 = device_query(s1[c], xp, kDeviceQueryCutoff, n1, v1);
+      if (d1 <= T(0) && d0 >= static_cast<T>(kDeviceQueryCutoff)) d0 = device_query(s0[c], xi, INFINITY, n0, v0);
       const T d = d0 < d1 ? d0 : d1;
       if (d <= T(0) && (best < 0 || d < depth)) {
         best = c;
@@ -573,8 +552,8 @@ struct BwConstraintKernel {  // S_i, z_i and the contact of vertex i; returns 1 
       sv[o + k] = bv[k];
     }
     dvn[i] = d;
-    mus[i] = s0[best].mu_static;
-    muk[i] = s0[best].mu_kinetic;
+    mus[i] = s0[best].s.mu_static;
+    muk[i] = s0[best].s.mu_kinetic;
     flag[i] = (bd > tol && !in_contact[i]) ? 2 : 1;
     return 1;
   }
@@ -651,7 +630,7 @@ struct BwFinishContactsKernel {  // landed vertices stop their approach; in_cont
 
 template <class T>
 struct BwProjectKernel {  // residual penetration after the step: positions onto the offset surfaces
-  kernels::ContactShape<T> s1[kMaxDeviceColliders];
+  DeviceShape<T> s1[kMaxDeviceColliders];
   int count;
   const std::uint8_t* pinned;
   T* x;
@@ -660,7 +639,7 @@ struct BwProjectKernel {  // residual penetration after the step: positions onto
     T* xi = x + 3LL * i;
     for (int c = 0; c < count; ++c) {
       T n[3], vs[3];
-      const T d = kernels::contact_query(s1[c], xi, n, vs);
+      const T d = device_query(s1[c], xi, 0.0, n, vs);  // exact where < 0
       if (d < T(0))
         for (int k = 0; k < 3; ++k) xi[k] -= d * n[k];
     }
@@ -673,7 +652,7 @@ class CudaBw final : public Integrator {
   explicit CudaBw(BwOptionsD o) : opt_(o) {}
   std::string name() const override { return "baraff_witkin"; }
   IntegratorNeeds needs() const override { return {false, true, true}; }
-  /// Sphere and plane contacts are constraints of the solve (the framework must not resolve
+  /// Sphere, plane and mesh contacts are constraints of the solve (the framework must not resolve
   /// them again on the host).
   bool handles_contacts() const override { return true; }
 
@@ -725,9 +704,10 @@ class CudaBw final : public Integrator {
     cuda::upload(s.pin_list, pins_);
     pcg_.analyze(n);
     ds_.upload(s);
-    // Sphere and plane colliders: contacts are constraints of the solve, as on the CPU.
+    // Sphere, plane and mesh colliders: contacts are constraints of the solve, as on the CPU.
     colliders_ = scene.colliders.empty() ? nullptr : &scene.colliders;
     if (colliders_) {
+      meshes_.prepare(scene.colliders);
       cuda::upload(s.pinned, pinned_);
       in_contact_.assign(n, 0);
       flag_.assign(n, 0);
@@ -801,7 +781,7 @@ class CudaBw final : public Integrator {
       parallel_for(bw.ds_.n, BwFinishContactsKernel<T>{raw(bw.flag_), raw(bw.cnormal_), raw(bw.csv_), raw(bw.ds_.v),
                                                        raw(bw.in_contact_)});
       BwProjectKernel<T> pk{};
-      pk.count = fill_contact_shapes(*bw.colliders_, bw.t0_ + hd, pk.s1);
+      pk.count = fill_device_shapes(*bw.colliders_, bw.meshes_, bw.t0_ + hd, pk.s1);
       pk.pinned = raw(bw.pinned_);
       pk.x = raw(bw.ds_.x);
       parallel_for(bw.ds_.n, pk);
@@ -816,8 +796,8 @@ class CudaBw final : public Integrator {
   // t0_ and the explicit prediction to t0_ + h; returns the number of contacts.
   int set_contact_constraints(const Scene& scene, double hd) {
     BwConstraintKernel<T> k{};
-    k.count = fill_contact_shapes(*colliders_, t0_, k.s0);
-    fill_contact_shapes(*colliders_, t0_ + hd, k.s1);
+    k.count = fill_device_shapes(*colliders_, meshes_, t0_, k.s0);
+    fill_device_shapes(*colliders_, meshes_, t0_ + hd, k.s1);
     k.pinned = raw(pinned_);
     k.in_contact = raw(in_contact_);
     k.x = raw(ds_.x);
@@ -868,6 +848,7 @@ class CudaBw final : public Integrator {
   DeviceFilter<T> S_;
   DevicePcg<T> pcg_;
   const ColliderSet* colliders_ = nullptr;
+  DeviceMeshes meshes_;
   DVec<std::uint8_t> pinned_, in_contact_, flag_;
   DVec<T> cnormal_, csv_, cmus_, cmuk_, cdvn_, cimpulse_;
   double t0_ = 0;  // start time of the (sub)step being solved

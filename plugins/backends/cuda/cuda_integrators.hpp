@@ -11,7 +11,7 @@
 //                         math as the CPU plugin (loom/kernels/ho.hpp)
 //   rk4                   loom/kernels/rk4.hpp stages; forces from the device force model
 //   symplectic_euler      forces from the device force model, then the CPU plugin's vertex update
-//                         (symplectic_euler/se_update.hpp); sphere/plane contacts after the step
+//                         (symplectic_euler/se_update.hpp); sphere, plane and mesh contacts after the step
 //   baraff_witkin         device assembly of A and b (NUMERICS 3.1/3.2, Kang-Cho and Rayleigh
 //                         damping), pins through the filter S, solved by cusparse_pcg on device
 #pragma once
