@@ -12,6 +12,16 @@
 
 #include "loom/common.hpp"
 
+// The descent and the collider query are kept out of line: a kernel asks several queries
+// (Baraff-Witkin's constraint pass three per collider), and inlining the descent into each
+// site of each kernel multiplies nvcc's compile time. One compiled copy also means the CPU and
+// the OpenMP stand-in run the very same instructions.
+#if defined(__CUDACC__)
+#define LOOM_MESH_NOINLINE __noinline__
+#else
+#define LOOM_MESH_NOINLINE __attribute__((noinline))
+#endif
+
 namespace loom::kernels {
 
 /// One node of the flattened hierarchy (node 0 is the root).
@@ -130,7 +140,7 @@ LOOM_HD inline double box_distance2(const double* lo, const double* hi, const do
 constexpr int kMeshStackDepth = 128;
 
 /// Nearest point among the faces closer than sqrt(limit2) (all faces for INFINITY); false if none.
-LOOM_HD inline bool mesh_nearest_within(const MeshView& m, const double p[3], double limit2, MeshNearest& best) {
+LOOM_HD LOOM_MESH_NOINLINE inline bool mesh_nearest_within(const MeshView& m, const double p[3], double limit2, MeshNearest& best) {
   using namespace mesh_detail;
   double best_d2 = limit2;
   int best_feature = -1;
@@ -231,7 +241,7 @@ LOOM_HD inline double mesh_signed_distance(const MeshView& m, const double p[3],
 /// The mesh collider's contact query at world point x: signed distance to the offset surface
 /// (distance - thickness; < 0 inside), outward unit normal n and the surface velocity vs at the
 /// nearest point. `cutoff` (>= 0, or INFINITY) as for Collider::query: exact below it.
-LOOM_HD inline double mesh_contact_query(const MeshView& m, const MeshPlacement& f, const double x[3], double cutoff,
+LOOM_HD LOOM_MESH_NOINLINE inline double mesh_contact_query(const MeshView& m, const MeshPlacement& f, const double x[3], double cutoff,
                                          double n[3], double vs[3]) {
   // Into the body frame: y = R^T (x - c(t)) + c0; the answer back: R n, R (q - c0) + c(t).
   const double r[3] = {x[0] - f.center[0], x[1] - f.center[1], x[2] - f.center[2]};
