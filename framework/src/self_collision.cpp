@@ -1,4 +1,7 @@
 #include "loom/self_collision.hpp"
+
+#include "loom/collider.hpp"
+#include "loom/kernels/contact.hpp"
 #include "loom/clock.hpp"
 
 #include <algorithm>
@@ -556,6 +559,8 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
   x0_.assign(n3, 0.0);
   d_.assign(n3, 0.0);
   inv_mass_.assign(nv_, 0.0);
+  touched_.reserve(nv_);
+  touched_flag_.assign(nv_, 0);
   vlo_.assign(n3, 0.0);
   vhi_.assign(n3, 0.0);
   tlo_.assign(3 * static_cast<std::size_t>(nt_), 0.0);
@@ -698,6 +703,10 @@ bool SelfCollision::respond(const Index idx[4], const double w[4], const double 
   }
   if (changed)
     for (int i = 0; i < 4; ++i) {
+      if (!touched_flag_[idx[i]]) {
+        touched_flag_[idx[i]] = 1;
+        touched_.push_back(idx[i]);  // within the capacity reserved for every vertex
+      }
       const double* di = &d_[3 * idx[i]];
       step_len_[idx[i]] = std::sqrt(selfcol::dot(di, di));
       max_growth_ = std::max(max_growth_, step_len_[idx[i]] - len0_[idx[i]]);
@@ -969,6 +978,35 @@ void SelfCollision::proximity_pairs(const double* x, double within, std::vector<
   std::sort(ee.begin(), ee.end(), by_ab);
 }
 
+bool SelfCollision::keep_outside(State& s, double h, const ColliderSet& colliders) {
+  constexpr std::size_t kStackFrames = 16;  // more colliders than this are refused by no one, but rare
+  const auto& cols = colliders.colliders();
+  const std::size_t nc = std::min(cols.size(), kStackFrames);
+  Collider::Frame frames[kStackFrames];
+  for (std::size_t c = 0; c < nc; ++c) frames[c] = cols[c].frame_at(s.time);
+  bool moved = false;
+  for (const Index v : touched_) {
+    if (s.pinned[v]) continue;
+    double y[3];
+    for (int k = 0; k < 3; ++k) y[k] = x0_[3 * v + k] + d_[3 * v + k];
+    bool in = false;
+    for (std::size_t c = 0; c < cols.size(); ++c) {
+      const Collider::Contact ct = c < nc ? cols[c].query(frames[c], y, 0.0) : cols[c].query(y, s.time);
+      if (ct.distance >= 0) continue;
+      // Onto the surface, inward velocity removed, no friction (the collider's own response had its turn).
+      kernels::contact_respond(y, &s.v[3 * v], ct.distance, ct.normal.data(), ct.velocity.data(), 0.0, 0.0, h);
+      in = true;
+    }
+    if (!in) continue;
+    moved = true;
+    for (int k = 0; k < 3; ++k) d_[3 * v + k] = y[k] - x0_[3 * v + k];
+    const double* dv = &d_[3 * v];
+    step_len_[v] = std::sqrt(selfcol::dot(dv, dv));
+    max_growth_ = std::max(max_growth_, step_len_[v] - len0_[v]);
+  }
+  return moved;
+}
+
 Index SelfCollision::freeze_pass(State& s) {
   // Fail-safe: every vertex of a pair that still collides returns to its start position and
   // stops. A pass ends when no collision remains; each pass freezes at least one moving vertex.
@@ -1031,8 +1069,10 @@ double relative_motion(bool vt, const Index idx[4], const double* p, const doubl
 }
 }  // namespace
 
-void SelfCollision::resolve(State& s, double h) {
+void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
   stats_ = SelfCollisionStats{};
+  for (const Index v : touched_) touched_flag_[v] = 0;
+  touched_.clear();
   auto t0 = Clock::now();
   const Index n = nv_;
   const double th = opt_.thickness;
@@ -1200,7 +1240,11 @@ void SelfCollision::resolve(State& s, double h) {
     stats_.ccd_collisions += hits;
     clean = hits == 0;
   }
-  if (!clean) {
+  // The response may have pushed cloth resting on a collider into it (the layers above press
+  // it down): put it back before the fail-safe, which then sees the corrected step and, where
+  // that collides, restores the step's start (outside the colliders when the step began so).
+  const bool projected = colliders && !colliders->empty() && !touched_.empty() && keep_outside(s, h, *colliders);
+  if (!clean || projected) {
     if (!candidates_valid()) update_candidates(x0_.data());
     stats_.frozen = freeze_pass(s);
     responded_ = true;

@@ -221,7 +221,8 @@ void Simulation::step() {
   integrator_->step(*scene_, dt_);
   if (!scene_->colliders.empty() && !integrator_->handles_contacts())
     scene_->colliders.resolve_contacts(scene_->state, scene_->state.time, dt_);
-  if (scene_->self_collision) scene_->self_collision->resolve(scene_->state, dt_);  // after colliders: last word
+  if (scene_->self_collision)  // after colliders: last word, keeping the colliders' too
+    scene_->self_collision->resolve(scene_->state, dt_, &scene_->colliders);
   const double secs = seconds_since(t0);
   step_seconds_ += secs;
   step_seconds_total_ += secs;

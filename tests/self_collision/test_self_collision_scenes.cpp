@@ -78,6 +78,7 @@ struct RunResult {
   double min_distance = 1e300;
   long long impulses = 0;  ///< proximity + CCD impulses over the run (the contact was real)
   long long frozen = 0;
+  double min_height = 1e300;  ///< lowest vertex (y) after any step: the ground plane's check
 };
 
 RunResult run_and_check(loom::Simulation& sim, int frames, double thickness) {
@@ -86,6 +87,8 @@ RunResult run_and_check(loom::Simulation& sim, int frames, double thickness) {
   for (int f = 1; f <= frames; ++f) {
     for (int k = 0; k < sim.substeps(); ++k) {
       sim.step();
+      const auto& xs = sim.scene().state.x;
+      for (std::size_t i = 1; i < xs.size(); i += 3) r.min_height = std::min(r.min_height, xs[i]);
       if (const auto* sc = sim.scene().self_collision.get()) {
         r.impulses += sc->last_stats().proximity + sc->last_stats().ccd_collisions;
         r.frozen += sc->last_stats().frozen;
@@ -162,10 +165,13 @@ TEST_F(SelfCollisionScenes, FoldingClothNeverIntersectsItselfWithEveryIntegrator
     EXPECT_EQ(r.max_intersections, 0) << "first at frame " << r.first_bad_frame;
     // Layers rest on each other at the thickness; fast approaches may dip below it for a step.
     EXPECT_GE(r.min_distance, 0.5 * kFoldThickness);
+    // The layers above must not press the lowest one into the ground (plane y = -0.01) at any
+    // step: the self-collision response puts a vertex it pushed into a collider back on it.
+    EXPECT_GE(r.min_height, -0.01 - 1e-9);
     EXPECT_GT(r.impulses, 0);
     if (verbose())
-      std::printf("%s: min distance / thickness = %.3f, impulses %lld, frozen %lld\n", integ.c_str(),
-                  r.min_distance / kFoldThickness, r.impulses, r.frozen);
+      std::printf("%s: min distance / thickness = %.3f, lowest vertex %.6f m, impulses %lld, frozen %lld\n",
+                  integ.c_str(), r.min_distance / kFoldThickness, r.min_height, r.impulses, r.frozen);
   }
 }
 

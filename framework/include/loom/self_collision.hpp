@@ -190,6 +190,8 @@ struct ProximityPair {
   double distance = 0;
 };
 
+class ColliderSet;
+
 class SelfCollision {
  public:
   struct Options {
@@ -212,7 +214,10 @@ class SelfCollision {
   /// Save the start-of-step positions.
   void begin_step(const State& s);
   /// After a step of size h: s.x and s.v are the integrator's end of step; modify them.
-  void resolve(State& s, double h);
+  /// With `colliders`, a vertex the response moved into a collider is put back onto its
+  /// surface (inward velocity removed) before the fail-safe checks the step, so the result is
+  /// both free of self-intersections and outside the colliders whenever the step's start was.
+  void resolve(State& s, double h, const ColliderSet* colliders = nullptr);
   const SelfCollisionStats& last_stats() const { return stats_; }
 
   /// The pairs that can end a step within the thickness: every non-adjacent vertex-triangle
@@ -290,6 +295,9 @@ class SelfCollision {
   // remove approach along n, Coulomb friction on the tangential part. Returns true if changed.
   bool respond(const Index idx[4], const double w[4], const double n[3], double dpos, double h, State& s);
   Index freeze_pass(State& s);
+  /// Puts the touched vertices that ended inside a collider back onto its surface (at the
+  /// step's end time s.time); true when one was moved.
+  bool keep_outside(State& s, double h, const ColliderSet& colliders);
 
   Options opt_;
   double margin_ = 0;
@@ -303,6 +311,8 @@ class SelfCollision {
 
   // Work arrays, sized in the constructor.
   std::vector<double> x0_, d_, inv_mass_;
+  std::vector<Index> touched_;            ///< vertices the response moved in this resolve()
+  std::vector<std::uint8_t> touched_flag_;
   std::vector<double> vlo_, vhi_, tlo_, thi_;    ///< swept boxes of vertices / triangles
   std::vector<double> ref_x_;                    ///< start positions at the last broad phase
   std::vector<double> moved_;                    ///< per vertex |x0 - ref_x| this step
