@@ -979,7 +979,7 @@ void SelfCollision::proximity_pairs(const double* x, double within, std::vector<
 }
 
 bool SelfCollision::keep_outside(State& s, double h, const ColliderSet& colliders) {
-  constexpr std::size_t kStackFrames = 16;  // more colliders than this are refused by no one, but rare
+  constexpr std::size_t kStackFrames = 16;  // placements on the stack; a collider beyond these (rare) is placed per query
   const auto& cols = colliders.colliders();
   const std::size_t nc = std::min(cols.size(), kStackFrames);
   Collider::Frame frames[kStackFrames];
@@ -999,6 +999,7 @@ bool SelfCollision::keep_outside(State& s, double h, const ColliderSet& collider
     }
     if (!in) continue;
     moved = true;
+    touched_flag_[v] = 2;  // put back: freeze_pass(s, true) re-checks its pairs
     for (int k = 0; k < 3; ++k) d_[3 * v + k] = y[k] - x0_[3 * v + k];
     const double* dv = &d_[3 * v];
     step_len_[v] = std::sqrt(selfcol::dot(dv, dv));
@@ -1007,9 +1008,11 @@ bool SelfCollision::keep_outside(State& s, double h, const ColliderSet& collider
   return moved;
 }
 
-Index SelfCollision::freeze_pass(State& s) {
+Index SelfCollision::freeze_pass(State& s, bool changed_only) {
   // Fail-safe: every vertex of a pair that still collides returns to its start position and
   // stops. A pass ends when no collision remains; each pass freezes at least one moving vertex.
+  // changed_only: the CCD passes ended clean, so only pairs with a vertex put back onto a
+  // collider (keep_outside) or frozen here since have a path that was not checked.
   const double tol = kCcdTolerance * opt_.thickness;
   Index frozen = 0;
   for (;;) {
@@ -1021,6 +1024,10 @@ Index SelfCollision::freeze_pass(State& s) {
       for (const Pair& p : list) {
         Index idx[4];
         pair_vertices(vt, p, idx);
+        if (changed_only && !(touched_flag_[idx[0]] == 2 || touched_flag_[idx[1]] == 2 || touched_flag_[idx[2]] == 2 ||
+                              touched_flag_[idx[3]] == 2 || frozen_[idx[0]] || frozen_[idx[1]] || frozen_[idx[2]] ||
+                              frozen_[idx[3]]))
+          continue;
         const double motion = vt ? step_len_[idx[0]] + std::max({step_len_[idx[1]], step_len_[idx[2]], step_len_[idx[3]]})
                                  : std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
         if (motion == 0) continue;
@@ -1245,8 +1252,12 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
   // that collides, restores the step's start (outside the colliders when the step began so).
   const bool projected = colliders && !colliders->empty() && !touched_.empty() && keep_outside(s, h, *colliders);
   if (!clean || projected) {
-    if (!candidates_valid()) update_candidates(x0_.data());
-    stats_.frozen = freeze_pass(s);
+    bool all_pairs = !clean;
+    if (!candidates_valid()) {
+      update_candidates(x0_.data());
+      all_pairs = true;  // pairs new to the lists were not in the CCD passes
+    }
+    stats_.frozen = freeze_pass(s, !all_pairs);
     responded_ = true;
   }
   if (responded_)

@@ -294,7 +294,7 @@ class SelfCollision {
   // Apply: separation push dpos (>= 0, displacement units) along n with weights w; velocity:
   // remove approach along n, Coulomb friction on the tangential part. Returns true if changed.
   bool respond(const Index idx[4], const double w[4], const double n[3], double dpos, double h, State& s);
-  Index freeze_pass(State& s);
+  Index freeze_pass(State& s, bool changed_only = false);
   /// Puts the touched vertices that ended inside a collider back onto its surface (at the
   /// step's end time s.time); true when one was moved.
   bool keep_outside(State& s, double h, const ColliderSet& colliders);
