@@ -72,7 +72,21 @@ void ThreadController::on_sample(double s, int steps) {
     const bool drifted = m > cfg_.drift * ref_ || m * cfg_.drift < ref_;
     need = std::max(cfg_.min_interval, next_loss_ / ((drifted ? 2.0 : 1.0) * cfg_.overhead));
   }
+  need = std::max(need, hold_);
   if (since_decision_ < need) return;
+  // The load gate: counts above the chosen one that exceed the cores free now stay out.
+  free_now_ = free_cores_ ? free_cores_() : -1;
+  bool any = false;
+  for (int k = 0; k < ncand_; ++k) {
+    blocked_[k] = free_now_ > 0 && cand_[k] > chosen_ && cand_[k] > free_now_;
+    any = any || (cand_[k] != chosen_ && !blocked_[k]);
+  }
+  if (!any) {  // ask again after min_interval at the soonest (a reading costs a /proc read)
+    ++gated_;
+    hold_ = cfg_.min_interval;
+    since_decision_ = 0;
+    return;
+  }
   if (probe_pays(m)) {
     start_probe();
   } else {   // wait a full interval before asking again (the answer only gets worse as the run ends)
@@ -90,10 +104,11 @@ bool ThreadController::probe_pays(double m) const {
     if (cand_[k] == chosen_) sps = std::max(1, steps_per_sample_[k]);
   double len = 0, bound = 0;
   for (int k = 0; k < ncand_; ++k) {
-    if (cand_[k] == chosen_) continue;
+    if (cand_[k] == chosen_ || blocked_[k]) continue;
     const double lk = cfg_.samples * std::max(sps, steps_per_sample_[k]);
     len += lk;
-    const bool unknown_up = cand_[k] > chosen_ && !ever_measured_[k];
+    // (a count the gate allowed is no riskier than any other)
+    const bool unknown_up = cand_[k] > chosen_ && !ever_measured_[k] && free_now_ < 0;
     bound += unknown_up ? cfg_.unmeasured_cost * m : (cfg_.reject_factor - 1.0) * m * lk;
   }
   const double left = static_cast<double>(run_steps_ - steps_) - len;
@@ -106,7 +121,7 @@ void ThreadController::start_probe() {
   for (int k = 0; k < ncand_; ++k) {
     nmeas_[k] = 0;
     rejected_[k] = false;
-    measured_[k] = false;
+    measured_[k] = blocked_[k];  // left out: never run in this probe
     if (cand_[k] == chosen_) baseline_idx_ = k;
     else steps_per_sample_[k] = 0;
   }
@@ -137,10 +152,10 @@ void ThreadController::next_candidate() {
 
 void ThreadController::decide() {
   double med[kMaxCandidates];
-  for (int k = 0; k < ncand_; ++k) med[k] = median(meas_[k], nmeas_[k]);
+  for (int k = 0; k < ncand_; ++k) med[k] = nmeas_[k] > 0 ? median(meas_[k], nmeas_[k]) : 0;
   int w = baseline_idx_, a = baseline_idx_;
   for (int k = 0; k < ncand_; ++k)
-    if (med[k] < med[a]) a = k;
+    if (nmeas_[k] > 0 && med[k] < med[a]) a = k;
   if (a != w && med[a] < (1.0 - cfg_.switch_gain) * med[w]) w = a;
   // What the next probe is expected to cost: each loser run for as many steps as this probe
   // ran it (the old baseline: one sample if it would be rejected, else `samples`), at its
@@ -149,7 +164,7 @@ void ThreadController::decide() {
   // (halves per probe) rather than forgetting a costly probe at once.
   double loss = 0;
   for (int k = 0; k < ncand_; ++k) {
-    if (k == w) continue;
+    if (k == w || nmeas_[k] == 0) continue;
     const bool rej = k == baseline_idx_ ? med[k] > cfg_.reject_factor * med[w] : rejected_[k];
     const double n = (rej ? 1 : cfg_.samples) * std::max(1, steps_per_sample_[k]);
     loss += n * std::max(0.0, med[k] - med[w]);

@@ -1,5 +1,8 @@
 #include "loom/threads.hpp"
 
+#include "loom/common.hpp"
+#include "loom/cpu_load.hpp"
+
 #include <sched.h>
 #include <unistd.h>
 
@@ -44,14 +47,9 @@ int cgroup_quota_cores() {
 // Runnable tasks other than this process, from /proc/loadavg's "running/total" field (the
 // count includes the reader itself). 0 when it cannot be read.
 int other_runnable_tasks() {
-  std::ifstream in("/proc/loadavg");
-  double l1, l5, l15;
-  std::string rt;
-  if (!(in >> l1 >> l5 >> l15 >> rt)) return 0;
-  const auto slash = rt.find('/');
-  if (slash == std::string::npos) return 0;
-  const int running = std::atoi(rt.substr(0, slash).c_str());
-  return std::max(0, running - 1);
+  std::string text;
+  if (!ProcSource().read("/proc/loadavg", text)) return 0;
+  return std::max(0, parse_loadavg_running(text) - 1);
 }
 
 }  // namespace
@@ -63,9 +61,10 @@ int usable_cores() {
   return std::max(1, n);
 }
 
-int resolve_thread_count(int requested, bool* capped) {
+int resolve_thread_count(int requested, bool* capped, int* others_runnable) {
   const int cores = usable_cores();
   if (capped) *capped = requested > cores;
+  if (others_runnable) *others_runnable = -1;
   if (requested <= 0) {
     // auto: OMP_NUM_THREADS, when set, still chooses (capped at the usable cores).
     const char* env = std::getenv("OMP_NUM_THREADS");
@@ -81,10 +80,29 @@ int resolve_thread_count(int requested, bool* capped) {
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
       others = std::min(others, other_runnable_tasks());
     }
+    if (others_runnable) *others_runnable = others;
     return std::max(1, cores - others);
   }
   return std::min(requested, cores);
 }
 
+
+int free_cores(int cores, int mask_cpus, double others_busy) {
+  if (others_busy < 0) return -1;
+  const int taken = static_cast<int>(std::floor(others_busy + 0.5));
+  return std::max(1, std::min(cores, std::max(1, mask_cpus) - taken));
+}
+
+ThreadStart choose_start_threads(int cores, int mask_cpus, double others_busy, int others_runnable,
+                                 long long vertices) {
+  ThreadStart s;
+  cores = std::max(1, cores);
+  s.free = others_busy >= 0 ? free_cores(cores, mask_cpus, others_busy)
+           : others_runnable >= 0 ? std::max(1, cores - others_runnable)
+                                  : -1;
+  s.small_mesh = vertices >= 0 && vertices < kParallelMinVertices;
+  s.threads = s.small_mesh ? 1 : (s.free > 0 ? s.free : cores);
+  return s;
+}
 
 }  // namespace loom

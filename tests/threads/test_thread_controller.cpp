@@ -328,3 +328,79 @@ TEST(ThreadController, NoProbesNearTheEndOfARun) {
   EXPECT_EQ(c.chosen(), 2);
   EXPECT_NEAR(extra_e - extra_c, 0.008, 1e-9);   // the skipped probe's one 1-thread step
 }
+
+// The load gate (set_free_cores): a due probe leaves out counts above the chosen one that
+// exceed the cores free now.
+TEST(ThreadController, GateHoldsBackMoreThreadsWhileTheCoresAreBusyAndLetsThemBackAfter) {
+  // Started on 1 next to a competitor: 2 threads take 20x as long until t = 3 s, when the
+  // competitor stops and they take 0.6x. The gate reads 1 free core until then, 2 after.
+  double t = 0;
+  int calls = 0;
+  auto world = [&](int n) { return n == 1 ? 0.010 : (t < 3.0 ? 0.200 : 0.006); };
+  ThreadController c(1, 2);
+  c.set_free_cores([&] {
+    ++calls;
+    return t < 3.0 ? 1 : 2;
+  });
+  while (t < 3.0) {
+    ASSERT_EQ(c.threads(), 1) << t;  // never a 2-thread step while the cores are busy
+    const double s = world(c.threads());
+    t += s;
+    c.record(s);
+  }
+  EXPECT_EQ(c.probes(), 0);
+  EXPECT_GE(c.gated_probes(), 1);
+  // A reading costs a /proc read: at most one per min_interval (0.25 s) after the first.
+  EXPECT_LE(calls, 1 + static_cast<int>(3.0 / 0.25) + 1);
+  const double back = t;
+  while (t < back + 1.0) {
+    const double s = world(c.threads());
+    t += s;
+    c.record(s);
+  }
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_GE(c.probes(), 1);
+}
+
+TEST(ThreadController, FreeCoresLiftTheUnmeasuredCountBoundOfAShortRun) {
+  // Started on 1 because the mesh is small (the start-up rule), alone, where 2 threads are
+  // faster (8 ms against 13 ms). 93 steps: without a reading the never-measured count above
+  // costs 10 step times (130 ms) > 10% x 13 ms x at most 81 steps, so no probe
+  // (BusyStartShortRunDoesNotProbeMoreThreads). With the gate reading 2 free cores the count
+  // is bounded like any other (0.5 x 13 ms x 3 steps = 19.5 ms): probed and kept.
+  auto world = [](int n) { return n == 2 ? 0.008 : 0.013; };
+  ThreadController c(1, 2), d(1, 2);
+  c.set_run_steps(93);
+  d.set_run_steps(93);
+  c.set_free_cores([] { return 2; });
+  for (int s = 0; s < 93; ++s) {
+    c.record(world(c.threads()));
+    d.record(world(d.threads()));
+  }
+  EXPECT_GE(c.probes(), 1);  // the first at step 11; the run is long enough for a second one of 1 thread
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_EQ(c.switches(), 1);
+  EXPECT_EQ(d.probes(), 0);
+  EXPECT_EQ(d.chosen(), 1);
+  // An unknown reading (-1) is no reading: the bound applies.
+  ThreadController e(1, 2);
+  e.set_run_steps(93);
+  e.set_free_cores([] { return -1; });
+  for (int s = 0; s < 93; ++s) e.record(world(e.threads()));
+  EXPECT_EQ(e.probes(), 0);
+}
+
+TEST(ThreadController, GateNeverHoldsBackFewerThreads) {
+  // Started on 2, a competitor arrives: the gate reads 1 free core, which does not stop the
+  // probe of 1 thread (only counts above the chosen one are held back).
+  auto world = [](int n) { return n == 2 ? 0.030 : 0.012; };
+  ThreadController c(2, 2);
+  c.set_free_cores([] { return 1; });
+  for (int s = 0; s < 60; ++s) c.record(world(c.threads()));
+  EXPECT_EQ(c.chosen(), 1);
+  EXPECT_EQ(c.gated_probes(), 0);
+  // ... and then, on 1 thread, every later due probe is held back.
+  for (int s = 0; s < 500; ++s) c.record(world(c.threads()));
+  EXPECT_EQ(c.probes(), 1);
+  EXPECT_GE(c.gated_probes(), 1);
+}

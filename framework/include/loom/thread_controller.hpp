@@ -35,9 +35,19 @@
 //   draped_ball_rk4). Short runs (a few dozen steps of a slow scene, a short run that started
 //   below the cores because the machine was busy, or the tail of any run) are then not probed and
 //   keep the start-up count. Unknown length (0): no such limit.
+// - Load gate: when the controller is given a reading of the cores free now (set_free_cores:
+//   usable cores less those other processes kept busy since the last reading, from /proc/stat;
+//   loom/cpu_load.hpp), a due probe leaves out every count above the chosen one that exceeds
+//   the free cores (more threads than free cores wait at every barrier for a descheduled
+//   thread), and is not started when no count is left (counted in gated_probes()). A count
+//   above the chosen one that the reading allows costs what any other count may cost (the
+//   `unmeasured_cost` bound is for an unknown reading). So next to a busy process a run never
+//   tries more threads, and it tries them again once the reading shows the cores free.
 // The controller is pure logic on the step times it is given (no clock of its own), so tests
 // drive it with made-up times. Simulation::step feeds it and applies threads().
 #pragma once
+
+#include <functional>
 
 namespace loom {
 
@@ -71,6 +81,14 @@ class ThreadController {
   /// The run's total number of steps, counted from the first record() (0: unknown, the default).
   /// Probes then start only when the steps left can repay them (see the top of this file).
   void set_run_steps(long total) { run_steps_ = total; }
+  /// The load gate (see the top of this file): free() returns the cores free now, -1 when unknown.
+  /// Called only when a probe is due (at most every min_interval after the first).
+  void set_free_cores(std::function<int()> free) { free_cores_ = std::move(free); }
+  int initial() const { return cand_[0]; }           ///< the count the run started on
+  int gated_probes() const { return gated_; }        ///< probes due but not started: no count fits the free cores
+  /// What the start-up rule saw (informational): cores other processes kept busy during the set-up, -1 unknown.
+  void set_start_load(double cores) { start_load_ = cores; }
+  double start_load() const { return start_load_; }
   long steps() const { return steps_; }              ///< steps recorded so far
   int skipped_probes() const { return skipped_; }    ///< probes due but not started: the run is too short to repay them
 
@@ -123,6 +141,12 @@ class ThreadController {
   int probes_ = 0, switches_ = 0;
   long run_steps_ = 0, steps_ = 0;
   int skipped_ = 0;
+  std::function<int()> free_cores_;
+  int free_now_ = -1;                        // the gate's reading when the due probe was decided
+  bool blocked_[kMaxCandidates] = {};        // left out of the due probe by the gate
+  int gated_ = 0;
+  double start_load_ = -1;
+  double hold_ = 0;                          // after a gated probe: wait at least this long
 };
 
 }  // namespace loom

@@ -2,8 +2,13 @@
 //
 // One place for the rule (docs/ARCHITECTURE.md, "Threads"):
 // - `threads: auto` (the default) uses the cores this process may run on: the affinity mask
-//   (taskset, mpirun binding) and the cgroup CPU quota (containers), whichever is smaller,
-//   less the cores other runnable processes occupy when the run starts (/proc/loadavg).
+//   (taskset, mpirun binding) and the cgroup CPU quota (containers), whichever is smaller.
+//   The scene is set up on those cores less the other runnable processes (/proc/loadavg); the
+//   steps then start on choose_start_threads(): 1 thread when the mesh is below
+//   kParallelMinVertices (most loops run serially there and a second thread only adds
+//   barriers) or when other processes kept the cores busy during the set-up (/proc/stat,
+//   loom/cpu_load.hpp; the runnable count when the set-up was too short to measure), else the
+//   free cores. loom/thread_controller.hpp then adapts the count to the step times.
 // - An explicit count is capped at those cores (more threads than cores only adds waiting at
 //   every barrier) with a note; a count above kMaxThreads is refused.
 // - Small loops run serially: kParallelMinVertices (common.hpp) is the threshold.
@@ -21,7 +26,26 @@ int usable_cores();
 /// The thread count for a scene's `threads` value: 0 means auto (OMP_NUM_THREADS when set,
 /// else usable_cores() less the other runnable processes, at least 1); larger
 /// requests are capped at usable_cores(). `capped` tells whether the request was reduced.
-int resolve_thread_count(int requested, bool* capped = nullptr);
+/// others_runnable (auto only): the other runnable tasks it saw (-1 when unknown).
+int resolve_thread_count(int requested, bool* capped = nullptr, int* others_runnable = nullptr);
+
+/// Cores free for this run's threads: min(cores, mask_cpus - the cores others keep busy), where
+/// others take a core from half a core's use (others_busy 0.5 -> 1 core); at least 1.
+/// -1 when others_busy is unknown (< 0).
+int free_cores(int cores, int mask_cpus, double others_busy);
+
+/// The count `threads: auto` starts the steps on, and what it saw.
+struct ThreadStart {
+  int threads = 1;
+  int free = -1;            ///< free cores (free_cores(), or from the runnable count; -1 unknown)
+  bool small_mesh = false;  ///< below kParallelMinVertices: starts on 1 whatever the load
+};
+/// The start-up rule. cores: usable_cores(); mask_cpus: CPUs in the affinity mask;
+/// others_busy: cores other processes kept busy during the set-up (CpuLoadMonitor, -1 unknown);
+/// others_runnable: the fallback when that is unknown (-1 unknown too: all cores are free);
+/// vertices: the mesh's vertex count.
+ThreadStart choose_start_threads(int cores, int mask_cpus, double others_busy, int others_runnable,
+                                 long long vertices);
 
 
 }  // namespace loom

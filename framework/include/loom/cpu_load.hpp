@@ -1,0 +1,84 @@
+// What other processes do on the cores this process may use, read from /proc (issue 16), for
+// `threads: auto` (docs/ARCHITECTURE.md, "Threads"; the rule itself is in loom/threads.hpp).
+//
+// - CPU time: /proc/stat's per-CPU lines (user nice system idle iowait irq softirq steal ...,
+//   in clock ticks) summed over the CPUs of the affinity mask, minus this process's own time
+//   (/proc/self/stat utime + stime, same ticks), over a window. The result is the number of
+//   cores that others kept busy on average ("busy": user, nice, system, irq, softirq and steal,
+//   the last being time a hypervisor gave to another machine). Ticks are 10 ms, so a window
+//   shorter than `min_ticks` per CPU says nothing: the reading is then "unknown" and the
+//   window keeps growing until it is long enough.
+// - Runnable tasks: /proc/loadavg's "running/total" field, an instant count (includes the
+//   reader), the fallback when no window is long enough yet.
+// Every reading goes through ProcSource, so tests feed recorded /proc texts, a busy machine,
+// an idle one or no /proc at all (every reading unknown: the callers fall back to the cores).
+// Cost: one read of /proc/stat and of /proc/self/stat per reading (measured in
+// docs/ARCHITECTURE.md); readings are taken at start-up and when a probe is due, never per step.
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace loom {
+
+/// Where /proc texts come from (the real files by default; tests give recorded texts).
+class ProcSource {
+ public:
+  virtual ~ProcSource() = default;
+  /// The whole text of `path` ("/proc/stat", "/proc/self/stat", "/proc/loadavg"); false when
+  /// it cannot be read.
+  virtual bool read(const char* path, std::string& text) const;
+};
+
+/// Ticks summed over some CPUs of /proc/stat: busy (not idle, not iowait) and total.
+struct CpuTicks {
+  long long busy = 0, total = 0;
+  int cpus = 0;  ///< CPUs of the list found in the text
+};
+
+/// Sums the "cpuN" lines of a /proc/stat text over `cpus` (all "cpuN" lines when empty).
+/// Lines need at least 4 numbers (user nice system idle); later fields (iowait, irq, softirq,
+/// steal) are used when present; guest and guest_nice are already inside user and nice.
+/// cpus == 0 in the result: nothing usable (no such lines).
+CpuTicks parse_proc_stat(std::string_view text, const std::vector<int>& cpus);
+
+/// utime + stime (ticks) from a /proc/<pid>/stat text (the command name may hold spaces and
+/// parentheses); -1 when malformed.
+long long parse_self_stat_ticks(std::string_view text);
+
+/// The running count of a /proc/loadavg text ("0.48 1.82 2.58 3/112 26335" -> 3); -1 when malformed.
+int parse_loadavg_running(std::string_view text);
+
+/// The CPUs this process may run on (sched_getaffinity), in increasing order.
+std::vector<int> affinity_cpus();
+
+/// Others' CPU use on a set of CPUs over a window between two readings.
+class CpuLoadMonitor {
+ public:
+  /// cpus: the CPUs to watch (empty: affinity_cpus()); src: null for the real /proc.
+  explicit CpuLoadMonitor(std::vector<int> cpus = {}, const ProcSource* src = nullptr, long long min_ticks = 5);
+
+  /// Starts a window now (taken by the constructor too).
+  void mark();
+  /// Cores that other processes kept busy on average on the watched CPUs since the window
+  /// began, and a new window begins; -1 when unknown (no /proc, or the window has fewer than
+  /// min_ticks ticks per CPU: then the window goes on).
+  double others_busy_cores();
+  /// Runnable tasks other than this reader right now (/proc/loadavg); -1 when unknown.
+  int others_runnable() const;
+  int cpus() const { return static_cast<int>(cpus_.size()); }
+  long long last_window_ticks() const { return last_window_; }  ///< per CPU, of the last known reading
+
+ private:
+  bool snapshot(CpuTicks& t, long long& self) const;
+  std::vector<int> cpus_;
+  const ProcSource* src_;
+  long long min_ticks_;
+  bool have_ = false;
+  CpuTicks t0_;
+  long long self0_ = 0;
+  long long last_window_ = 0;
+};
+
+}  // namespace loom

@@ -1,0 +1,32 @@
+// `threads: auto` from set-up to steps (docs/ARCHITECTURE.md, "Threads"): measure the other
+// processes' CPU use while the scene is set up, choose the count the steps start on
+// (choose_start_threads, loom/threads.hpp) and attach the step-time controller with a load
+// gate that reads the same monitor when a probe is due (loom/thread_controller.hpp).
+#pragma once
+
+#include <memory>
+
+#include "loom/cpu_load.hpp"
+#include "loom/thread_controller.hpp"
+#include "loom/threads.hpp"
+
+namespace loom {
+
+class AutoThreadStart {
+ public:
+  /// Begins the set-up window (the real /proc; src for tests).
+  explicit AutoThreadStart(const ProcSource* src = nullptr, std::vector<int> cpus = {});
+  /// At the end of the set-up: the start count (see choose_start_threads) for a mesh of
+  /// `vertices`, with others_runnable the set-up count's fallback (resolve_thread_count), and
+  /// the controller to adapt it (null on one usable core). Call once.
+  std::unique_ptr<ThreadController> finish(int cores, int others_runnable, long long vertices);
+  const ThreadStart& start() const { return start_; }
+  double others_busy() const { return others_busy_; }  ///< during the set-up; -1 unknown
+
+ private:
+  std::shared_ptr<CpuLoadMonitor> load_;
+  ThreadStart start_;
+  double others_busy_ = -1;
+};
+
+}  // namespace loom

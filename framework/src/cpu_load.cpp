@@ -1,0 +1,189 @@
+#include "loom/cpu_load.hpp"
+
+#include <sched.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cstdio>
+
+namespace loom {
+
+bool ProcSource::read(const char* path, std::string& text) const {
+  // Plain stdio: /proc files report size 0, so read until end of file.
+  std::FILE* f = std::fopen(path, "re");
+  if (!f) return false;
+  text.clear();
+  char buf[4096];
+  std::size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, n);
+  const bool ok = !std::ferror(f);
+  std::fclose(f);
+  return ok && !text.empty();
+}
+
+namespace {
+
+// Reads unsigned integers separated by blanks from s; returns how many were read (at most max).
+int read_numbers(std::string_view s, long long* out, int max) {
+  int k = 0;
+  std::size_t i = 0;
+  while (k < max) {
+    while (i < s.size() && (s[i] == ' ' || s[i] == '\t')) ++i;
+    if (i >= s.size() || s[i] < '0' || s[i] > '9') break;
+    long long v = 0;
+    const auto r = std::from_chars(s.data() + i, s.data() + s.size(), v);
+    if (r.ec != std::errc()) break;
+    out[k++] = v;
+    i = static_cast<std::size_t>(r.ptr - s.data());
+  }
+  return k;
+}
+
+}  // namespace
+
+CpuTicks parse_proc_stat(std::string_view text, const std::vector<int>& cpus) {
+  CpuTicks t;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    std::size_t end = text.find('\n', pos);
+    if (end == std::string_view::npos) end = text.size();
+    const std::string_view line = text.substr(pos, end - pos);
+    pos = end + 1;
+    // "cpuN ..." (not the aggregate "cpu  ..." line)
+    if (line.size() < 4 || line.compare(0, 3, "cpu") != 0 || line[3] < '0' || line[3] > '9') continue;
+    int id = 0;
+    const auto r = std::from_chars(line.data() + 3, line.data() + line.size(), id);
+    if (r.ec != std::errc()) continue;
+    if (!cpus.empty() && !std::binary_search(cpus.begin(), cpus.end(), id)) continue;
+    long long v[10] = {};
+    const int n = read_numbers(line.substr(static_cast<std::size_t>(r.ptr - line.data())), v, 10);
+    if (n < 4) continue;
+    // user nice system idle iowait irq softirq steal guest guest_nice
+    const long long busy = v[0] + v[1] + v[2] + v[5] + v[6] + v[7];
+    t.busy += busy;
+    t.total += busy + v[3] + v[4];
+    ++t.cpus;
+  }
+  return t;
+}
+
+long long parse_self_stat_ticks(std::string_view text) {
+  // "pid (comm) state ppid ...": fields after the last ')' start with the state (field 3);
+  // utime and stime are fields 14 and 15.
+  const std::size_t close = text.rfind(')');
+  if (close == std::string_view::npos) return -1;
+  std::string_view rest = text.substr(close + 1);
+  int field = 2;
+  std::size_t i = 0;
+  long long utime = -1;
+  while (i < rest.size()) {
+    while (i < rest.size() && rest[i] == ' ') ++i;
+    if (i >= rest.size()) break;
+    std::size_t j = i;
+    while (j < rest.size() && rest[j] != ' ' && rest[j] != '\n') ++j;
+    ++field;
+    if (field == 14 || field == 15) {
+      long long v = 0;
+      const auto r = std::from_chars(rest.data() + i, rest.data() + j, v);
+      if (r.ec != std::errc() || r.ptr != rest.data() + j) return -1;
+      if (field == 14) utime = v;
+      else return utime + v;
+    }
+    i = j;
+    if (i < rest.size() && rest[i] == '\n') break;
+  }
+  return -1;
+}
+
+int parse_loadavg_running(std::string_view text) {
+  // "l1 l5 l15 running/total last_pid"
+  int field = 0;
+  std::size_t i = 0;
+  while (i < text.size()) {
+    while (i < text.size() && (text[i] == ' ' || text[i] == '\t')) ++i;
+    if (i >= text.size() || text[i] == '\n') break;
+    std::size_t j = i;
+    while (j < text.size() && text[j] != ' ' && text[j] != '\t' && text[j] != '\n') ++j;
+    if (++field == 4) {
+      const std::string_view f = text.substr(i, j - i);
+      const std::size_t slash = f.find('/');
+      if (slash == std::string_view::npos || slash == 0) return -1;
+      int running = 0;
+      const auto r = std::from_chars(f.data(), f.data() + slash, running);
+      if (r.ec != std::errc() || r.ptr != f.data() + slash) return -1;
+      return running;
+    }
+    i = j;
+  }
+  return -1;
+}
+
+std::vector<int> affinity_cpus() {
+  std::vector<int> out;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof(set), &set) == 0) {
+    for (int c = 0; c < CPU_SETSIZE; ++c)
+      if (CPU_ISSET(c, &set)) out.push_back(c);
+  }
+  return out;  // empty: every CPU line counts
+}
+
+namespace {
+const ProcSource& real_proc() {
+  static const ProcSource src;
+  return src;
+}
+}  // namespace
+
+CpuLoadMonitor::CpuLoadMonitor(std::vector<int> cpus, const ProcSource* src, long long min_ticks)
+    : cpus_(std::move(cpus)), src_(src ? src : &real_proc()), min_ticks_(std::max(1LL, min_ticks)) {
+  if (cpus_.empty() && !src) cpus_ = affinity_cpus();
+  std::sort(cpus_.begin(), cpus_.end());
+  mark();
+}
+
+bool CpuLoadMonitor::snapshot(CpuTicks& t, long long& self) const {
+  std::string text;
+  if (!src_->read("/proc/stat", text)) return false;
+  t = parse_proc_stat(text, cpus_);
+  if (t.cpus == 0) return false;
+  if (!src_->read("/proc/self/stat", text)) return false;
+  self = parse_self_stat_ticks(text);
+  return self >= 0;
+}
+
+void CpuLoadMonitor::mark() { have_ = snapshot(t0_, self0_); }
+
+double CpuLoadMonitor::others_busy_cores() {
+  CpuTicks t;
+  long long self = 0;
+  if (!snapshot(t, self)) {
+    have_ = false;
+    return -1;
+  }
+  if (!have_ || t.cpus != t0_.cpus) {  // no start, or a CPU went on/offline: start again
+    t0_ = t;
+    self0_ = self;
+    have_ = true;
+    return -1;
+  }
+  const long long window = (t.total - t0_.total) / t.cpus;  // ticks per CPU
+  if (window < min_ticks_) return -1;                     // too short to say: keep the window
+  const long long others = (t.busy - t0_.busy) - (self - self0_);
+  t0_ = t;
+  self0_ = self;
+  last_window_ = window;
+  // Ticks are sampled: a window may show a little less than our own time; never negative.
+  return std::max(0.0, static_cast<double>(others) / static_cast<double>(window));
+}
+
+int CpuLoadMonitor::others_runnable() const {
+  std::string text;
+  if (!src_->read("/proc/loadavg", text)) return -1;
+  const int running = parse_loadavg_running(text);
+  return running < 0 ? -1 : std::max(0, running - 1);
+}
+
+}  // namespace loom
