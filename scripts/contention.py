@@ -20,7 +20,9 @@ step from `loom run`'s summary line; the rest of the run's wall time is its star
 the table are the wall-clock seconds of the whole `loom run` (start-up, steps, output), the
 median of --repeat runs (3 x --repeat for scenes whose one-thread run is estimated under 0.5 s), the settings interleaved (1, 2, auto, 1, 2, auto, ...) so that a slow
 minute of the machine does not fall on one setting. The "auto ends on" column is the count
-`threads: auto` kept at the end of its runs (from its summary line).
+`threads: auto` kept at the end of its runs (from its summary line); the JSON also keeps each auto
+run's whole summary (the count it started on, the others' load it measured at start, probes and
+probes held back by load) and every run's CPU seconds (user + system).
 
 The goal (exit code 1 when missed): with threads: auto, a run is never more than 10% slower
 than the better of threads 1 and 2, alone and loaded. OMP_NUM_THREADS is removed from the
@@ -41,6 +43,7 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SUMMARY = re.compile(r"\(([0-9.eE+-]+) ms per step in the integrator\)")
 AUTO = re.compile(r"threads auto: ended on (\d+)")
+AUTO_LINE = re.compile(r"loom: threads auto: (.*)")
 
 
 def scene_timing(path):
@@ -53,17 +56,23 @@ def scene_timing(path):
 
 
 def run_once(loom, scene, out, frames, substeps, threads, env):
-    """(wall seconds, integrator ms per step, the count auto ended on or None)."""
+    """(wall seconds, integrator ms per step, the count auto ended on or None, auto's summary or None,
+    user + system CPU seconds of the run)."""
     cmd = [loom, "run", scene, "--out", out, "--overwrite", "--frames", str(frames),
            "--set", f"integrator.substeps={substeps}", "--set", f"threads={threads}"]
+    c0 = os.times()
     t0 = time.perf_counter()
     r = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     t = time.perf_counter() - t0
+    c1 = os.times()
+    cpu = (c1.children_user - c0.children_user) + (c1.children_system - c0.children_system)
     if r.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({r.returncode}): {r.stderr.strip()[-400:]}")
     m = SUMMARY.search(r.stdout)
     a = AUTO.search(r.stdout)
-    return t, (float(m.group(1)) if m else None), (int(a.group(1)) if a else None)
+    line = AUTO_LINE.search(r.stdout)
+    return (t, (float(m.group(1)) if m else None), (int(a.group(1)) if a else None),
+            (line.group(1) if line else None), cpu)
 
 
 def plan_scene(a, sc, tmp, env):
@@ -72,11 +81,11 @@ def plan_scene(a, sc, tmp, env):
     # One step first (a Baraff-Witkin step on 65,536 vertices takes seconds), then 10 when
     # that was cheap: the first step carries set-up work, so one step overstates the cost.
     cal = 1
-    wall, ms, _ = run_once(a.loom, sc, os.path.join(tmp, name + "_cal"), 1, 1, 1, env)
+    wall, ms, *_ = run_once(a.loom, sc, os.path.join(tmp, name + "_cal"), 1, 1, 1, env)
     step_cost = (ms / 1e3) if ms else wall
     if step_cost < a.budget / 10:
         cal = 10
-        wall, ms, _ = run_once(a.loom, sc, os.path.join(tmp, name + "_cal"), 1, cal, 1, env)
+        wall, ms, *_ = run_once(a.loom, sc, os.path.join(tmp, name + "_cal"), 1, cal, 1, env)
         step_cost = (ms / 1e3) if ms else wall / cal
     startup = max(0.0, wall - cal * step_cost)
     want = max(1, int(round(a.sim / dt)))
@@ -133,25 +142,32 @@ def main():
                 time.sleep(0.5)
             for p in plans:
                 runs = {"1": [], "2": [], "auto": []}
+                cpu = {"1": [], "2": [], "auto": []}
                 ends = []
+                auto_lines = []
                 # Runs under half a second are mostly start-up and output: three times the runs.
                 reps = a.repeat * (3 if p["est_one_thread"] < 0.5 else 1)
                 for rep in range(reps):
                     for threads in ("1", "2", "auto"):
-                        t, _, end = run_once(a.loom, p["path"], os.path.join(tmp, f"{p['scene']}_{threads}"),
-                                             p["frames"], p["substeps"], threads, env)
+                        t, _, end, line, c = run_once(a.loom, p["path"], os.path.join(tmp, f"{p['scene']}_{threads}"),
+                                                      p["frames"], p["substeps"], threads, env)
                         runs[threads].append(t)
+                        cpu[threads].append(c)
                         if threads == "auto" and end is not None:
                             ends.append(end)
+                            auto_lines.append(line)
                 med = {k: statistics.median(v) for k, v in runs.items()}
                 best = min(med["1"], med["2"])
                 ratio = med["auto"] / best
                 row = {"scene": p["scene"], "condition": cond, "steps": p["steps"], "sim_time": p["sim_time"],
                        "capped": p["capped"], "t1": med["1"], "t2": med["2"], "tauto": med["auto"],
-                       "runs": runs, "auto_ends_on": ends, "auto_over_best": ratio, "ok": ratio <= 1.10}
+                       "runs": runs, "cpu_seconds": cpu, "auto_ends_on": ends, "auto_summaries": auto_lines,
+                       "auto_over_best": ratio, "ok": ratio <= 1.10}
                 rows.append(row)
                 print(f"  {cond:6s} {p['scene']}: 1 thr {med['1']:.2f} s, 2 thr {med['2']:.2f} s, "
                       f"auto {med['auto']:.2f} s (auto / best {ratio:.2f}; auto ends on {ends})", flush=True)
+                if auto_lines:  # start count, load seen at start, probes: what auto did
+                    print(f"    auto: {auto_lines[0]}", flush=True)
             if hog:
                 hog.kill()
                 hog.wait()

@@ -72,18 +72,21 @@ void ThreadController::on_sample(double s, int steps) {
     const bool drifted = m > cfg_.drift * ref_ || m * cfg_.drift < ref_;
     need = std::max(cfg_.min_interval, next_loss_ / ((drifted ? 2.0 : 1.0) * cfg_.overhead));
   }
-  need = std::max(need, hold_);
   if (since_decision_ < need) return;
-  // The load gate: counts above the chosen one that exceed the cores free now stay out.
-  free_now_ = free_cores_ ? free_cores_() : -1;
+  // The load gate: counts above the chosen one that exceed the cores free now stay out. A
+  // reading costs a /proc read (about 30 us): at most one per min_interval of step time.
+  if (free_cores_ && (gate_read_at_ < 0 || elapsed_ - gate_read_at_ >= cfg_.min_interval)) {
+    free_now_ = free_cores_();
+    gate_read_at_ = elapsed_;
+    ++gate_reads_;
+  }
   bool any = false;
   for (int k = 0; k < ncand_; ++k) {
     blocked_[k] = free_now_ > 0 && cand_[k] > chosen_ && cand_[k] > free_now_;
     any = any || (cand_[k] != chosen_ && !blocked_[k]);
   }
-  if (!any) {  // ask again after min_interval at the soonest (a reading costs a /proc read)
+  if (!any) {
     ++gated_;
-    hold_ = cfg_.min_interval;
     since_decision_ = 0;
     return;
   }

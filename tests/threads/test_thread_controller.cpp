@@ -352,6 +352,7 @@ TEST(ThreadController, GateHoldsBackMoreThreadsWhileTheCoresAreBusyAndLetsThemBa
   EXPECT_GE(c.gated_probes(), 1);
   // A reading costs a /proc read: at most one per min_interval (0.25 s) after the first.
   EXPECT_LE(calls, 1 + static_cast<int>(3.0 / 0.25) + 1);
+  EXPECT_EQ(calls, c.gate_reads());
   const double back = t;
   while (t < back + 1.0) {
     const double s = world(c.threads());
@@ -403,4 +404,24 @@ TEST(ThreadController, GateNeverHoldsBackFewerThreads) {
   for (int s = 0; s < 500; ++s) c.record(world(c.threads()));
   EXPECT_EQ(c.probes(), 1);
   EXPECT_GE(c.gated_probes(), 1);
+}
+
+TEST(ThreadController, GateReadingsAreRationedWhenProbesAreSkipped) {
+  // A small mesh started on 1 thread alone (the gate reads 2 free cores), 50 us steps, in a
+  // 700-step run too short to repay a probe: a sample is 40 steps (2 ms), so a probe of 2
+  // threads is 120 steps and may cost 0.5 x 120 = 60 step times, while 10% of the at most
+  // 685 - 120 steps left repays 56.5. Probes fall due every 10 step times and are skipped;
+  // the gate is read at most once per min_interval (0.25 s) of step time: once in this 35 ms run.
+  int calls = 0;
+  ThreadController c(1, 2);
+  c.set_run_steps(700);
+  c.set_free_cores([&] {
+    ++calls;
+    return 2;
+  });
+  for (int s = 0; s < 700; ++s) c.record(c.threads() == 1 ? 50e-6 : 40e-6);
+  EXPECT_EQ(c.probes(), 0);
+  EXPECT_GE(c.skipped_probes(), 10);
+  EXPECT_EQ(calls, 1);
+  EXPECT_EQ(c.gate_reads(), 1);
 }

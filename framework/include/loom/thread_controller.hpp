@@ -82,10 +82,11 @@ class ThreadController {
   /// Probes then start only when the steps left can repay them (see the top of this file).
   void set_run_steps(long total) { run_steps_ = total; }
   /// The load gate (see the top of this file): free() returns the cores free now, -1 when unknown.
-  /// Called only when a probe is due (at most every min_interval after the first).
+  /// Read only when a probe is due, and at most once per min_interval of step time.
   void set_free_cores(std::function<int()> free) { free_cores_ = std::move(free); }
   int initial() const { return cand_[0]; }           ///< the count the run started on
   int gated_probes() const { return gated_; }        ///< probes due but not started: no count fits the free cores
+  int gate_reads() const { return gate_reads_; }     ///< readings taken by the load gate
   /// What the start-up rule saw (informational): cores other processes kept busy during the set-up, -1 unknown.
   void set_start_load(double cores) { start_load_ = cores; }
   double start_load() const { return start_load_; }
@@ -146,7 +147,8 @@ class ThreadController {
   bool blocked_[kMaxCandidates] = {};        // left out of the due probe by the gate
   int gated_ = 0;
   double start_load_ = -1;
-  double hold_ = 0;                          // after a gated probe: wait at least this long
+  double gate_read_at_ = -1;                 // elapsed_ at the last gate reading
+  int gate_reads_ = 0;
 };
 
 }  // namespace loom
