@@ -137,6 +137,13 @@ const ProcSource& real_proc() {
 }
 }  // namespace
 
+int read_others_runnable(const ProcSource* src) {
+  std::string text;
+  if (!(src ? src : &real_proc())->read("/proc/loadavg", text)) return -1;
+  const int running = parse_loadavg_running(text);
+  return running < 0 ? -1 : std::max(0, running - 1);
+}
+
 CpuLoadMonitor::CpuLoadMonitor(std::vector<int> cpus, const ProcSource* src, long long min_ticks)
     : cpus_(std::move(cpus)), src_(src ? src : &real_proc()), min_ticks_(std::max(1LL, min_ticks)) {
   if (cpus_.empty() && !src) cpus_ = affinity_cpus();
@@ -177,13 +184,6 @@ double CpuLoadMonitor::others_busy_cores() {
   last_window_ = window;
   // Ticks are sampled: a window may show a little less than our own time; never negative.
   return std::max(0.0, static_cast<double>(others) / static_cast<double>(window));
-}
-
-int CpuLoadMonitor::others_runnable() const {
-  std::string text;
-  if (!src_->read("/proc/loadavg", text)) return -1;
-  const int running = parse_loadavg_running(text);
-  return running < 0 ? -1 : std::max(0, running - 1);
 }
 
 }  // namespace loom

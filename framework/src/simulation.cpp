@@ -46,7 +46,7 @@ bool g_notes = true;
 
 // `threads: auto` (default) or a count; the policy lives in loom/threads.hpp. Returns whether
 // the count is auto's own choice (then loom/thread_controller.hpp adapts it during the run).
-bool configure_threads(const Params& t, Scene& sc, int* others_runnable) {
+bool configure_threads(const Params& t, Scene& sc) {
   int requested = 0;
   if (t.valid()) {
     if (t.is_scalar() && t.as_string() == "auto") {
@@ -60,7 +60,7 @@ bool configure_threads(const Params& t, Scene& sc, int* others_runnable) {
     }
   }
   bool capped = false;
-  sc.threads = resolve_thread_count(requested, &capped, others_runnable);
+  sc.threads = resolve_thread_count(requested, &capped);
   if (capped && g_notes && is_output_rank())
     std::cerr << "loom: note: threads: " << requested << " capped at " << sc.threads
               << ", the cores this process may use (more threads than cores only wait at barriers).\n";
@@ -113,9 +113,8 @@ void Simulation::build(const Params& scene, const std::string& base_dir, PluginL
   base_dir_ = base_dir.empty() ? std::string(".") : base_dir;
 
   sc.backend = ParamReader(root, scene_section_spec()).text("backend");
-  int others_runnable = -1;
   std::unique_ptr<AutoThreadStart> auto_threads;  // measures the load while the scene is set up
-  if (configure_threads(root.child("threads"), sc, &others_runnable) && usable_cores() > 1)
+  if (configure_threads(root.child("threads"), sc) && usable_cores() > 1)
     auto_threads = std::make_unique<AutoThreadStart>();
 
   // The stages (scene_build.cpp), in the order their results are needed.
@@ -136,7 +135,7 @@ void Simulation::build(const Params& scene, const std::string& base_dir, PluginL
   integrator_->prepare(sc, dt_);
   prepared_ = true;
   if (auto_threads) {  // the count the steps start on (loom/thread_start.hpp)
-    thread_ctl_ = auto_threads->finish(usable_cores(), others_runnable, static_cast<long long>(sc.state.x.size() / 3));
+    thread_ctl_ = auto_threads->finish(usable_cores(), static_cast<long long>(sc.state.x.size() / 3));
     sc.threads = auto_threads->start().threads;
     omp_set_num_threads(sc.threads);
   }

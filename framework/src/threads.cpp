@@ -44,14 +44,6 @@ int cgroup_quota_cores() {
   return 0;
 }
 
-// Runnable tasks other than this process, from /proc/loadavg's "running/total" field (the
-// count includes the reader itself). 0 when it cannot be read.
-int other_runnable_tasks() {
-  std::string text;
-  if (!ProcSource().read("/proc/loadavg", text)) return 0;
-  return std::max(0, parse_loadavg_running(text) - 1);
-}
-
 }  // namespace
 
 int usable_cores() {
@@ -61,31 +53,30 @@ int usable_cores() {
   return std::max(1, n);
 }
 
-int resolve_thread_count(int requested, bool* capped, int* others_runnable) {
+int others_runnable_sampled(const ProcSource* src) {
+  int others = read_others_runnable(src);
+  for (int k = 0; k < 4 && others > 0; ++k) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    const int o = read_others_runnable(src);
+    if (o >= 0) others = std::min(others, o);
+  }
+  return others;
+}
+
+int resolve_thread_count(int requested, bool* capped) {
   const int cores = usable_cores();
   if (capped) *capped = requested > cores;
-  if (others_runnable) *others_runnable = -1;
   if (requested <= 0) {
     // auto: OMP_NUM_THREADS, when set, still chooses (capped at the usable cores).
     const char* env = std::getenv("OMP_NUM_THREADS");
     const int from_env = env ? std::atoi(env) : 0;
     if (from_env > 0) return std::min(from_env, cores);
-    // Otherwise leave the cores other runnable processes occupy right now: on a busy machine
-    // every barrier of a parallel step waits for a descheduled thread (measured: 2 threads
-    // next to one CPU-bound process ran 2x slower than 1 thread; docs/BENCHMARKS.md).
-    // The minimum over a few samples 2 ms apart: a process that is only starting or
-    // finishing (the shell that launched us, a pipe) is not a competitor.
-    int others = other_runnable_tasks();
-    for (int k = 0; k < 4 && others > 0; ++k) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
-      others = std::min(others, other_runnable_tasks());
-    }
-    if (others_runnable) *others_runnable = others;
-    return std::max(1, cores - others);
+    // Otherwise the set-up leaves the cores other runnable processes occupy right now (one
+    // reading: the steps' count is measured over the set-up, choose_start_threads).
+    return std::max(1, cores - std::max(0, read_others_runnable()));
   }
   return std::min(requested, cores);
 }
-
 
 int free_cores(int cores, int mask_cpus, double others_busy) {
   if (others_busy < 0) return -1;

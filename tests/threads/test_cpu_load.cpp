@@ -220,7 +220,7 @@ TEST(AutoThreadStart, BusySetUpStartsOnOneAndTheGateHoldsBackMoreThreads) {
   p.push("/proc/self/stat", self(0, 0));
   p.push("/proc/self/stat", self(80, 0));
   AutoThreadStart a(&p, {0, 1});
-  auto ctl = a.finish(2, 0, 4 * kParallelMinVertices);
+  auto ctl = a.finish(2, 4 * kParallelMinVertices);
   ASSERT_NE(ctl, nullptr);
   EXPECT_EQ(a.start().threads, 1);
   EXPECT_EQ(ctl->threads(), 1);
@@ -240,18 +240,23 @@ TEST(AutoThreadStart, IdleSetUpStartsOnTheCoresAndNoProcFallsBack) {
   p.push("/proc/self/stat", self(0, 0));
   p.push("/proc/self/stat", self(195, 0));  // our own set-up kept both CPUs busy
   AutoThreadStart a(&p, {0, 1});
-  auto ctl = a.finish(2, 1, 4 * kParallelMinVertices);
-  EXPECT_EQ(a.start().threads, 2);  // the window wins over the runnable count
+  auto ctl = a.finish(2, 4 * kParallelMinVertices);
+  EXPECT_EQ(a.start().threads, 2);
   EXPECT_NEAR(a.others_busy(), 0.05, 1e-12);
-  FakeProc none;
-  AutoThreadStart b(&none, {0, 1});
-  auto c2 = b.finish(2, 1, 4 * kParallelMinVertices);
-  EXPECT_EQ(b.start().threads, 1);  // no /proc/stat: the runnable count
+  // No /proc/stat: the runnable count decides (/proc/loadavg: 2 running, us and one other).
+  FakeProc loadavg;
+  loadavg.push("/proc/loadavg", "1.00 1.00 1.00 2/100 999\n");
+  AutoThreadStart b(&loadavg, {0, 1});
+  auto c2 = b.finish(2, 4 * kParallelMinVertices);
+  EXPECT_EQ(b.start().threads, 1);
   EXPECT_EQ(b.others_busy(), -1);
+  EXPECT_EQ(others_runnable_sampled(&loadavg), 1);
+  FakeProc none;  // nothing known: the cores
   AutoThreadStart c(&none, {0, 1});
-  c.finish(2, -1, 4 * kParallelMinVertices);
-  EXPECT_EQ(c.start().threads, 2);  // nothing known: the cores
+  c.finish(2, 4 * kParallelMinVertices);
+  EXPECT_EQ(c.start().threads, 2);
+  EXPECT_EQ(others_runnable_sampled(&none), -1);
   AutoThreadStart d(&none, {0, 1});
-  EXPECT_EQ(d.finish(1, -1, 4 * kParallelMinVertices), nullptr);  // one core: nothing to adapt
+  EXPECT_EQ(d.finish(1, 4 * kParallelMinVertices), nullptr);  // one core: nothing to adapt
   EXPECT_EQ(d.start().threads, 1);
 }

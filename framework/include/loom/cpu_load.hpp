@@ -50,6 +50,10 @@ long long parse_self_stat_ticks(std::string_view text);
 /// The running count of a /proc/loadavg text ("0.48 1.82 2.58 3/112 26335" -> 3); -1 when malformed.
 int parse_loadavg_running(std::string_view text);
 
+/// Runnable tasks other than the reader right now (/proc/loadavg through src, null: the real
+/// file); -1 when unknown.
+int read_others_runnable(const ProcSource* src = nullptr);
+
 /// The CPUs this process may run on (sched_getaffinity), in increasing order.
 std::vector<int> affinity_cpus();
 
@@ -65,8 +69,8 @@ class CpuLoadMonitor {
   /// began, and a new window begins; -1 when unknown (no /proc, or the window has fewer than
   /// min_ticks ticks per CPU: then the window goes on).
   double others_busy_cores();
-  /// Runnable tasks other than this reader right now (/proc/loadavg); -1 when unknown.
-  int others_runnable() const;
+  /// read_others_runnable() through this monitor's source.
+  int others_runnable() const { return read_others_runnable(src_); }
   int cpus() const { return static_cast<int>(cpus_.size()); }
   long long last_window_ticks() const { return last_window_; }  ///< per CPU, of the last known reading
 

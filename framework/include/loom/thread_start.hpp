@@ -17,14 +17,16 @@ class AutoThreadStart {
   /// Begins the set-up window (the real /proc; src for tests).
   explicit AutoThreadStart(const ProcSource* src = nullptr, std::vector<int> cpus = {});
   /// At the end of the set-up: the start count (see choose_start_threads) for a mesh of
-  /// `vertices`, with others_runnable the set-up count's fallback (resolve_thread_count), and
-  /// the controller to adapt it (null on one usable core). Call once.
-  std::unique_ptr<ThreadController> finish(int cores, int others_runnable, long long vertices);
+  /// `vertices`, and the controller to adapt it (null on one usable core). When the set-up was
+  /// too short to measure and the mesh is not small, the runnable count decides
+  /// (others_runnable_sampled: up to 8 ms of sleep while others are runnable). Call once.
+  std::unique_ptr<ThreadController> finish(int cores, long long vertices);
   const ThreadStart& start() const { return start_; }
   double others_busy() const { return others_busy_; }  ///< during the set-up; -1 unknown
 
  private:
   std::shared_ptr<CpuLoadMonitor> load_;
+  const ProcSource* src_;
   ThreadStart start_;
   double others_busy_ = -1;
 };

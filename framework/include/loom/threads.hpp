@@ -24,10 +24,16 @@ constexpr int kMaxThreads = 1024;
 int usable_cores();
 
 /// The thread count for a scene's `threads` value: 0 means auto (OMP_NUM_THREADS when set,
-/// else usable_cores() less the other runnable processes, at least 1); larger
-/// requests are capped at usable_cores(). `capped` tells whether the request was reduced.
-/// others_runnable (auto only): the other runnable tasks it saw (-1 when unknown).
-int resolve_thread_count(int requested, bool* capped = nullptr, int* others_runnable = nullptr);
+/// else usable_cores() less the other runnable processes now, at least 1: the count the scene
+/// is set up on; its steps start on choose_start_threads()'s); larger requests are capped at
+/// usable_cores(). `capped` tells whether the request was reduced.
+int resolve_thread_count(int requested, bool* capped = nullptr);
+
+class ProcSource;  // loom/cpu_load.hpp
+/// Runnable tasks other than this process (/proc/loadavg): the minimum of up to five readings
+/// 2 ms apart (a process only starting or finishing, such as the shell that launched us, is
+/// not a competitor; the sleeps happen only while the count is above 0). -1 when unknown.
+int others_runnable_sampled(const ProcSource* src = nullptr);
 
 /// Cores free for this run's threads: min(cores, mask_cpus - the cores others keep busy), where
 /// others take a core from half a core's use (others_busy 0.5 -> 1 core); at least 1.
@@ -42,7 +48,8 @@ struct ThreadStart {
 };
 /// The start-up rule. cores: usable_cores(); mask_cpus: CPUs in the affinity mask;
 /// others_busy: cores other processes kept busy during the set-up (CpuLoadMonitor, -1 unknown);
-/// others_runnable: the fallback when that is unknown (-1 unknown too: all cores are free);
+/// others_runnable: the fallback when that is unknown (others_runnable_sampled(); -1 unknown
+/// too: all cores are free);
 /// vertices: the mesh's vertex count.
 ThreadStart choose_start_threads(int cores, int mask_cpus, double others_busy, int others_runnable,
                                  long long vertices);
