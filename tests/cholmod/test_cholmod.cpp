@@ -2,6 +2,8 @@
 // (NUMERICS.md 3.4), on random spring networks with pins, direction constraints and
 // nonzero z, and on a hanging-cloth matrix.
 #include <gtest/gtest.h>
+#include <omp.h>
+#include <sys/resource.h>
 
 #include <cstdlib>
 #include <string>
@@ -327,4 +329,35 @@ TEST(Cholmod, StaleFactorPreconditionsPcgWithPinsAndContacts) {
   });
   EXPECT_EQ(stale, 3);
   EXPECT_EQ(solver.numeric_factorizations(), 1);
+}
+
+// CHOLMOD's supernodal factorisation asks OpenMP for teams of CHOLMOD_OMP_NUM_THREADS (4)
+// whatever the run's count; the solver caps them while it calls CHOLMOD. On 1 thread no team
+// forms, so the factorisation and solve never block: voluntary context switches (getrusage:
+// every thread of the process) stay near zero. Uncapped, these 3 factorisations and solves of
+// a 48 x 48 cloth (the ground_plane scene's size) made 12,694 on the development VM (a team
+// woken and put to sleep per large supernode); capped, 0-2.
+TEST(Cholmod, OneThreadRunsCholmodOnOneThread) {
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  System s = testsys::cloth(48);
+  CholmodOptions o;
+  o.blas_threads = 1;
+  CholmodSolver solver(o);
+  solver.analyze_pattern(s.A, s.S);
+  std::vector<double> dv;
+  rusage before{}, after{};
+  getrusage(RUSAGE_SELF, &before);
+  for (int k = 0; k < 3; ++k) {
+    SolveReport f;
+    ASSERT_TRUE(solver.factorize(s.A, s.S, f)) << f.message;
+    dv.assign(3 * s.n, 0.0);
+    ASSERT_TRUE(solver.solve(s.A, s.S, s.b, s.z, dv).converged);
+  }
+  getrusage(RUSAGE_SELF, &after);
+  omp_set_num_threads(saved);
+  EXPECT_LT(after.ru_nvcsw - before.ru_nvcsw, 30) << "voluntary context switches in 3 factorisations";
+  // The caller's OpenMP settings are restored.
+  EXPECT_GT(omp_get_max_active_levels(), 0);
+  EXPECT_EQ(omp_get_dynamic(), 0);
 }

@@ -69,6 +69,30 @@ void apply_blas_threads(int requested, Index vertices) {
   openblas_set_num_threads(n);
 }
 
+// CHOLMOD (SuiteSparse 5.x) opens OpenMP regions with num_threads(CHOLMOD_OMP_NUM_THREADS), 4
+// by default, in its supernodal factorisation, whatever omp_set_num_threads says: `threads: 1`
+// ran a 4-thread team per supernode (measured on ground_plane, 8 steps: 42,000 context
+// switches and 0.53 s of CPU against 90 and 0.26 s with the team capped at 1). While a CHOLMOD
+// call runs, its teams are capped at the run's count: on 1 thread no region is active
+// (max-active-levels 0); on more, dynamic teams (libgomp then gives at most the run's count and
+// the online CPUs, less the 15-minute load average, at least 1). Restored after the call.
+class TeamCap {
+ public:
+  TeamCap() : levels_(omp_get_max_active_levels()), dynamic_(omp_get_dynamic()) {
+    if (omp_get_max_threads() <= 1) omp_set_max_active_levels(0);
+    else omp_set_dynamic(1);
+  }
+  ~TeamCap() {
+    omp_set_max_active_levels(levels_);
+    omp_set_dynamic(dynamic_);
+  }
+  TeamCap(const TeamCap&) = delete;
+  TeamCap& operator=(const TeamCap&) = delete;
+
+ private:
+  int levels_, dynamic_;
+};
+
 }  // namespace
 
 namespace {
@@ -167,7 +191,10 @@ struct CholmodSolver::Impl {
     B.z = nullptr;
     B.xtype = CHOLMOD_REAL;
     B.dtype = CHOLMOD_DOUBLE;
-    if (!cholmod_l_solve2(CHOLMOD_A, L, &B, nullptr, &X, nullptr, &Y, &E, &c)) return false;
+    {
+      const TeamCap cap;
+      if (!cholmod_l_solve2(CHOLMOD_A, L, &B, nullptr, &X, nullptr, &Y, &E, &c)) return false;
+    }
     const double* xs = static_cast<const double*>(X->x);
     const long NN = N;
 #pragma omp parallel for schedule(static) if (NN >= kParallelMinDofs)
@@ -177,7 +204,10 @@ struct CholmodSolver::Impl {
 
   /// Numeric factorisation of the current Acsc. On failure fills msg.
   bool numeric(std::string& msg) {
-    cholmod_l_factorize(Acsc, L, &c);
+    {
+      const TeamCap cap;
+      cholmod_l_factorize(Acsc, L, &c);
+    }
     ++numeric_count;
     since_factor = 0;
     if (c.status == CHOLMOD_NOT_POSDEF || (L->minor < L->n)) {
@@ -269,7 +299,10 @@ void CholmodSolver::analyze_pattern(const BsrMatrix& A, const Filter& S) {
         }
     }
   }
-  m.L = cholmod_l_analyze(m.Acsc, &m.c);
+  {
+    const TeamCap cap;
+    m.L = cholmod_l_analyze(m.Acsc, &m.c);
+  }
   if (!m.L) throw SolverError("cholmod: symbolic analysis failed (CHOLMOD status " + std::to_string(m.c.status) + ")");
 
   m.proj = BsrMatrix(&P);
