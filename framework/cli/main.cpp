@@ -386,10 +386,13 @@ int main(int argc, char** argv) {
                   static_cast<long long>(st.scene().state.step - first_step), el,
                   st.scene().state.step > first_step ? 1e3 * st.step_seconds_total() / (st.scene().state.step - first_step) : 0.0, f.max_strain,
                   f.kinetic + f.gravitational + f.elastic, f.kinetic, f.elastic, st.force_evaluations(), st.linear_iterations());
-      if (const auto* tc = st.thread_controller())
-        std::printf("loom: threads auto: ended on %d (started on %d, others' load at start %.2f cores; %d probes, "
+      if (const auto* tc = st.thread_controller()) {
+        char load[64] = "not measured (short set-up)";
+        if (tc->start_load() >= 0) std::snprintf(load, sizeof load, "%.2f cores", tc->start_load());
+        std::printf("loom: threads auto: ended on %d (started on %d, others' load at start %s; %d probes, "
                     "%d held back by load, %d switches, probes cost %.3g s)\n", tc->chosen(), tc->initial(),
-                    tc->start_load(), tc->probes(), tc->gated_probes(), tc->switches(), tc->probe_loss());
+                    load, tc->probes(), tc->gated_probes(), tc->switches(), tc->probe_loss());
+      }
     }
     if (args.render && loom::is_output_rank()) {
       if (!args.quiet)
