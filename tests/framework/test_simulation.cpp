@@ -250,6 +250,9 @@ TEST_F(Fixture, ThreadsAutoAdaptsOnlyWhenNothingElseDecides) {
     if (const auto* tc = sim->thread_controller()) {
       EXPECT_EQ(omp_get_max_threads(), tc->threads());
       EXPECT_GT(tc->elapsed(), 0.0);
+      // 12 vertices, below kParallelMinVertices: the steps start on 1 thread (choose_start_threads).
+      EXPECT_EQ(tc->initial(), 1);
+      EXPECT_EQ(sim->scene().threads, 1);
     }
     EXPECT_EQ(make(kBase, {"threads=1"})->thread_controller(), nullptr);
   }
