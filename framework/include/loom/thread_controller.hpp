@@ -2,10 +2,10 @@
 // the step time with each candidate thread count, keep the fastest, and measure again now and
 // then, at a bounded cost.
 //
-// The start-up rule (loom/threads.hpp) guesses a count from the cores and the load when the run
-// starts. That guess cannot see what a count costs for this scene (on a small mesh a second
-// thread may only add barriers) nor a competitor that starts later. The controller corrects it
-// from the step times themselves:
+// The start-up rule (choose_start_threads, loom/threads.hpp) chooses a count from the mesh size
+// and the other processes' CPU use measured during the set-up. It cannot see what a count
+// costs for this scene beyond the size rule, nor a competitor that starts or stops later. The
+// controller corrects it from the step times themselves:
 // - Samples: whole steps are batched until a batch lasts at least `sample_seconds` (2 ms); a
 //   sample is the batch's mean step time. A count's time is the median of `samples` (3) samples.
 //   The first step of the run (set-up work) is not sampled.
