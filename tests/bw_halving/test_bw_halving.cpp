@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "baraff_witkin.hpp"
+#include "common/scene_state.hpp"
 #include "eigen_ldlt.hpp"
 #include "loom/mesh.hpp"
 #include "loom/scene.hpp"
@@ -54,16 +55,13 @@ std::unique_ptr<Scene> make_scene() {
   sc->material = std::make_unique<mass_spring::MassSpringMaterial>(
       Params::from_string("stiffness: {structural: 300, shear: 300, bend: 30}\ndamping: 0.01\ndensity: 0.1\n", "<test>"),
       sc->mesh);
+  loom_test::init_state(*sc);
   State& st = sc->state;
-  st.resize(sc->mesh.num_vertices());
-  st.x = sc->mesh.positions;
   for (Index i = 0; i < st.size(); ++i) {
     st.x[3 * i + 1] += 0.001;
     st.v[3 * i + 1] = -0.4;
     st.v[3 * i] = 0.2;
   }
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
   sc->colliders = ColliderSet::parse(Params::from_string(R"(colliders:
   - {type: plane, point: [0, 0, 0], normal: [0, 1, 0], friction: {static: 0.4, kinetic: 0.3},
      motion: {type: translate, velocity: [0, 0.5, 0]}}

@@ -3,6 +3,7 @@
 
 #include <random>
 
+#include "common/scene_state.hpp"
 #include "loom/integrator.hpp"
 #include "loom/scene.hpp"
 
@@ -11,12 +12,9 @@ namespace loom_cuda_test {
 /// Masses from the scene's material, corners 0 and nx - 1 pinned, the free vertices moved by
 /// up to pert (m) and given velocities up to vel (m/s) from a seeded generator, gravity -9.81 y.
 inline void init_perturbed_state(loom::Scene& sc, loom::Index nx, unsigned seed, double pert, double vel) {
+  loom_test::init_state(sc);
   loom::State& st = sc.state;
   const loom::Index n = sc.mesh.num_vertices();
-  st.resize(n);
-  st.x = sc.mesh.positions;
-  sc.material->compute_masses(st.mass);
-  st.update_inverse_masses();
   st.pin(0);
   st.pin(nx - 1);
   std::mt19937 rng(seed);

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "baraff_witkin.hpp"
+#include "common/scene_state.hpp"
 #include "cuda_integrators.hpp"
 #include "cuda_test_compare.hpp"
 #include "device_pcg.hpp"
@@ -53,11 +54,8 @@ std::unique_ptr<Scene> make_scene(const ColliderSet& cols, Cloth cloth, Index nx
         Params::from_string("stiffness: {structural: 400, shear: 300, bend: 20}\ndamping: 0.001\ndensity: 0.1\n", "<test>"),
         sc->mesh);
   }
+  loom_test::init_state(*sc);
   State& st = sc->state;
-  st.resize(sc->mesh.num_vertices());
-  st.x = sc->mesh.positions;
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
   if (pin) st.pin(0);
   std::mt19937 rng(3);
   std::uniform_real_distribution<double> u(-1.0, 1.0);

@@ -10,6 +10,7 @@
 #include <memory>
 #include <string>
 
+#include "common/scene_state.hpp"
 #include "cuda_integrators.hpp"
 #include "device.hpp"
 #include "device_pcg.hpp"
@@ -28,12 +29,8 @@ std::unique_ptr<Scene> make_scene(Index nx) {
   sc->mesh = make_grid(nx, nx, 1.0, 1.0, GridPlane::XZ);
   sc->material = std::make_unique<mass_spring::MassSpringMaterial>(
       Params::from_string("stiffness: {structural: 400, shear: 300, bend: 20}\ndensity: 0.1\n", "<test>"), sc->mesh);
-  State& st = sc->state;
-  st.resize(sc->mesh.num_vertices());
-  st.x = sc->mesh.positions;
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
-  st.pin(0);
+  loom_test::init_state(*sc);
+  sc->state.pin(0);
   sc->solver = std::make_unique<lc::CusparsePcg>(lc::PcgOptions{});
   return sc;
 }
