@@ -9,16 +9,14 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
-#include <random>
 #include <string>
 #include <vector>
 
 #include "cuda_integrators.hpp"
 #include "cuda_test_compare.hpp"
+#include "cuda_test_scenes.hpp"
 #include "ho_integrator.hpp"
-#include "loom/mesh.hpp"
 #include "loom/scene.hpp"
-#include "mass_spring.hpp"
 #include "rk4_integrator.hpp"
 
 using namespace loom;
@@ -38,35 +36,10 @@ ColliderSet parse_colliders(const std::string& yaml) {
   return ColliderSet::parse(Params::from_string(yaml, "<test>").child("colliders"));
 }
 
-/// A 0.6 m mass-spring cloth (nx x nx, xz plane) centred over (cx, cz), its centre `gap` above
-/// height y0, falling at `vy` with a sideways drift; one corner pinned.
+/// The falling cloth of cuda_test_scenes.hpp centred over (cx, cz), its plane at y0, falling at
+/// `vy`, drifting along x at 0.3 m/s, seed 5.
 std::unique_ptr<Scene> make_scene(const ColliderSet& colliders, Index nx, double cx, double y0, double cz, double vy) {
-  auto sc = std::make_unique<Scene>();
-  sc->source = "<test>";
-  sc->mesh = make_grid(nx, nx, 0.6, 0.6, GridPlane::XZ);
-  for (Index i = 0; i < sc->mesh.num_vertices(); ++i) {
-    sc->mesh.positions[3 * i] += cx - 0.3;
-    sc->mesh.positions[3 * i + 1] += y0;
-    sc->mesh.positions[3 * i + 2] += cz + 0.3;  // the grid runs along -z from its origin
-  }
-  sc->material = std::make_unique<mass_spring::MassSpringMaterial>(
-      Params::from_string("stiffness: {structural: 200, shear: 200, bend: 20}\ndamping: 0.0005\ndensity: 0.1\n", "<test>"),
-      sc->mesh);
-  State& st = sc->state;
-  st.resize(sc->mesh.num_vertices());
-  st.x = sc->mesh.positions;
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
-  st.pin(0);
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (Index i = 1; i < st.size(); ++i) {
-    st.v[3 * i] = 0.3 + 0.02 * u(rng);
-    st.v[3 * i + 1] = vy + 0.02 * u(rng);
-    st.v[3 * i + 2] = 0.02 * u(rng);
-  }
-  sc->colliders = colliders;
-  return sc;
+  return loom_cuda_test::falling_cloth(colliders, nx, cx, y0, cz, 0.3, vy, 5);
 }
 
 /// The CPU backend's step: the integrator, then the contacts (Simulation::step).

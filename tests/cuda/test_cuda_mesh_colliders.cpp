@@ -22,6 +22,7 @@
 #include "baraff_witkin.hpp"
 #include "cuda_integrators.hpp"
 #include "cuda_test_compare.hpp"
+#include "cuda_test_scenes.hpp"
 #include "device_colliders.hpp"
 #include "device_pcg.hpp"
 #include "eigen_pcg.hpp"
@@ -116,35 +117,10 @@ const Case kCases[] = {
 
 enum class Cloth { Explicit, Implicit };
 
-/// A 0.6 m mass-spring cloth (nx x nx, xz plane) centred over (0.5, -0.5), `gap` above `top`,
-/// falling at `vy` with a random drift; one corner pinned.
+/// The falling cloth of cuda_test_scenes.hpp centred over (0.5, -0.5), its plane at y0, falling
+/// at `vy`, drifting along x at `drift`, seed 7.
 std::unique_ptr<Scene> make_scene(const ColliderSet& cols, Index nx, double y0, double vy, double drift) {
-  auto sc = std::make_unique<Scene>();
-  sc->source = "<test>";
-  sc->mesh = make_grid(nx, nx, 0.6, 0.6, GridPlane::XZ);
-  for (Index i = 0; i < sc->mesh.num_vertices(); ++i) {
-    sc->mesh.positions[3 * i] += 0.5 - 0.3;
-    sc->mesh.positions[3 * i + 1] += y0;
-    sc->mesh.positions[3 * i + 2] += -0.5 + 0.3;  // the grid runs along -z from its origin
-  }
-  sc->material = std::make_unique<mass_spring::MassSpringMaterial>(
-      Params::from_string("stiffness: {structural: 200, shear: 200, bend: 20}\ndamping: 0.0005\ndensity: 0.1\n", "<test>"),
-      sc->mesh);
-  State& st = sc->state;
-  st.resize(sc->mesh.num_vertices());
-  st.x = sc->mesh.positions;
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
-  st.pin(0);
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (Index i = 1; i < st.size(); ++i) {
-    st.v[3 * i] = drift + 0.02 * u(rng);
-    st.v[3 * i + 1] = vy + 0.02 * u(rng);
-    st.v[3 * i + 2] = 0.02 * u(rng);
-  }
-  sc->colliders = cols;
-  return sc;
+  return loom_cuda_test::falling_cloth(cols, nx, 0.5, y0, -0.5, drift, vy, 7);
 }
 
 struct Outcome {
