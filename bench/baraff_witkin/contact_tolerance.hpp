@@ -179,24 +179,43 @@ inline LocalErrors local_errors(const ContactScene& sc, double tolerance, const 
 
 // ---- The scenes of the study (NUMERICS.md 3.6, "The tolerance on contact scenes") ----
 
+/// A scene named `name` on an n x n grid `size` m square (as the YAML writes it) in `plane`
+/// (xy | xz), `rest` the YAML after the mesh, run for `steps` steps of `dt`.
+inline ContactScene grid_scene(const std::string& name, int n, const std::string& size, const std::string& plane,
+                               const std::string& rest, double dt, int steps) {
+  ContactScene sc;
+  sc.name = name;
+  sc.yaml = "mesh: {grid: {nx: " + std::to_string(n) + ", ny: " + std::to_string(n) + ", width: " + size +
+            ", height: " + size + ", plane: " + plane + "}}\n" + rest;
+  sc.dt = dt;
+  sc.steps = steps;
+  return sc;
+}
+
+/// The penetration is measured against a sphere of `radius` centred at (x, y, z).
+inline void measure_sphere(ContactScene& sc, double x, double y, double z, double radius) {
+  sc.sphere_center[0] = x;
+  sc.sphere_center[1] = y;
+  sc.sphere_center[2] = z;
+  sc.sphere_radius = radius;
+}
+
+/// The shipped wool (materials/wool.yaml) as the YAML's material.
+inline std::string wool_material() {
+  return "material: {type: gnatv, material_file: " + std::string(LOOM_SOURCE_DIR) + "/materials/wool.yaml}\n";
+}
+
 /// The drape of bench_baraff_witkin: an n x n cloth, 1 m square, released flat in contact with
 /// the top of a ball (radius 0.3 m, thickness 1 mm, friction 0.5/0.4), h = 2 ms.
 /// `material` is the material mapping's body, e.g. "type: gnatv, fabric: 11oz-black-denim".
 inline ContactScene drape(int n, const std::string& material, const std::string& name, int steps) {
-  ContactScene sc;
-  sc.name = name;
-  sc.yaml = "mesh: {grid: {nx: " + std::to_string(n) + ", ny: " + std::to_string(n) +
-            ", width: 1.0, height: 1.0, plane: xz}}\n"
-            "material: {" + material + "}\n"
-            "colliders: [{type: sphere, center: [0.5, -0.3005, -0.5], radius: 0.3, thickness: 0.001, "
-            "friction: {static: 0.5, kinetic: 0.4}}]\n"
-            "gravity: [0, -9.81, 0]\n";
-  sc.dt = 2e-3;
-  sc.steps = steps;
-  sc.sphere_center[0] = 0.5;
-  sc.sphere_center[1] = -0.3005;
-  sc.sphere_center[2] = -0.5;
-  sc.sphere_radius = 0.3;
+  ContactScene sc = grid_scene(name, n, "1.0", "xz",
+                               "material: {" + material + "}\n"
+                               "colliders: [{type: sphere, center: [0.5, -0.3005, -0.5], radius: 0.3, thickness: 0.001, "
+                               "friction: {static: 0.5, kinetic: 0.4}}]\n"
+                               "gravity: [0, -9.81, 0]\n",
+                               2e-3, steps);
+  measure_sphere(sc, 0.5, -0.3005, -0.5, 0.3);
   return sc;
 }
 
@@ -204,16 +223,12 @@ inline ContactScene drape(int n, const std::string& material, const std::string&
 /// which turn about the vertical axis through the top edge's centre at 3 rad/s (the corners
 /// move at 1.5 m/s and twist the cloth), h = 5 ms.
 inline ContactScene moving_pins(int n, int steps) {
-  ContactScene sc;
-  sc.name = "pins" + std::to_string(n);
-  sc.yaml = "mesh: {grid: {nx: " + std::to_string(n) + ", ny: " + std::to_string(n) +
-            ", width: 1.0, height: 1.0, plane: xy}}\n"
-            "material: {type: gnatv, material_file: " + std::string(LOOM_SOURCE_DIR) + "/materials/wool.yaml}\n"
-            "pins: [{group: top_corners, motion: {type: rotate, axis: [0, 1, 0], center: [0.5, 1.0, 0], "
-            "angular_velocity: 3.0}}]\n"
-            "gravity: [0, -9.81, 0]\n";
-  sc.dt = 5e-3;
-  sc.steps = steps;
+  ContactScene sc = grid_scene("pins" + std::to_string(n), n, "1.0", "xy",
+                               wool_material() +
+                                   "pins: [{group: top_corners, motion: {type: rotate, axis: [0, 1, 0], center: [0.5, 1.0, 0], "
+                                   "angular_velocity: 3.0}}]\n"
+                                   "gravity: [0, -9.81, 0]\n",
+                               5e-3, steps);
   sc.kang_cho = 0.01;
   return sc;
 }
@@ -222,17 +237,13 @@ inline ContactScene moving_pins(int n, int steps) {
 /// standing on its edge collapses in folds onto a plane; mass_spring, self_collision thickness
 /// 4 mm, the springs of the implicit self-contact in the solve), n x n, h = 2 ms.
 inline ContactScene fold(int n, int steps) {
-  ContactScene sc;
-  sc.name = "fold" + std::to_string(n);
-  sc.yaml = "mesh: {grid: {nx: " + std::to_string(n) + ", ny: " + std::to_string(n) +
-            ", width: 0.4, height: 0.4, plane: xy}}\n"
-            "material: {type: mass_spring, stencil: structural_shear_bend, stiffness: {structural: 300, shear: 300, "
-            "bend: 0.2}, damping: 0.01, density: 0.2}\n"
-            "gravity: [0, -9.81, 1.5]\n"
-            "colliders: [{type: plane, point: [0, -0.01, 0], normal: [0, 1, 0], friction: 0.8}]\n"
-            "self_collision: {thickness: 0.004, friction: 0.3}\n";
-  sc.dt = 2e-3;
-  sc.steps = steps;
+  ContactScene sc = grid_scene("fold" + std::to_string(n), n, "0.4", "xy",
+                               "material: {type: mass_spring, stencil: structural_shear_bend, stiffness: {structural: 300, shear: 300, "
+                               "bend: 0.2}, damping: 0.01, density: 0.2}\n"
+                               "gravity: [0, -9.81, 1.5]\n"
+                               "colliders: [{type: plane, point: [0, -0.01, 0], normal: [0, 1, 0], friction: 0.8}]\n"
+                               "self_collision: {thickness: 0.004, friction: 0.3}\n",
+                               2e-3, steps);
   sc.width = 0.4;
   sc.kang_cho = -1;
   sc.has_plane = true;
@@ -243,21 +254,14 @@ inline ContactScene fold(int n, int steps) {
 /// The shipped draped-ball scene (scenes/draped_ball_gnatv_bw.yaml) at n x n: wool on a ball
 /// spinning at 2 rad/s, friction, self-collision (thickness 4 mm), h = 2 ms.
 inline ContactScene spinning_ball_self(int n, int steps) {
-  ContactScene sc;
-  sc.name = "ball_self" + std::to_string(n);
-  sc.yaml = "mesh: {grid: {nx: " + std::to_string(n) + ", ny: " + std::to_string(n) +
-            ", width: 1.0, height: 1.0, plane: xz}}\n"
-            "material: {type: gnatv, material_file: " + std::string(LOOM_SOURCE_DIR) + "/materials/wool.yaml}\n"
-            "colliders: [{type: sphere, center: [0.5, -0.35, -0.5], radius: 0.3, thickness: 0.004, "
-            "friction: {static: 0.5, kinetic: 0.4}, motion: {type: rotate, axis: [0, 1, 0], angular_velocity: 2.0}}]\n"
-            "self_collision: {thickness: 0.004, friction: 0.3}\n"
-            "gravity: [0, -9.81, 0]\n";
-  sc.dt = 2e-3;
-  sc.steps = steps;
-  sc.sphere_center[0] = 0.5;
-  sc.sphere_center[1] = -0.35;
-  sc.sphere_center[2] = -0.5;
-  sc.sphere_radius = 0.3;
+  ContactScene sc = grid_scene("ball_self" + std::to_string(n), n, "1.0", "xz",
+                               wool_material() +
+                                   "colliders: [{type: sphere, center: [0.5, -0.35, -0.5], radius: 0.3, thickness: 0.004, "
+                                   "friction: {static: 0.5, kinetic: 0.4}, motion: {type: rotate, axis: [0, 1, 0], angular_velocity: 2.0}}]\n"
+                                   "self_collision: {thickness: 0.004, friction: 0.3}\n"
+                                   "gravity: [0, -9.81, 0]\n",
+                               2e-3, steps);
+  measure_sphere(sc, 0.5, -0.35, -0.5, 0.3);
   return sc;
 }
 
