@@ -13,6 +13,7 @@
 #include <memory>
 #include <string>
 
+#include "common/plugin_loader.hpp"
 #include "loom/simulation.hpp"
 
 namespace {
@@ -29,14 +30,7 @@ integrator: {type: baraff_witkin, dt: 2.0e-3, implicit_self_contact: )" +
          ", friction: 0.3}\n";
 }
 
-loom::Registry& registry() {
-  static loom::Registry r;
-  return r;
-}
-loom::PluginLoader& loader() {
-  static loom::PluginLoader l(registry());
-  return l;
-}
+using loom_bench::loader;
 
 const loom::State& draped(int n) {
   static std::map<int, std::unique_ptr<loom::Simulation>> sims;

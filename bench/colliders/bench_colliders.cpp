@@ -9,6 +9,7 @@
 #include <map>
 #include <memory>
 
+#include "common/plugin_loader.hpp"
 #include "loom/simulation.hpp"
 
 namespace {
@@ -32,14 +33,7 @@ const std::map<std::string, std::string> kIntegrators = {
     {"rk4", "{type: rk4, dt: 8.0e-5}"},
     {"baraff_witkin", "{type: baraff_witkin, dt: 2.0e-3}"}};
 
-loom::Registry& registry() {
-  static loom::Registry r;
-  return r;
-}
-loom::PluginLoader& loader() {
-  static loom::PluginLoader l(registry());
-  return l;
-}
+using loom_bench::loader;
 
 // The draped state, computed once with BW (cheap, large steps) and shared by all runs.
 const loom::State& draped() {

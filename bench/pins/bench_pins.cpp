@@ -14,18 +14,12 @@
 #include <memory>
 #include <string>
 
+#include "common/plugin_loader.hpp"
 #include "loom/simulation.hpp"
 
 namespace {
 
-loom::Registry& registry() {
-  static loom::Registry r;
-  return r;
-}
-loom::PluginLoader& loader() {
-  static loom::PluginLoader l(registry());
-  return l;
-}
+using loom_bench::loader;
 
 const std::map<std::string, std::string> kIntegrators = {
     {"symplectic_euler", "{type: symplectic_euler, dt: 5.0e-5}"},

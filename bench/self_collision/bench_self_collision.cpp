@@ -40,6 +40,7 @@
 #include "baraff_witkin.hpp"
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
+#include "common/plugin_loader.hpp"
 #include "loom/simulation.hpp"
 
 namespace {
@@ -63,14 +64,7 @@ colliders: [{type: sphere, center: [0.5, -0.35, -0.5], radius: 0.3, thickness: 0
   return s;
 }
 
-loom::Registry& registry() {
-  static loom::Registry r;
-  return r;
-}
-loom::PluginLoader& loader() {
-  static loom::PluginLoader l(registry());
-  return l;
-}
+using loom_bench::loader;
 
 // The draping takes a while at 256^2; LOOM_BENCH_DRAPE_CACHE=DIR keeps the draped positions
 // and velocities there (draped_se_N.bin) for later runs of this benchmark.
