@@ -6,6 +6,7 @@
 #include <memory>
 #include <string>
 
+#include "common/table1.hpp"
 #include "cuda_integrators.hpp"
 #include "ho_integrator.hpp"
 #include "loom/mesh.hpp"
@@ -18,16 +19,7 @@ namespace {
 
 std::unique_ptr<Scene> make_scene(Index n) {
   auto sc = std::make_unique<Scene>();
-  sc->mesh = make_grid(n, n, 1.0, 1.0, GridPlane::XY);
-  sc->material = std::make_unique<mass_spring::MassSpringMaterial>(
-      Params::from_string("stencil: kang_cho_table1\nstiffness: 2000\ndensity: 0.1\n"), sc->mesh);
-  State& st = sc->state;
-  st.resize(sc->mesh.num_vertices());
-  st.x = sc->mesh.positions;
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
-  st.pin(sc->mesh.grid->index(0, n - 1));
-  st.pin(sc->mesh.grid->index(n - 1, n - 1));
+  loom_bench::table1_cloth(*sc, static_cast<int>(n), "");
   return sc;
 }
 

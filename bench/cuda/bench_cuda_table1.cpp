@@ -37,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "common/table1.hpp"
 #include "cuda_integrators.hpp"
 #include "device.hpp"
 #include "device_pcg.hpp"
@@ -60,30 +61,11 @@ std::string source_root() {
   return LOOM_SOURCE_DIR;
 }
 
-struct Row {
-  int n;
-  long springs;
-  double fps;
-};
+using Row = loom_bench::Table1Row;
 
 const std::vector<Row>& rows() {
-  static const std::vector<Row> r = [] {
-    std::vector<Row> out;
-    const std::string path = source_root() + "/data/table1_kang_cho2011.csv";
-    std::ifstream in(path);
-    std::string line;
-    while (std::getline(in, line)) {
-      if (line.empty() || line[0] == '#' || line[0] == 'v') continue;
-      std::stringstream ss(line);
-      std::string a, b, c;
-      std::getline(ss, a, ',');
-      std::getline(ss, b, ',');
-      std::getline(ss, c, ',');
-      out.push_back({static_cast<int>(std::lround(std::sqrt(std::stod(a)))), std::stol(b), std::stod(c)});
-    }
-    if (out.empty()) throw std::runtime_error(path + " is missing or empty (set LOOM_SOURCE_ROOT to the repository)");
-    return out;
-  }();
+  static const std::vector<Row> r =
+      loom_bench::read_table1(source_root(), " (set LOOM_SOURCE_ROOT to the repository)");
   return r;
 }
 
@@ -106,19 +88,7 @@ double copy_bandwidth() {
 
 std::unique_ptr<Scene> table1_scene(int n) {
   auto sc = std::make_unique<Scene>();
-  sc->source = "table1_gpu";
-  sc->mesh = make_grid(n, n, 1.0, 1.0, GridPlane::XY);
-  sc->material = std::make_unique<mass_spring::MassSpringMaterial>(
-      Params::from_string("stencil: kang_cho_table1\nstiffness: 2000\ndensity: 0.1\n"), sc->mesh);
-  State& st = sc->state;
-  st.resize(sc->mesh.num_vertices());
-  st.x = sc->mesh.positions;
-  sc->material->compute_masses(st.mass);
-  const GridInfo& g = *sc->mesh.grid;
-  st.pin(g.index(0, g.ny - 1));
-  st.pin(g.index(g.nx - 1, g.ny - 1));
-  st.update_inverse_masses();
-  sc->gravity = {0, -9.81, 0};
+  loom_bench::table1_cloth(*sc, n, "table1_gpu");
   return sc;
 }
 

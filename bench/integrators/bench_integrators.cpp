@@ -29,6 +29,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "common/table1.hpp"
 #include "ho_integrator.hpp"
 #include "loom/explicit_springs.hpp"
 #include "loom/vertex_order.hpp"
@@ -42,31 +43,10 @@ using namespace loom;
 
 namespace {
 
-struct Row {
-  int n;
-  long springs;
-  double fps;
-};
-
-std::vector<Row> table1() {
-  std::vector<Row> rows;
-  std::ifstream in(std::string(LOOM_SOURCE_DIR) + "/data/table1_kang_cho2011.csv");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.empty() || line[0] == '#' || line[0] == 'v') continue;
-    std::stringstream ss(line);
-    std::string a, b, c;
-    std::getline(ss, a, ',');
-    std::getline(ss, b, ',');
-    std::getline(ss, c, ',');
-    rows.push_back({static_cast<int>(std::lround(std::sqrt(std::stod(a)))), std::stol(b), std::stod(c)});
-  }
-  if (rows.empty()) throw std::runtime_error("data/table1_kang_cho2011.csv is missing or empty");
-  return rows;
-}
+using Row = loom_bench::Table1Row;
 
 const std::vector<Row>& rows() {
-  static const std::vector<Row> r = table1();
+  static const std::vector<Row> r = loom_bench::read_table1(LOOM_SOURCE_DIR);
   return r;
 }
 
@@ -118,18 +98,7 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   c->n = n;
   c_stencil = stencil;
   Scene& sc = c->scene;
-  sc.source = "table1";
-  sc.mesh = make_grid(n, n, 1.0, 1.0, GridPlane::XY);
-  const Params p = Params::from_string("stencil: " + stencil + "\nstiffness: 2000\ndensity: 0.1\n");
-  sc.material = std::make_unique<mass_spring::MassSpringMaterial>(p, sc.mesh);
-  sc.state.resize(sc.mesh.num_vertices());
-  sc.state.x = sc.mesh.positions;
-  sc.material->compute_masses(sc.state.mass);
-  const GridInfo& g = *sc.mesh.grid;
-  sc.state.pin(g.index(0, g.ny - 1));
-  sc.state.pin(g.index(g.nx - 1, g.ny - 1));
-  sc.state.update_inverse_masses();
-  sc.gravity = {0, -9.81, 0};
+  loom_bench::table1_cloth(sc, n, "table1", stencil);
   c->x0 = sc.state.x;
   c->ho.prepare(sc, c->h);
   c->ho_direct.prepare(sc, c->h);
