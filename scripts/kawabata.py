@@ -32,6 +32,8 @@ import sys
 
 import yaml
 
+from loom_matplotlib import require_matplotlib
+
 GAUGE = 0.05   # m, distance between the clamps (KES-F)
 CLAMP = 0.20   # m, clamp length = sample width (KES-F)
 NX = 9         # vertices along the clamps
@@ -182,7 +184,7 @@ def analyse(scene_path, stats_path):
 
 def run(args):
     if args.plot:
-        ensure_matplotlib()
+        require_matplotlib()
     loom = args.loom
     os.makedirs(args.out, exist_ok=True)
     results = []
@@ -206,17 +208,6 @@ def run(args):
         results.append((base, test, measure, rows))
     if args.plot:
         plot(results, args.plot)
-
-
-def ensure_matplotlib():
-    """matplotlib may come from Debian's python3-matplotlib: if this interpreter lacks it, start
-    again (before any work) with the system's python3."""
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        if os.path.exists("/usr/bin/python3") and os.path.realpath(sys.executable) != os.path.realpath("/usr/bin/python3"):
-            os.execv("/usr/bin/python3", ["/usr/bin/python3"] + sys.argv)
-        raise
 
 
 def plot(results, dst):

@@ -16,14 +16,7 @@ import subprocess
 import sys
 from collections import defaultdict
 
-
-def ensure_matplotlib():
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        if os.path.exists("/usr/bin/python3") and os.path.realpath(sys.executable) != os.path.realpath("/usr/bin/python3"):
-            os.execv("/usr/bin/python3", ["/usr/bin/python3"] + sys.argv)
-        raise
+from loom_matplotlib import require_matplotlib
 
 
 def main():
@@ -34,7 +27,7 @@ def main():
     ap.add_argument("--tool", default=os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "build", "bin",
                                                    "loom-material-curves"))
     a = ap.parse_args()
-    ensure_matplotlib()
+    require_matplotlib()
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -8,22 +8,13 @@ import csv
 import os
 import sys
 
-
-def _import_matplotlib():
-    """matplotlib comes from Debian's python3-matplotlib: if this interpreter (a pyenv or venv
-    python) lacks it, run the script again with the system's python3; exit 3 if that fails too."""
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        system = "/usr/bin/python3"
-        if os.path.exists(system) and os.path.realpath(sys.executable) != os.path.realpath(system):
-            os.execv(system, [system] + sys.argv)
-        sys.stderr.write("plot_run.py: python3 cannot import matplotlib\n")
-        sys.exit(3)
+from loom_matplotlib import have_matplotlib
 
 
 def main(src, dst):
-    _import_matplotlib()
+    if not have_matplotlib():
+        sys.stderr.write("plot_run.py: python3 cannot import matplotlib\n")
+        sys.exit(3)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

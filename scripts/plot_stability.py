@@ -6,20 +6,10 @@ stable step of each combo against the swept value, log-log, with the bracket
 usage: plot_stability.py stability.csv stability.png
 Exit 3 when matplotlib cannot be imported."""
 import csv
-import os
 import sys
 from collections import defaultdict
 
-
-def _import_matplotlib():
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        system = "/usr/bin/python3"
-        if os.path.exists(system) and os.path.realpath(sys.executable) != os.path.realpath(system):
-            os.execv(system, [system] + sys.argv)
-        sys.stderr.write("plot_stability.py: python3 cannot import matplotlib\n")
-        sys.exit(3)
+from loom_matplotlib import have_matplotlib
 
 
 def number(text):
@@ -30,7 +20,9 @@ def number(text):
 
 
 def main(src, dst):
-    _import_matplotlib()
+    if not have_matplotlib():
+        sys.stderr.write("plot_stability.py: python3 cannot import matplotlib\n")
+        sys.exit(3)
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

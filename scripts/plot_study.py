@@ -8,21 +8,9 @@ import csv
 import sys
 from collections import defaultdict
 
-import os as _os
+from loom_matplotlib import require_matplotlib
 
-
-def _system_python():
-    """matplotlib comes from Debian's python3-matplotlib: if this interpreter (a pyenv or venv
-    python) lacks it, run the script again with the system's python3."""
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        if _os.path.exists("/usr/bin/python3") and _os.path.realpath(sys.executable) != _os.path.realpath("/usr/bin/python3"):
-            _os.execv("/usr/bin/python3", ["/usr/bin/python3"] + sys.argv)
-        raise
-
-
-_system_python()
+require_matplotlib()
 import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt

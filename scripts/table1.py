@@ -15,6 +15,8 @@ import re
 import subprocess
 import sys
 
+from loom_matplotlib import have_matplotlib
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -82,15 +84,12 @@ def main():
     print(table)
     if a.md:
         open(a.md, "w").write(table + "\n")
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        if os.path.exists("/usr/bin/python3") and os.path.realpath(sys.executable) != os.path.realpath("/usr/bin/python3"):
-            os.execv("/usr/bin/python3", ["/usr/bin/python3"] + [a for a in sys.argv if a != "--run"])
+    if not have_matplotlib([a for a in sys.argv if a != "--run"]):
         print("no matplotlib: table only (apt-get install python3-matplotlib)")
         return
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, col, label in ((axes[0], 0, "vertices"), (axes[1], 1, "springs (paper's counts)")):
         xs = [p[col] for p in pts]
