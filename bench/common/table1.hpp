@@ -1,7 +1,9 @@
 // Kang & Cho 2011 Table 1 for the benchmarks that set it beside the paper (bench_integrators,
-// bench_cuda, table1_gpu): the paper's rows (data/table1_kang_cho2011.csv) and the hanging cloth
-// of its grids.
+// bench_cuda, table1_gpu): the paper's rows (data/table1_kang_cho2011.csv), the hanging cloth
+// of its grids and the counters a case reports beside the paper.
 #pragma once
+
+#include <benchmark/benchmark.h>
 
 #include <cmath>
 #include <fstream>
@@ -64,6 +66,20 @@ inline void table1_cloth(loom::Scene& sc, int n, const std::string& source,
   st.pin(g.index(g.nx - 1, g.ny - 1));
   st.update_inverse_masses();
   sc.gravity = {0, -9.81, 0};
+}
+
+/// The counters of a Table 1 case: fps (steps per second), the paper's fps and the ratio,
+/// `bytes` (the modelled bytes a step moves), GB/s = bytes x fps and its fraction bw_frac of
+/// `bandwidth` (bytes per second measured on this machine), and the vertex count.
+inline void set_table1_counters(benchmark::State& st, const Table1Row& r, double bytes, double bandwidth) {
+  const double it = static_cast<double>(st.iterations());
+  st.counters["fps"] = benchmark::Counter(it, benchmark::Counter::kIsRate);
+  st.counters["paper_fps"] = r.fps;
+  st.counters["ratio"] = benchmark::Counter(it / r.fps, benchmark::Counter::kIsRate);
+  st.counters["bytes"] = bytes;
+  st.counters["GB/s"] = benchmark::Counter(it * bytes * 1e-9, benchmark::Counter::kIsRate);
+  st.counters["bw_frac"] = benchmark::Counter(it * bytes / bandwidth, benchmark::Counter::kIsRate);
+  st.counters["vertices"] = static_cast<double>(r.n) * r.n;
 }
 
 }  // namespace loom_bench

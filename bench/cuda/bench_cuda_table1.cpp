@@ -97,14 +97,7 @@ double rk4_bytes(double T, double N, double S) { return 4 * (S * (18 + 12 * T) +
 double se_bytes(double T, double N, double S) { return S * (18 + 12 * T) + N * (4 + 9 * T) + N * 16 * T; }
 
 void set_counters(benchmark::State& st, const Row& r, double springs, double bytes) {
-  const double it = static_cast<double>(st.iterations());
-  st.counters["fps"] = benchmark::Counter(it, benchmark::Counter::kIsRate);
-  st.counters["paper_fps"] = r.fps;
-  st.counters["ratio"] = benchmark::Counter(it / r.fps, benchmark::Counter::kIsRate);
-  st.counters["bytes"] = bytes;
-  st.counters["GB/s"] = benchmark::Counter(it * bytes * 1e-9, benchmark::Counter::kIsRate);
-  st.counters["bw_frac"] = benchmark::Counter(it * bytes / copy_bandwidth(), benchmark::Counter::kIsRate);
-  st.counters["vertices"] = static_cast<double>(r.n) * r.n;
+  loom_bench::set_table1_counters(st, r, bytes, copy_bandwidth());
   st.counters["springs"] = springs;
 }
 

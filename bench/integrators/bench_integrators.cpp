@@ -143,14 +143,7 @@ double rk4_fused_bytes(double T, double N, double S) {
 }
 
 void set_counters(benchmark::State& st, const Row& r, int threads, double bytes) {
-  const double it = static_cast<double>(st.iterations());
-  st.counters["fps"] = benchmark::Counter(it, benchmark::Counter::kIsRate);
-  st.counters["paper_fps"] = r.fps;
-  st.counters["ratio"] = benchmark::Counter(it / r.fps, benchmark::Counter::kIsRate);
-  st.counters["bytes"] = bytes;
-  st.counters["GB/s"] = benchmark::Counter(it * bytes * 1e-9, benchmark::Counter::kIsRate);
-  st.counters["bw_frac"] = benchmark::Counter(it * bytes / triad_bandwidth(threads), benchmark::Counter::kIsRate);
-  st.counters["vertices"] = static_cast<double>(r.n) * r.n;
+  loom_bench::set_table1_counters(st, r, bytes, triad_bandwidth(threads));
   st.counters["paper_springs"] = r.springs;
 }
 
