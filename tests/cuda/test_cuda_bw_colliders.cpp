@@ -18,6 +18,7 @@
 #include "common/scene_state.hpp"
 #include "cuda_integrators.hpp"
 #include "cuda_test_compare.hpp"
+#include "cuda_test_pcg.hpp"
 #include "device_pcg.hpp"
 #include "eigen_pcg.hpp"
 #include "gnatv_material.hpp"
@@ -80,14 +81,7 @@ Compared compare(const ColliderSet& cols, Cloth cloth, Index nx, double y0, doub
                  const BaraffWitkinOptions& o, bool pin = false) {
   auto cpu = make_scene(cols, cloth, nx, y0, vy, pin);
   auto dev = make_scene(cols, cloth, nx, y0, vy, pin);
-  PcgOptions co;
-  co.tolerance = 1e-13;
-  co.max_iterations = 20000;
-  cpu->solver = std::make_unique<EigenPcg>(co);
-  lc::PcgOptions go;
-  go.tolerance = 1e-13;
-  go.max_iterations = 20000;
-  dev->solver = std::make_unique<lc::CusparsePcg>(go);
+  loom_cuda_test::tight_pcg(*cpu, *dev);
   BaraffWitkin ci(o);
   lc::BwOptionsD d;
   d.kang_cho_damping = o.kang_cho_damping;

@@ -22,6 +22,7 @@
 #include "baraff_witkin.hpp"
 #include "cuda_integrators.hpp"
 #include "cuda_test_compare.hpp"
+#include "cuda_test_pcg.hpp"
 #include "cuda_test_scenes.hpp"
 #include "device_colliders.hpp"
 #include "device_pcg.hpp"
@@ -177,14 +178,7 @@ Outcome run_explicit(const ColliderSet& cols, const std::string& which, double y
 Outcome run_bw(const ColliderSet& cols, double y0, int steps) {
   auto cpu = make_scene(cols, 12, y0, -0.3, 0.1);
   auto dev = make_scene(cols, 12, y0, -0.3, 0.1);
-  PcgOptions co;
-  co.tolerance = 1e-13;
-  co.max_iterations = 20000;
-  cpu->solver = std::make_unique<EigenPcg>(co);
-  lc::PcgOptions go;
-  go.tolerance = 1e-13;
-  go.max_iterations = 20000;
-  dev->solver = std::make_unique<lc::CusparsePcg>(go);
+  loom_cuda_test::tight_pcg(*cpu, *dev);
   BaraffWitkinOptions o;
   o.kang_cho_damping = 0.01;
   BaraffWitkin ci(o);

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "device_pcg.hpp"
@@ -45,18 +46,23 @@ struct PcgRun {
   std::vector<double> dv;
 };
 
-PcgRun run_cpu(const ts::System& s, PcgPreconditioner pc, double tol, int max_it, std::vector<double> guess = {}) {
-  PcgOptions o;
-  o.preconditioner = pc;
-  o.tolerance = tol;
-  o.max_iterations = max_it;
-  EigenPcg pcg(o);
+/// One solve of `s` by `pcg` from `guess` (zero when empty).
+PcgRun solve_from(LinearSolver& pcg, const ts::System& s, std::vector<double> guess) {
   PcgRun r;
   r.dv = guess.empty() ? std::vector<double>(3 * s.n, 0.0) : guess;
   pcg.analyze_pattern(s.A, s.S);
   EXPECT_TRUE(pcg.factorize(s.A, s.S, r.rep)) << r.rep.message;
   r.rep = pcg.solve(s.A, s.S, s.b, s.z, r.dv);
   return r;
+}
+
+PcgRun run_cpu(const ts::System& s, PcgPreconditioner pc, double tol, int max_it, std::vector<double> guess = {}) {
+  PcgOptions o;
+  o.preconditioner = pc;
+  o.tolerance = tol;
+  o.max_iterations = max_it;
+  EigenPcg pcg(o);
+  return solve_from(pcg, s, std::move(guess));
 }
 
 PcgRun run_dev(const ts::System& s, PcgPreconditioner pc, double tol, int max_it, std::vector<double> guess = {}) {
@@ -67,12 +73,7 @@ PcgRun run_dev(const ts::System& s, PcgPreconditioner pc, double tol, int max_it
   o.tolerance = tol;
   o.max_iterations = max_it;
   lc::CusparsePcg pcg(o);
-  PcgRun r;
-  r.dv = guess.empty() ? std::vector<double>(3 * s.n, 0.0) : guess;
-  pcg.analyze_pattern(s.A, s.S);
-  EXPECT_TRUE(pcg.factorize(s.A, s.S, r.rep)) << r.rep.message;
-  r.rep = pcg.solve(s.A, s.S, s.b, s.z, r.dv);
-  return r;
+  return solve_from(pcg, s, std::move(guess));
 }
 
 }  // namespace
