@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 namespace loom_cli_test {
@@ -40,6 +41,17 @@ inline std::filesystem::path scratch_dir(const std::string& prefix, const std::s
   std::filesystem::remove_all(d);
   std::filesystem::create_directories(d);
   return d;
+}
+
+/// DIR/scene.yaml, returned: a 6 x 5 grid (30 vertices, 40 triangles) falling under gravity,
+/// pinned at its top edge, with the test plugins (no internal forces, explicit Euler), `frames`
+/// frames, then the YAML `extra`.
+inline std::string falling_grid_scene(const std::filesystem::path& dir, int frames, const std::string& extra = "") {
+  const std::string text = "mesh:\n  grid: {nx: 6, ny: 5, width: 1.0, height: 0.8}\nmaterial:\n  type: test_gravity_only\n"
+                           "integrator:\n  type: test_explicit_euler\n  dt: 0.01\n  substeps: 2\npins: [top_edge]\n"
+                           "frames: " + std::to_string(frames) + "\n" + extra;
+  std::ofstream(dir / "scene.yaml") << text;
+  return (dir / "scene.yaml").string();
 }
 
 }  // namespace loom_cli_test

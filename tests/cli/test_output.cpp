@@ -32,11 +32,7 @@ Result run(const std::string& args) { return loom_cli_test::run_loom(args); }
 fs::path scratch(const std::string& name) { return loom_cli_test::scratch_dir("loom_output_", name); }
 
 std::string scene(const fs::path& dir, int frames, const std::string& extra = "") {
-  const std::string text = "mesh:\n  grid: {nx: 6, ny: 5, width: 1.0, height: 0.8}\nmaterial:\n  type: test_gravity_only\n"
-                           "integrator:\n  type: test_explicit_euler\n  dt: 0.01\n  substeps: 2\npins: [top_edge]\n"
-                           "frames: " + std::to_string(frames) + "\n" + extra;
-  std::ofstream(dir / "scene.yaml") << text;
-  return (dir / "scene.yaml").string();
+  return loom_cli_test::falling_grid_scene(dir, frames, extra);
 }
 
 // Positions of an OBJ frame, read by hand (not through Loom's reader).

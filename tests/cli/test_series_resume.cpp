@@ -45,14 +45,9 @@ std::string slurp(const fs::path& p) {
   return std::string((std::istreambuf_iterator<char>(in)), {});
 }
 
-// A 6 x 5 grid (30 vertices, 40 triangles) falling under gravity, pinned at its top edge,
-// with the test plugins (no internal forces, explicit Euler).
+// The falling 6 x 5 grid of cli_run.hpp.
 std::string scene(const fs::path& dir, int frames, const std::string& extra = "") {
-  const std::string text = "mesh:\n  grid: {nx: 6, ny: 5, width: 1.0, height: 0.8}\nmaterial:\n  type: test_gravity_only\n"
-                           "integrator:\n  type: test_explicit_euler\n  dt: 0.01\n  substeps: 2\npins: [top_edge]\n"
-                           "frames: " + std::to_string(frames) + "\n" + extra;
-  std::ofstream(dir / "scene.yaml") << text;
-  return (dir / "scene.yaml").string();
+  return loom_cli_test::falling_grid_scene(dir, frames, extra);
 }
 
 // ---- an independent reader of the VTK XML we expect (not Loom's code) ----
@@ -428,33 +423,21 @@ TEST(Plot, DrawsStatsCsvOrSaysWhatIsMissing) {
   const fs::path out = dir / "out";
   ASSERT_EQ(run("run " + scene(dir, 6) + " --quiet --out " + out.string()).code, 0);
   // Without python3 on the PATH: a clear error with the fix, exit 2.
-  Result r;
-  {
-    const std::string cmd = "PATH=" + (dir / "empty").string() + " " + std::string(LOOM_EXE) + " plot " + out.string() + " 2>&1";
-    fs::create_directories(dir / "empty");
-    FILE* p = popen(cmd.c_str(), "r");
-    std::string text;
-    char buf[512];
-    while (fgets(buf, sizeof buf, p)) text += buf;
-    const int status = pclose(p);
-    EXPECT_EQ(WEXITSTATUS(status), 2) << text;
-    EXPECT_NE(text.find("python3-matplotlib"), std::string::npos) << text;
-  }
+  fs::create_directories(dir / "empty");
+  Result r = loom_cli_test::run_loom_shell("PATH=" + (dir / "empty").string() + " " + std::string(LOOM_EXE) + " plot " +
+                                           out.string());
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("python3-matplotlib"), std::string::npos) << r.out;
   // A python3 that cannot import matplotlib (exit 3, as scripts/plot_run.py does then).
   {
     fs::create_directories(dir / "fake");
     std::ofstream(dir / "fake" / "python3") << "#!/bin/sh\necho 'no module named matplotlib' >&2\nexit 3\n";
     fs::permissions(dir / "fake" / "python3", fs::perms::owner_all);
-    const std::string cmd = "PATH=" + (dir / "fake").string() + ":/usr/bin:/bin " + std::string(LOOM_EXE) + " plot " +
-                            out.string() + " 2>&1";
-    FILE* p = popen(cmd.c_str(), "r");
-    std::string text;
-    char buf[512];
-    while (fgets(buf, sizeof buf, p)) text += buf;
-    const int status = pclose(p);
-    EXPECT_EQ(WEXITSTATUS(status), 2) << text;
-    EXPECT_NE(text.find("cannot import"), std::string::npos) << text;
-    EXPECT_NE(text.find("apt-get install python3-matplotlib"), std::string::npos) << text;
+    r = loom_cli_test::run_loom_shell("PATH=" + (dir / "fake").string() + ":/usr/bin:/bin " + std::string(LOOM_EXE) +
+                                      " plot " + out.string());
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("cannot import"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("apt-get install python3-matplotlib"), std::string::npos) << r.out;
   }
   // Not a run folder.
   r = run("plot " + dir.string());
