@@ -32,7 +32,7 @@ import sys
 
 import yaml
 
-from loom_matplotlib import require_matplotlib
+from loom_plot import require_matplotlib
 
 GAUGE = 0.05   # m, distance between the clamps (KES-F)
 CLAMP = 0.20   # m, clamp length = sample width (KES-F)

@@ -16,7 +16,7 @@ import subprocess
 import sys
 from collections import defaultdict
 
-from loom_matplotlib import require_matplotlib
+from loom_plot import require_matplotlib
 
 
 def main():

@@ -4,25 +4,15 @@ against simulated time (what `loom plot RUN_DIR` draws).
 
 usage: plot_run.py stats.csv stats.png
 Exit 3 when matplotlib cannot be imported (loom plot then names the package to install)."""
-import csv
 import os
 import sys
 
-from loom_matplotlib import have_matplotlib
+from loom_plot import csv_rows, pyplot_or_exit
 
 
 def main(src, dst):
-    if not have_matplotlib():
-        sys.stderr.write("plot_run.py: python3 cannot import matplotlib\n")
-        sys.exit(3)
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    with open(src, newline="") as f:
-        rows = list(csv.DictReader(f))
-    if not rows:
-        sys.exit(f"plot_run.py: {src} has no rows")
+    plt = pyplot_or_exit("plot_run.py")
+    rows = csv_rows(src, "plot_run.py")
     t = [float(r["time"]) for r in rows]
     col = lambda k: [float(r[k]) for r in rows]  # noqa: E731
     # force_evaluations and linear_iterations are running totals: per frame = differences.

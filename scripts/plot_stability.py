@@ -5,11 +5,10 @@ stable step of each combo against the swept value, log-log, with the bracket
 
 usage: plot_stability.py stability.csv stability.png
 Exit 3 when matplotlib cannot be imported."""
-import csv
 import sys
 from collections import defaultdict
 
-from loom_matplotlib import have_matplotlib
+from loom_plot import csv_rows, pyplot_or_exit
 
 
 def number(text):
@@ -20,17 +19,8 @@ def number(text):
 
 
 def main(src, dst):
-    if not have_matplotlib():
-        sys.stderr.write("plot_stability.py: python3 cannot import matplotlib\n")
-        sys.exit(3)
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    with open(src, newline="") as f:
-        rows = list(csv.DictReader(f))
-    if not rows:
-        sys.exit(f"plot_stability.py: {src} has no rows")
+    plt = pyplot_or_exit("plot_stability.py")
+    rows = csv_rows(src, "plot_stability.py")
     by_combo = defaultdict(list)
     for r in rows:
         by_combo[r["combo"]].append(r)

@@ -8,7 +8,7 @@ import csv
 import sys
 from collections import defaultdict
 
-from loom_matplotlib import require_matplotlib
+from loom_plot import require_matplotlib
 
 require_matplotlib()
 import matplotlib

@@ -15,7 +15,7 @@ import re
 import subprocess
 import sys
 
-from loom_matplotlib import have_matplotlib
+from loom_plot import have_matplotlib
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
