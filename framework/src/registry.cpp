@@ -45,35 +45,33 @@ std::vector<std::string> section_keys(PluginKind k) {
   return sec ? sec->keys() : std::vector<std::string>{};
 }
 
+/// Files a plugin of `kind` under its (kind, name, backend), replacing one filed before under
+/// the same key; its module is the one being loaded unless it names its own.
+template <class Entries, class Factory>
+void add_entry(Entries& entries, PluginKind kind, PluginInfo info, const std::string& module, Factory f) {
+  info.kind = kind;
+  if (info.module_path.empty()) info.module_path = module;
+  typename Entries::mapped_type e{info, effective_spec(info), std::move(f)};
+  entries[key(info.kind, info.name, info.backend)] = std::move(e);
+}
+
 /// The Params a factory reads: with the plugin's spec attached when it declares one, and with
 /// none when it does not (not the framework section's spec the scene builder read through).
 Params view(const Params& p, const std::shared_ptr<const ParamSpec>& spec) { return p.with_spec(spec.get()); }
 }  // namespace
 
 void Registry::add_material(PluginInfo info, MaterialFactory f) {
-  info.kind = PluginKind::Material;
-  if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, effective_spec(info), std::move(f)};
-  entries_[key(info.kind, info.name, info.backend)] = std::move(e);
+  add_entry(entries_, PluginKind::Material, std::move(info), current_module_, std::move(f));
 }
 void Registry::add_integrator(PluginInfo info, IntegratorFactory f) {
-  info.kind = PluginKind::Integrator;
-  if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, effective_spec(info), std::move(f)};
-  entries_[key(info.kind, info.name, info.backend)] = std::move(e);
+  add_entry(entries_, PluginKind::Integrator, std::move(info), current_module_, std::move(f));
 }
 void Registry::add_solver(PluginInfo info, SolverFactory f) {
-  info.kind = PluginKind::Solver;
-  if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, effective_spec(info), std::move(f)};
-  entries_[key(info.kind, info.name, info.backend)] = std::move(e);
+  add_entry(entries_, PluginKind::Solver, std::move(info), current_module_, std::move(f));
 }
 
 void Registry::add_renderer(PluginInfo info, RendererFactory f) {
-  info.kind = PluginKind::Renderer;
-  if (info.module_path.empty()) info.module_path = current_module_;
-  Entry e{info, effective_spec(info), std::move(f)};
-  entries_[key(info.kind, info.name, info.backend)] = std::move(e);
+  add_entry(entries_, PluginKind::Renderer, std::move(info), current_module_, std::move(f));
 }
 
 bool Registry::has(PluginKind kind, const std::string& name, const std::string& backend) const {
