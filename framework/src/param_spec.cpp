@@ -23,6 +23,26 @@ std::string join(const std::vector<std::string>& v, const char* sep) {
   return out;
 }
 
+/// The declaration of `key`, of type `type`, with a default shown to users as `text`.
+ParamDecl with_default(const std::string& key, ParamType type, std::string text) {
+  ParamDecl d;
+  d.name = key;
+  d.type = type;
+  d.has_default = true;
+  d.default_text = std::move(text);
+  return d;
+}
+
+/// The declaration of `key`, of type `type`, without a default ("none" in the tables).
+ParamDecl without_default(const std::string& key, ParamType type) {
+  ParamDecl d;
+  d.name = key;
+  d.type = type;
+  d.default_text = "none";
+  d.default_is_value = false;
+  return d;
+}
+
 }  // namespace
 
 const char* to_string(ParamType t) {
@@ -131,104 +151,59 @@ ParamDeclBuilder ParamSpec::add(ParamDecl d) {
 }
 
 ParamDeclBuilder ParamSpec::number(const std::string& key, double def) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::Number;
-  d.has_default = true;
+  ParamDecl d = with_default(key, ParamType::Number, num_text(def));
   d.default_number = def;
-  d.default_text = num_text(def);
   return add(std::move(d));
 }
 
 ParamDeclBuilder ParamSpec::integer(const std::string& key, std::int64_t def) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::Int;
-  d.has_default = true;
+  ParamDecl d = with_default(key, ParamType::Int, std::to_string(def));
   d.default_number = static_cast<double>(def);
-  d.default_text = std::to_string(def);
   return add(std::move(d));
 }
 
 ParamDeclBuilder ParamSpec::flag(const std::string& key, bool def) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::Bool;
-  d.has_default = true;
+  ParamDecl d = with_default(key, ParamType::Bool, def ? "true" : "false");
   d.default_bool = def;
-  d.default_text = def ? "true" : "false";
   return add(std::move(d));
 }
 
 ParamDeclBuilder ParamSpec::text(const std::string& key, const std::string& def) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::String;
-  d.has_default = true;
+  ParamDecl d = with_default(key, ParamType::String, def.empty() ? "\"\"" : def);
   d.default_string = def;
-  d.default_text = def.empty() ? "\"\"" : def;
   return add(std::move(d));
 }
 
 ParamDeclBuilder ParamSpec::choice(const std::string& key, const std::string& def, std::vector<std::string> choices) {
   if (std::find(choices.begin(), choices.end(), def) == choices.end())
     throw std::logic_error("parameter spec '" + name_ + "': the default '" + def + "' of '" + key + "' is not a choice");
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::Enum;
-  d.has_default = true;
+  ParamDecl d = with_default(key, ParamType::Enum, def);
   d.default_string = def;
-  d.default_text = def;
   d.choices = std::move(choices);
   return add(std::move(d));
 }
 
 ParamDeclBuilder ParamSpec::vec3(const std::string& key, std::array<double, 3> def) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::Vec3;
-  d.has_default = true;
+  ParamDecl d =
+      with_default(key, ParamType::Vec3, "[" + num_text(def[0]) + ", " + num_text(def[1]) + ", " + num_text(def[2]) + "]");
   d.default_vec.assign(def.begin(), def.end());
-  d.default_text = "[" + num_text(def[0]) + ", " + num_text(def[1]) + ", " + num_text(def[2]) + "]";
   return add(std::move(d));
 }
 
-ParamDeclBuilder ParamSpec::list(const std::string& key) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::List;
-  d.default_text = "none";
-  d.default_is_value = false;
-  return add(std::move(d));
-}
+ParamDeclBuilder ParamSpec::list(const std::string& key) { return add(without_default(key, ParamType::List)); }
 
 ParamDeclBuilder ParamSpec::map(const std::string& key, ParamSpec fields) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::Map;
-  d.default_text = "none";
-  d.default_is_value = false;
+  ParamDecl d = without_default(key, ParamType::Map);
   d.fields = std::make_shared<const ParamSpec>(std::move(fields));
   return add(std::move(d));
 }
 
-ParamDeclBuilder ParamSpec::open_map(const std::string& key) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::Map;
-  d.default_text = "none";
-  d.default_is_value = false;
-  return add(std::move(d));
-}
+ParamDeclBuilder ParamSpec::open_map(const std::string& key) { return add(without_default(key, ParamType::Map)); }
 
 ParamDeclBuilder ParamSpec::number_or_map(const std::string& key, double def, ParamSpec fields) {
-  ParamDecl d;
-  d.name = key;
-  d.type = ParamType::Map;
+  ParamDecl d = with_default(key, ParamType::Map, num_text(def));
   d.number_or_map = true;
-  d.has_default = true;
   d.default_number = def;
-  d.default_text = num_text(def);
   d.fields = std::make_shared<const ParamSpec>(std::move(fields));
   return add(std::move(d));
 }
