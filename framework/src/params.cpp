@@ -76,6 +76,17 @@ std::string fmt_double(double v) {
   return os.str();
 }
 
+/// The scalar `n` of `p` as a T; anything else fails through p, saying what was `expected`.
+template <class T>
+T scalar_as(const Params& p, const YAML::Node& n, const std::string& expected) {
+  if (!p.is_scalar()) p.fail("expected " + expected + ", got " + describe_value(n) + ".");
+  try {
+    return n.as<T>();
+  } catch (const YAML::Exception&) {
+    p.fail("expected " + expected + ", got '" + n.Scalar() + "'.");
+  }
+}
+
 }  // namespace
 
 std::string closest_match(const std::string& word, const std::vector<std::string>& candidates) {
@@ -275,32 +286,11 @@ Params Params::at(std::size_t i) const {
   return Params(impl);
 }
 
-double Params::as_double() const {
-  if (!is_scalar()) fail("expected a number, got " + describe_value(impl_->node) + ".");
-  try {
-    return impl_->node.as<double>();
-  } catch (const YAML::Exception&) {
-    fail("expected a number, got '" + impl_->node.Scalar() + "'.");
-  }
-}
+double Params::as_double() const { return scalar_as<double>(*this, impl_->node, "a number"); }
 
-std::int64_t Params::as_int() const {
-  if (!is_scalar()) fail("expected an integer, got " + describe_value(impl_->node) + ".");
-  try {
-    return impl_->node.as<long long>();
-  } catch (const YAML::Exception&) {
-    fail("expected an integer, got '" + impl_->node.Scalar() + "'.");
-  }
-}
+std::int64_t Params::as_int() const { return scalar_as<long long>(*this, impl_->node, "an integer"); }
 
-bool Params::as_bool() const {
-  if (!is_scalar()) fail("expected true or false, got " + describe_value(impl_->node) + ".");
-  try {
-    return impl_->node.as<bool>();
-  } catch (const YAML::Exception&) {
-    fail("expected true or false, got '" + impl_->node.Scalar() + "'.");
-  }
-}
+bool Params::as_bool() const { return scalar_as<bool>(*this, impl_->node, "true or false"); }
 
 std::string Params::as_string() const {
   if (!is_scalar()) fail("expected a text value, got " + describe_value(impl_->node) + ".");
