@@ -77,6 +77,7 @@ struct Cloth {
   std::vector<double> x0;
   HoIntegrator ho{HoVariant::Velocity};
   HoIntegrator ho_direct{HoVariant::Velocity, false};   // per-spring constants (no tables)
+  HoIntegrator ho_table{HoVariant::Velocity};           // parameter tables on the window (the old default)
   double h = 1e-6;
   // float copies
   HoSprings<float> fs;
@@ -102,6 +103,8 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   c->x0 = sc.state.x;
   c->ho.prepare(sc, c->h);
   c->ho_direct.prepare(sc, c->h);
+  c->ho_table.set_tables_on_window(true);
+  c->ho_table.prepare(sc, c->h);
   const HoSprings<double>& d = c->ho.springs();
   convert_ho_springs(d, c->fs);
   c->fx.assign(sc.state.x.begin(), sc.state.x.end());
@@ -188,6 +191,21 @@ void BM_HoStep_double_direct(benchmark::State& st) {
   set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), false));
 }
 
+// The parameter tables kept on the windowed sweep (HoIntegrator::set_tables_on_window): 2 bytes
+// per spring and a table gather per spring, the default before per-spring streams.
+void BM_HoStep_double_table(benchmark::State& st) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  Cloth& c = cloth(r.n);
+  omp_set_num_threads(threads);
+  c.scene.state.x = c.x0;
+  std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  for (auto _ : st) c.ho_table.step(c.scene, c.h);
+  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), c.ho_table.springs().table));
+  st.counters["table"] = c.ho_table.springs().table ? static_cast<double>(c.ho_table.springs().t_l0.size()) : 0.0;
+}
+
 // A/B of the windowed grouped sweep (ho_window.hpp): the HO step on raw arrays (the plugin's
 // step without pins and clock), window on (the default) and off (the plain grouped sweep, what
 // the step ran before). Same springs, same cloth, interleave them with --benchmark_repetitions.
@@ -206,26 +224,29 @@ void ho_window_bench(benchmark::State& st, bool window) {
   for (std::size_t g = 0; g < s.segs.size(); ++g) {
     tail += static_cast<double>(s.segs[g].len % 4);
     step2 += s.segs[g].step == 2 ? 1 : 0;
-    mixed += s.seg_uniform.size() == s.segs.size() && !s.seg_uniform[g] ? 1 : 0;
   }
   st.counters["segs"] = static_cast<double>(s.segs.size());
   st.counters["tail_springs"] = tail;
   st.counters["step2_segs"] = step2;
-  st.counters["mixed_segs"] = mixed;
+  // with the parameter tables: segments whose springs do not share one id, or kx and kv
   double kmixed = 0, l0_float_delta_ok = 0;
-  if (s.table)
-    for (const auto& G : s.segs) {
-      bool same = true, fits = true;
-      const double base = s.t_l0[s.id[G.begin]];
+  const HoSprings<double>& t = c.ho_table.springs();
+  if (t.table)
+    for (const auto& G : t.segs) {
+      bool same = true, fits = true, one = true;
+      const double base = t.t_l0[t.id[G.begin]];
       for (Index r = 0; r < G.len; ++r) {
-        const std::size_t id = s.id[G.begin + r], id0 = s.id[G.begin];
-        same = same && s.t_kx[id] == s.t_kx[id0] && s.t_kv[id] == s.t_kv[id0];
-        const double d = s.t_l0[id] - base;
-        fits = fits && static_cast<double>(static_cast<float>(d)) == d && base + d == s.t_l0[id];
+        const std::size_t id = t.id[G.begin + r], id0 = t.id[G.begin];
+        one = one && id == id0;
+        same = same && t.t_kx[id] == t.t_kx[id0] && t.t_kv[id] == t.t_kv[id0];
+        const double d = t.t_l0[id] - base;
+        fits = fits && static_cast<double>(static_cast<float>(d)) == d && base + d == t.t_l0[id];
       }
+      mixed += one ? 0 : 1;
       kmixed += same ? 0 : 1;
       l0_float_delta_ok += fits ? 1 : 0;
     }
+  st.counters["mixed_segs"] = mixed;
   st.counters["k_mixed_segs"] = kmixed;
   st.counters["l0_delta_ok_segs"] = l0_float_delta_ok;
   std::vector<double> x = c.x0, v(x.size(), 0.0), dv(x.size(), 0.0);
@@ -458,6 +479,7 @@ BENCHMARK(BM_Triad)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime(
 BENCHMARK(BM_HoStep_double)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_sqrt5)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_direct)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_table)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_window)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_nowindow)->Apply(rows_args);
 BENCHMARK(BM_HoStep_float)->Apply(rows_args);

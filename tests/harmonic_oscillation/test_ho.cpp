@@ -472,6 +472,7 @@ TEST(HoStorage, TableAndDirectAgreeBitwise) {
       auto scene = make_scene(x, v, m, {nx * (nx - 1), nx * nx - 1}, {0, -9.81, 0},
                               std::make_unique<TestSpringMaterial>(s, m));
       HoIntegrator ho(var, table == 1);
+      ho.set_tables_on_window(table == 1);   // the windowed sweep streams per-spring constants by default
       ho.prepare(*scene, 1e-4);
       EXPECT_EQ(ho.springs().table, table == 1);
       if (table) {
@@ -562,6 +563,7 @@ TEST(HoStorage, WindowedSweepIsBitIdentical) {
     for (bool table : {true, false}) {
       auto scene = make_scene(x, v, m, pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(s, m));
       HoIntegrator ho(var, table, true, HoReorder::None);
+      ho.set_tables_on_window(table);
       ho.prepare(*scene, 1e-4);
       ASSERT_TRUE(ho.springs().grouped);
       ASSERT_GT(ho.springs().win_cap, 0);

@@ -71,23 +71,6 @@ inline void sweep_segment_forces(Index len, Index a, Index off, const T* __restr
   }
 }
 
-/// Adds +F at window vertices a + Step r, then -F at a + off + Step r (two passes: the ranges
-/// may overlap).
-template <class T, int Step, Index Bk>
-inline void sweep_segment_scatter(Index len, Index a, Index off, T* __restrict FX, T* __restrict FY,
-                                  T* __restrict FZ, const T* __restrict F) {
-  for (Index r = 0; r < len; ++r) {
-    FX[a + Step * r] += F[r];
-    FY[a + Step * r] += F[Bk + r];
-    FZ[a + Step * r] += F[2 * Bk + r];
-  }
-  for (Index r = 0; r < len; ++r) {
-    FX[a + off + Step * r] -= F[r];
-    FY[a + off + Step * r] -= F[Bk + r];
-    FZ[a + off + Step * r] -= F[2 * Bk + r];
-  }
-}
-
 template <class T>
 struct SpringSweep {
   SpringLayout layout;
@@ -232,9 +215,8 @@ struct SpringSweep {
     const std::uint8_t* def = is_deferred.data();
     auto sweep = [&](int p) {
       const Index cap = win_cap;
-      T* base = win.data() + static_cast<std::size_t>(p) * kWinArrays * static_cast<std::size_t>(cap);
       T* A[kWinArrays];
-      for (int e = 0; e < kWinArrays; ++e) A[e] = base + static_cast<std::size_t>(e) * static_cast<std::size_t>(cap);
+      window_arrays(win.data(), p, cap, A);
       T* const X = A[0];
       T* const Y = A[1];
       T* const Z = A[2];
@@ -251,18 +233,11 @@ struct SpringSweep {
         const SpringBlock& B = blocks[bk];
         const Index need = block_need[bk];
         window_make_room(A, narr, cap, need, qfin, fill, ws);
-        for (; fill < need; ++fill) {
-          const std::size_t o = 3 * static_cast<std::size_t>(fill);
-          const Index l = fill - ws;
-          X[l] = x[o];
-          Y[l] = x[o + 1];
-          Z[l] = x[o + 2];
-          FX[l] = FY[l] = FZ[l] = T(0);
-          if constexpr (Damped) {
-            VX[l] = v[o];
-            VY[l] = v[o + 1];
-            VZ[l] = v[o + 2];
-          }
+        if (fill < need) {
+          window_load3(x, fill, need, ws, X, Y, Z);
+          if constexpr (Damped) window_load3(v, fill, need, ws, VX, VY, VZ);
+          window_zero3(fill, need, ws, FX, FY, FZ);
+          fill = need;
         }
         for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
           const SpringSegment& G = segs[sg];
@@ -271,11 +246,11 @@ struct SpringSweep {
           if (G.step == 1) {
             sweep_segment_forces<T, Damped, 1, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX, VY,
                                                    VZ, F);
-            sweep_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+            window_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F);
           } else {
             sweep_segment_forces<T, Damped, 2, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX, VY,
                                                    VZ, F);
-            sweep_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+            window_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F);
           }
         }
         for (; qfin < B.vertex_end; ++qfin) {

@@ -151,6 +151,51 @@ void plan_spring_window(const SpringLayout& layout, Springs& s) {
   s.win_cap = std::max<Index>(1024, 4 * span);
 }
 
+/// The narr arrays of part p's window in the scratch win (parts x narr x cap, part after part):
+/// A[e] = win + (p narr + e) cap.
+template <class T, int N>
+inline void window_arrays(T* win, int p, Index cap, T* (&A)[N]) {
+  T* base = win + static_cast<std::size_t>(p) * N * static_cast<std::size_t>(cap);
+  for (int e = 0; e < N; ++e) A[e] = base + static_cast<std::size_t>(e) * static_cast<std::size_t>(cap);
+}
+
+/// Copy the vertices [from, to) of an interleaved 3n array (x0 y0 z0 x1 ...) into the window
+/// arrays X, Y, Z (window slot = vertex - ws).
+template <class T>
+inline void window_load3(const T* __restrict src, Index from, Index to, Index ws, T* __restrict X, T* __restrict Y,
+                         T* __restrict Z) {
+  for (Index q = from; q < to; ++q) {
+    const std::size_t o = 3 * static_cast<std::size_t>(q);
+    const Index l = q - ws;
+    X[l] = src[o];
+    Y[l] = src[o + 1];
+    Z[l] = src[o + 2];
+  }
+}
+
+/// Zero the window slots of the vertices [from, to) in the arrays X, Y, Z.
+template <class T>
+inline void window_zero3(Index from, Index to, Index ws, T* __restrict X, T* __restrict Y, T* __restrict Z) {
+  for (Index l = from - ws; l < to - ws; ++l) X[l] = Y[l] = Z[l] = T(0);
+}
+
+/// A segment's per-spring vectors F (3 x Bk, structure of arrays) added at window vertices
+/// a + Step r and subtracted at a + off + Step r, r < len (two passes: the ranges may overlap).
+template <class T, int Step, Index Bk>
+inline void window_segment_scatter(Index len, Index a, Index off, T* __restrict FX, T* __restrict FY,
+                                   T* __restrict FZ, const T* __restrict F) {
+  for (Index r = 0; r < len; ++r) {
+    FX[a + Step * r] += F[r];
+    FY[a + Step * r] += F[Bk + r];
+    FZ[a + Step * r] += F[2 * Bk + r];
+  }
+  for (Index r = 0; r < len; ++r) {
+    FX[a + off + Step * r] -= F[r];
+    FY[a + off + Step * r] -= F[Bk + r];
+    FZ[a + off + Step * r] -= F[2 * Bk + r];
+  }
+}
+
 /// Before a block that reads vertices up to need - 1: when need lies beyond the window
 /// [ws, ws + cap), move the live vertices [qfin, fill) of the narr arrays A to the start (ws = qfin).
 template <class T>

@@ -32,7 +32,8 @@ const ParamSpec& harmonic_oscillation_spec() {
         "velocity: exact axial velocity change per spring; analytic_position: also the exact displacement (HO-A); "
         "kang_cho_2011: the published formula (half the stiffness)");
     s.choice("storage", "auto", {"auto", "direct"}).backends({"cpu"}).help(
-        "auto: the per-spring constants (l0, k, c, W) deduplicated into tables; direct: stored per spring");
+        "auto: constants stored per spring on the windowed grouped sweep (streamed), otherwise deduplicated into "
+        "tables of (l0, k, c, W) when there are at most 65536 sets; direct: always stored per spring");
     s.choice("reorder", "auto", {"auto", "none", "rcm"}).backends({"cpu"}).help(
         "vertex order of the step: rcm renumbers the vertices internally (reverse Cuthill-McKee) so that "
         "springs join nearby vertices; results stay in the mesh's numbering. auto: rcm for meshes of at least "
@@ -158,7 +159,7 @@ void HoIntegrator::prepare(Scene& scene, double h) {
     vp_.clear();
     wp_.clear();
   }
-  update_ho_coefficients(springs_, variant_, w, h, allow_table_);
+  update_ho_coefficients(springs_, variant_, w, h, allow_table_, tables_on_window_);
   h_ = h;
 }
 

@@ -81,7 +81,6 @@ struct HoSprings {
   Index win_span = 0;             ///< the most vertices live at once (plan_ho_window)
   Index win_cap = 0;
   mutable std::vector<T> win;
-  std::vector<std::uint8_t> seg_uniform;   ///< table storage: segment's springs share one id
 
   Index size() const { return static_cast<Index>(i.size()); }
 };
@@ -111,7 +110,6 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
   out.win_span = in.win_span;
   out.win_cap = in.win_cap;
   out.win.assign(in.win.size(), T(0));
-  out.seg_uniform.clear();   // table storage is rebuilt by update_ho_coefficients
   out.l0.assign(in.l0.begin(), in.l0.end());
   out.k.assign(in.k.begin(), in.k.end());
   out.c.assign(in.c.begin(), in.c.end());
@@ -139,16 +137,28 @@ inline std::array<double, 4> ho_constants(HoVariant variant, double k, double c,
   return {r.kx, r.kv, r.ex, r.ev};
 }
 
-/// (Re)compute the constants for step h and inverse masses w (called by prepare, so whenever h
-/// or a mass changes). allow_table: deduplicate (l0, k, c, W) into tables when there are at
-/// most kHoMaxTable distinct sets; otherwise (or when false) store constants per spring.
+/// Whether update_ho_coefficients may store tables (HoSprings::table) for springs s.
+/// allow_table = false: never (storage: direct). Otherwise tables are used when there are at most
+/// kHoMaxTable distinct (l0, k, c, W), except on the windowed grouped sweep (s.grouped and
+/// s.win_cap > 0), which streams per-spring constants (contiguous loads; a table lookup per
+/// spring is a gather, which costs more there than the 22 bytes per spring it saves:
+/// docs/plugins/integrators.md), unless tables_on_window (tests and benchmarks).
 template <class T>
-void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h, bool allow_table = true) {
+bool ho_tables_wanted(const HoSprings<T>& s, bool allow_table, bool tables_on_window) {
+  return allow_table && (tables_on_window || !(s.grouped && s.win_cap > 0));
+}
+
+/// (Re)compute the constants for step h and inverse masses w (called by prepare, so whenever h
+/// or a mass changes). Deduplicates (l0, k, c, W) into tables when ho_tables_wanted and there
+/// are at most kHoMaxTable distinct sets; otherwise stores the constants per spring.
+template <class T>
+void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h, bool allow_table = true,
+                            bool tables_on_window = false) {
   const Index S = s.size();
   const bool pos = variant == HoVariant::AnalyticPosition;
   const double hd = static_cast<double>(h);
   s.table = false;
-  if (allow_table) {
+  if (ho_tables_wanted(s, allow_table, tables_on_window)) {
     struct KeyHash {
       std::size_t operator()(const std::array<double, 4>& a) const {
         std::size_t x = 0;
@@ -194,12 +204,10 @@ void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h,
       s.kv.clear();
       s.ex.clear();
       s.ev.clear();
-      mark_uniform_segments(s);
       return;
     }
   }
   s.id.clear();
-  mark_uniform_segments(s);
   s.kx.resize(S);
   s.kv.resize(S);
   s.ex.resize(pos ? S : 0);
@@ -251,37 +259,26 @@ inline void ho_one_spring(Index q, const Index* I, const Index* J, const HoParam
   }
 }
 
-/// Phase 1 of a block of m springs: G_i = w_i g, G_j = w_j g (and P for analytic_position)
-/// into the block buffers. Plain restrict pointers so that the loop vectorises (gathers only).
+/// Phase 1 of a block of m springs: each spring's impulse per unit inverse mass g (and its
+/// displacement p for analytic_position) into the block buffers G (and P), 3 per spring. Plain
+/// restrict pointers so that the loop vectorises (gathers only).
 template <class T, HoVariant V, bool Table>
 inline void ho_block_impulses(Index m, const Index* __restrict I, const Index* __restrict J,
                               const std::uint16_t* __restrict ID, const T* __restrict L0,
                               const T* __restrict KX, const T* __restrict KV, const T* __restrict EX,
                               const T* __restrict EV, const T* __restrict x, const T* __restrict v,
-                              const T* __restrict w, T* __restrict Gi, T* __restrict Gj, T* __restrict Pi,
-                              T* __restrict Pj) {
+                              T* __restrict G, T* __restrict P) {
   for (Index r = 0; r < m; ++r) {
     const std::size_t a = 3 * static_cast<std::size_t>(I[r]);
     const std::size_t b = 3 * static_cast<std::size_t>(J[r]);
     const std::size_t c = Table ? static_cast<std::size_t>(ID[r]) : static_cast<std::size_t>(r);
-    const T wi = w[I[r]], wj = w[J[r]];
-    T gv[3];
     if constexpr (V == HoVariant::AnalyticPosition) {
       const kernels::HoCoeffs<T> k{KX[c], KV[c], EX[c], EV[c]};
-      T pv[3];
-      kernels::ho_spring_velocity_position(x, v, a, b, L0[c], k, gv, pv);
-      for (int e = 0; e < 3; ++e) {
-        Pi[3 * r + e] = wi * pv[e];
-        Pj[3 * r + e] = wj * pv[e];
-      }
+      kernels::ho_spring_velocity_position(x, v, a, b, L0[c], k, G + 3 * r, P + 3 * r);
     } else if constexpr (V == HoVariant::KangCho2011) {
-      kernels::kang_cho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], gv);
+      kernels::kang_cho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], G + 3 * r);
     } else {
-      kernels::ho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], gv);
-    }
-    for (int e = 0; e < 3; ++e) {
-      Gi[3 * r + e] = wi * gv[e];
-      Gj[3 * r + e] = wj * gv[e];
+      kernels::ho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], G + 3 * r);
     }
   }
 }
@@ -291,44 +288,32 @@ template <class T, HoVariant V, bool Table, int Step>
 inline void ho_segment_impulses(Index len, Index i0, Index off, const std::uint16_t* __restrict ID,
                                 const T* __restrict L0, const T* __restrict KX, const T* __restrict KV,
                                 const T* __restrict EX, const T* __restrict EV, const T* __restrict x,
-                                const T* __restrict v, const T* __restrict w, T* __restrict Gi, T* __restrict Gj,
-                                T* __restrict Pi, T* __restrict Pj) {
+                                const T* __restrict v, T* __restrict G, T* __restrict P) {
   for (Index r = 0; r < len; ++r) {
     const std::size_t a = 3 * static_cast<std::size_t>(i0 + Step * r);
     const std::size_t b = a + 3 * static_cast<std::size_t>(off);
     const std::size_t c = Table ? static_cast<std::size_t>(ID[r]) : static_cast<std::size_t>(r);
-    const T wi = w[i0 + Step * r], wj = w[i0 + off + Step * r];
-    T gv[3];
     if constexpr (V == HoVariant::AnalyticPosition) {
       const kernels::HoCoeffs<T> k{KX[c], KV[c], EX[c], EV[c]};
-      T pv[3];
-      kernels::ho_spring_velocity_position(x, v, a, b, L0[c], k, gv, pv);
-      for (int e = 0; e < 3; ++e) {
-        Pi[3 * r + e] = wi * pv[e];
-        Pj[3 * r + e] = wj * pv[e];
-      }
+      kernels::ho_spring_velocity_position(x, v, a, b, L0[c], k, G + 3 * r, P + 3 * r);
     } else if constexpr (V == HoVariant::KangCho2011) {
-      kernels::kang_cho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], gv);
+      kernels::kang_cho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], G + 3 * r);
     } else {
-      kernels::ho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], gv);
-    }
-    for (int e = 0; e < 3; ++e) {
-      Gi[3 * r + e] = wi * gv[e];
-      Gj[3 * r + e] = wj * gv[e];
+      kernels::ho_spring_velocity(x, v, a, b, L0[c], KX[c], KV[c], G + 3 * r);
     }
   }
 }
 
-/// Phase 2 of a segment: two passes (the i and j ranges may overlap).
+/// Phase 2 of a segment: +G at the lower endpoints, then -G at the upper ones (two passes: the
+/// ranges may overlap).
 template <class T, int Step>
-inline void ho_segment_scatter(Index len, Index i0, Index off, T* __restrict acc, const T* __restrict Gi,
-                               const T* __restrict Gj) {
+inline void ho_segment_scatter(Index len, Index i0, Index off, T* __restrict acc, const T* __restrict G) {
   T* ai = acc + 3 * static_cast<std::size_t>(i0);
   for (Index r = 0; r < len; ++r)
-    for (int e = 0; e < 3; ++e) ai[3 * Step * r + e] += Gi[3 * r + e];
+    for (int e = 0; e < 3; ++e) ai[3 * Step * r + e] += G[3 * r + e];
   T* aj = acc + 3 * static_cast<std::size_t>(i0 + off);
   for (Index r = 0; r < len; ++r)
-    for (int e = 0; e < 3; ++e) aj[3 * Step * r + e] -= Gj[3 * r + e];
+    for (int e = 0; e < 3; ++e) aj[3 * Step * r + e] -= G[3 * r + e];
 }
 
 /// Springs per block in the sweep: phase 1 computes the impulses of a block (vectorised,
@@ -339,10 +324,16 @@ constexpr Index kHoBlock = 128;
 /// allocation. dv (and dx for analytic_position) are 3n accumulators that must be zero on
 /// entry; they are zero again on return.
 ///
+/// Accumulation: a spring's impulse per unit inverse mass g (Delta v_i = +w_i g, Delta v_j =
+/// -w_j g) is summed unweighted into both endpoints' accumulators (+g, -g, like a force), and
+/// a vertex's sum is multiplied by its inverse mass once, when it is finalised: w_i (g_1 + g_2
+/// + ...) instead of w_i g_1 + w_i g_2 + ... (equal to rounding), which halves the stores of
+/// the impulse loops and drops their inverse-mass loads.
+///
 /// Traversal: each part of the layout is swept in order of lower endpoint (s.i). A vertex q
 /// of the part is complete as soon as the sweep has passed every spring with lower endpoint
 /// q (its other springs have a smaller lower endpoint), unless a cross spring touches it
-/// (s.deferred). So the sweep finalises q right away (v += dv + h g, x += h v), while
+/// (s.deferred). So the sweep finalises q right away (v += w dv + h g, x += h v), while
 /// q's data is still in cache, and clears the accumulator; the deferred vertices are
 /// finalised after the cross springs. One pass over the vertices per step.
 template <class T, HoVariant V, bool Table>
@@ -358,11 +349,25 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
   const T hg[3] = {h * g[0], h * g[1], h * g[2]};
   const T gg[3] = {hh2 * g[0], hh2 * g[1], hh2 * g[2]};
 
-  auto finalize = [&](Index q) {  // kernels::ho_finalise_vertex, shared with the CUDA backend
+  // Vertex q with unweighted sums sv (and sp): kernels::ho_finalise_vertex (shared with the
+  // CUDA backend) on w_q sv (and w_q sp).
+  auto finish = [&](Index q, const T* sv, const T* sp) {
+    const std::size_t o = 3 * static_cast<std::size_t>(q);
+    const T wq = w[q];
+    const T dq[3] = {wq * sv[0], wq * sv[1], wq * sv[2]};
+    T pq[3] = {T(0), T(0), T(0)};
+    if constexpr (kPos) {
+      pq[0] = wq * sp[0];
+      pq[1] = wq * sp[1];
+      pq[2] = wq * sp[2];
+    }
+    kernels::ho_finalise_vertex<T, kPos>(x + o, v + o, dq, pq, wq, h, hg, gg);
+  };
+  auto finalize = [&](Index q) {  // from the 3n accumulators, which it clears
     const std::size_t o = 3 * static_cast<std::size_t>(q);
     T* dq = dv + o;
     T* pq = kPos ? dx + o : nullptr;
-    kernels::ho_finalise_vertex<T, kPos>(x + o, v + o, dq, pq, w[q], h, hg, gg);
+    finish(q, dq, pq);
     dq[0] = dq[1] = dq[2] = T(0);
     if constexpr (kPos) pq[0] = pq[1] = pq[2] = T(0);
   };
@@ -370,15 +375,14 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
   auto single = [&](Index q) {
     const std::size_t a = 3 * static_cast<std::size_t>(I[q]);
     const std::size_t b = 3 * static_cast<std::size_t>(J[q]);
-    const T wi = w[I[q]], wj = w[J[q]];
     T gv[3], pv[3];
     ho_one_spring<T, V, Table>(q, I, J, P, x, v, gv, pv);
     for (int e = 0; e < 3; ++e) {
-      dv[a + e] += wi * gv[e];
-      dv[b + e] -= wj * gv[e];
+      dv[a + e] += gv[e];
+      dv[b + e] -= gv[e];
       if constexpr (kPos) {
-        dx[a + e] += wi * pv[e];
-        dx[b + e] -= wj * pv[e];
+        dx[a + e] += pv[e];
+        dx[b + e] -= pv[e];
       }
     }
   };
@@ -388,16 +392,16 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
     const Index kend = layout.part_spring_end(p);
     Index k = layout.part_spring_begin(p);
     Index qfin = layout.part_vertex_begin(p);
-    alignas(64) T Gi[3 * kHoBlock], Gj[3 * kHoBlock];
-    alignas(64) T Pi[kPosBlock], Pj[kPosBlock];
+    alignas(64) T Gb[3 * kHoBlock];
+    alignas(64) T Pb[kPosBlock];
     while (k < kend) {
       const Index k1 = std::min<Index>(k + kHoBlock, kend);
       const Index m = k1 - k;
-      // phase 1: impulses (times the endpoint's inverse mass), gathers only
+      // phase 1: impulses per unit inverse mass, gathers only
       const std::size_t off = Table ? 0 : static_cast<std::size_t>(k);
       ho_block_impulses<T, V, Table>(m, I + k, J + k, Table ? P.id + k : nullptr, P.l0 + off, P.kx + off,
                                      P.kv + off, kPos ? P.ex + off : nullptr, kPos ? P.ev + off : nullptr, x, v,
-                                     w, Gi, Gj, Pi, Pj);
+                                     Gb, Pb);
       // phase 2: scatter. Consecutive springs mostly share their lower endpoint: its sum is kept
       // in registers for the run (no store-to-load chain through dv[i]).
       for (Index r = 0; r < m;) {
@@ -406,11 +410,11 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
         do {
           const std::size_t b = 3 * static_cast<std::size_t>(J[k + r]);
           for (int e = 0; e < 3; ++e) {
-            si[e] += Gi[3 * r + e];
-            dv[b + e] -= Gj[3 * r + e];
+            si[e] += Gb[3 * r + e];
+            dv[b + e] -= Gb[3 * r + e];
             if constexpr (kPos) {
-              pi[e] += Pi[3 * r + e];
-              dx[b + e] -= Pj[3 * r + e];
+              pi[e] += Pb[3 * r + e];
+              dx[b + e] -= Pb[3 * r + e];
             }
           }
           ++r;
@@ -433,8 +437,8 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
   // Grouped sweep of part p (see HoSprings::grouped).
   auto sweep_grouped = [&](int p) {
     Index qfin = layout.part_vertex_begin(p);
-    alignas(64) T Gi[3 * kHoVertexBlock], Gj[3 * kHoVertexBlock];
-    alignas(64) T Pi[kPos ? 3 * kHoVertexBlock : 1], Pj[kPos ? 3 * kHoVertexBlock : 1];
+    alignas(64) T Gb[3 * kHoVertexBlock];
+    alignas(64) T Pb[kPos ? 3 * kHoVertexBlock : 1];
     for (Index bk = s.part_block[p]; bk < s.part_block[p + 1]; ++bk) {
       const auto& B = s.blocks[bk];
       for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
@@ -445,14 +449,14 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
         const T* ev = kPos ? P.ev + off : nullptr;
         if (G.step == 1) {
           ho_segment_impulses<T, V, Table, 1>(G.len, G.i0, G.off, id, P.l0 + off, P.kx + off, P.kv + off, ex, ev,
-                                              x, v, w, Gi, Gj, Pi, Pj);
-          ho_segment_scatter<T, 1>(G.len, G.i0, G.off, dv, Gi, Gj);
-          if constexpr (kPos) ho_segment_scatter<T, 1>(G.len, G.i0, G.off, dx, Pi, Pj);
+                                              x, v, Gb, Pb);
+          ho_segment_scatter<T, 1>(G.len, G.i0, G.off, dv, Gb);
+          if constexpr (kPos) ho_segment_scatter<T, 1>(G.len, G.i0, G.off, dx, Pb);
         } else {
           ho_segment_impulses<T, V, Table, 2>(G.len, G.i0, G.off, id, P.l0 + off, P.kx + off, P.kv + off, ex, ev,
-                                              x, v, w, Gi, Gj, Pi, Pj);
-          ho_segment_scatter<T, 2>(G.len, G.i0, G.off, dv, Gi, Gj);
-          if constexpr (kPos) ho_segment_scatter<T, 2>(G.len, G.i0, G.off, dx, Pi, Pj);
+                                              x, v, Gb, Pb);
+          ho_segment_scatter<T, 2>(G.len, G.i0, G.off, dv, Gb);
+          if constexpr (kPos) ho_segment_scatter<T, 2>(G.len, G.i0, G.off, dx, Pb);
         }
       }
       for (; qfin < B.vertex_end; ++qfin)
@@ -466,9 +470,8 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
     constexpr Index Bk = kHoVertexBlock;
     constexpr int Vi = V == HoVariant::Velocity ? 0 : (V == HoVariant::AnalyticPosition ? 1 : 2);
     const Index cap = s.win_cap;
-    T* base = s.win.data() + static_cast<std::size_t>(p) * kHoWinArrays * static_cast<std::size_t>(cap);
     T* A[kHoWinArrays];
-    for (int e = 0; e < kHoWinArrays; ++e) A[e] = base + static_cast<std::size_t>(e) * static_cast<std::size_t>(cap);
+    window_arrays(s.win.data(), p, cap, A);
     T* const X = A[0];
     T* const Y = A[1];
     T* const Z = A[2];
@@ -482,29 +485,19 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
     T* const PY = A[10];
     T* const PZ = A[11];
     const int narr = kPos ? 12 : 9;
-    const std::uint8_t* uniform = s.seg_uniform.size() == s.segs.size() ? s.seg_uniform.data() : nullptr;
     Index ws = layout.part_vertex_begin(p), fill = ws, qfin = ws;
-    alignas(64) T Gi[3 * Bk], Gj[3 * Bk];
-    alignas(64) T Qi[kPos ? 3 * Bk : 1], Qj[kPos ? 3 * Bk : 1];
+    alignas(64) T Gb[3 * Bk];
+    alignas(64) T Qb[kPos ? 3 * Bk : 1];
     for (Index bk = s.part_block[p]; bk < s.part_block[p + 1]; ++bk) {
       const auto& B = s.blocks[bk];
       const Index need = s.block_need[bk];
-      if (need > ws + cap) {   // move the live vertices [qfin, fill) to the start
-        const std::size_t sh = static_cast<std::size_t>(qfin - ws), cnt = static_cast<std::size_t>(fill - qfin);
-        for (int e = 0; e < narr; ++e) std::memmove(A[e], A[e] + sh, cnt * sizeof(T));
-        ws = qfin;
-      }
-      for (; fill < need; ++fill) {
-        const std::size_t o = 3 * static_cast<std::size_t>(fill);
-        const Index l = fill - ws;
-        X[l] = x[o];
-        Y[l] = x[o + 1];
-        Z[l] = x[o + 2];
-        VX[l] = v[o];
-        VY[l] = v[o + 1];
-        VZ[l] = v[o + 2];
-        DX[l] = DY[l] = DZ[l] = T(0);
-        if constexpr (kPos) PX[l] = PY[l] = PZ[l] = T(0);
+      window_make_room(A, narr, cap, need, qfin, fill, ws);
+      if (fill < need) {
+        window_load3(x, fill, need, ws, X, Y, Z);
+        window_load3(v, fill, need, ws, VX, VY, VZ);
+        window_zero3(fill, need, ws, DX, DY, DZ);
+        if constexpr (kPos) window_zero3(fill, need, ws, PX, PY, PZ);
+        fill = need;
       }
       for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
         const auto& G = s.segs[sg];
@@ -513,20 +506,15 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
         const T* ex = kPos ? P.ex + off : nullptr;
         const T* ev = kPos ? P.ev + off : nullptr;
         const Index a = G.i0 - ws;
-        const bool uni = Table && uniform != nullptr && uniform[sg];
         const T* l0 = P.l0 + off;
         const T* kx = P.kx + off;
         const T* kv = P.kv + off;
-        // One run with its stride (1 or 2) and uniform-constant flag as template arguments.
+        // One run with its stride (1 or 2) as a template argument.
         const auto run = [&]<int Step>() {
-          if (uni)
-            ho_window_impulses<T, Vi, Table, true, Step, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z,
-                                                             VX, VY, VZ, w, Gi, Gj, Qi, Qj);
-          else
-            ho_window_impulses<T, Vi, Table, false, Step, Bk>(G.len, a, G.off, G.i0, id, l0, kx, kv, ex, ev, X, Y, Z,
-                                                              VX, VY, VZ, w, Gi, Gj, Qi, Qj);
-          ho_window_scatter<T, Step, Bk>(G.len, a, G.off, DX, DY, DZ, Gi, Gj);
-          if constexpr (kPos) ho_window_scatter<T, Step, Bk>(G.len, a, G.off, PX, PY, PZ, Qi, Qj);
+          ho_window_impulses<T, Vi, Table, Step, Bk>(G.len, a, G.off, id, l0, kx, kv, ex, ev, X, Y, Z, VX, VY, VZ,
+                                                     Gb, Qb);
+          window_segment_scatter<T, Step, Bk>(G.len, a, G.off, DX, DY, DZ, Gb);
+          if constexpr (kPos) window_segment_scatter<T, Step, Bk>(G.len, a, G.off, PX, PY, PZ, Qb);
         };
         if (G.step == 1)
           run.template operator()<1>();
@@ -546,14 +534,14 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
             dx[o + 2] += PZ[l];
           }
         } else {
-          const T dq[3] = {DX[l], DY[l], DZ[l]};
-          T pq[3] = {T(0), T(0), T(0)};
+          const T sv[3] = {DX[l], DY[l], DZ[l]};
+          T sp[3] = {T(0), T(0), T(0)};
           if constexpr (kPos) {
-            pq[0] = PX[l];
-            pq[1] = PY[l];
-            pq[2] = PZ[l];
+            sp[0] = PX[l];
+            sp[1] = PY[l];
+            sp[2] = PZ[l];
           }
-          kernels::ho_finalise_vertex<T, kPos>(x + o, v + o, dq, pq, w[qfin], h, hg, gg);
+          finish(qfin, sv, sp);
         }
       }
     }
@@ -613,11 +601,15 @@ class HoIntegrator final : public Integrator {
   const VertexOrder& order() const { return order_; }
   bool reordered() const { return !order_.identity(); }
   HoReorder reorder_mode() const { return reorder_; }
+  /// Keep the parameter tables on the windowed grouped sweep too (the storage before per-spring
+  /// streams became the default there; tests and benchmarks compare the two). Call before prepare.
+  void set_tables_on_window(bool on) { tables_on_window_ = on; }
 
  private:
   HoVariant variant_ = HoVariant::Velocity;
   bool allow_table_ = true;
   bool allow_grouping_ = true;
+  bool tables_on_window_ = false;
   SpringLayout layout_;
   HoSprings<double> springs_;
   HoReorder reorder_ = HoReorder::Auto;

@@ -50,41 +50,23 @@ void allocate_ho_window(Springs& s, int parts) {
                0);
 }
 
-/// Table storage: seg_uniform[sg] = 1 when every spring of segment sg has the same parameter id
-/// (on a uniform cloth most do), so that the impulse loop reads its constants once instead of
-/// gathering them per spring. Cleared for direct storage or ungrouped springs.
-template <class Springs>
-void mark_uniform_segments(Springs& s) {
-  s.seg_uniform.clear();
-  if (!s.table || !s.grouped) return;
-  s.seg_uniform.assign(s.segs.size(), 0);
-  for (std::size_t sg = 0; sg < s.segs.size(); ++sg) {
-    const auto& G = s.segs[sg];
-    bool same = true;
-    for (Index r = 1; r < G.len && same; ++r) same = s.id[G.begin + r] == s.id[G.begin];
-    s.seg_uniform[sg] = same ? 1 : 0;
-  }
-}
-
 /// Per-segment impulse loop on the window: springs (a + Step r, a + Step r + off) in window
-/// coordinates (Uniform: every spring has parameter id ID[0]), inverse masses from the user-order array at global index i0 + Step r. Writes
-/// the w-weighted impulses of both ends into G (3 x kHoVertexBlock, SoA) and, for
-/// analytic_position, the displacements into Q. The arithmetic is kernels::ho_spring_velocity's
-/// (ho_spring_axis) operation for operation.
-template <class T, int V, bool Table, bool Uniform, int Step, Index Bk>
-inline void ho_window_impulses(Index len, Index a, Index off, Index i0, const std::uint16_t* __restrict ID,
+/// coordinates; constants per spring, read contiguously (Table: gathered from the tables by id). Writes each spring's impulse per unit inverse mass g = s n into
+/// G (3 x Bk, SoA) and, for analytic_position, its displacement per unit inverse mass into Q: the
+/// endpoints' inverse masses are applied once per vertex when it is finalised, not per spring.
+/// The arithmetic is kernels::ho_spring_velocity's (ho_spring_axis) operation for operation.
+template <class T, int V, bool Table, int Step, Index Bk>
+inline void ho_window_impulses(Index len, Index a, Index off, const std::uint16_t* __restrict ID,
                                const T* __restrict L0, const T* __restrict KX, const T* __restrict KV,
                                const T* __restrict EX, const T* __restrict EV, const T* __restrict X,
                                const T* __restrict Y, const T* __restrict Z, const T* __restrict VX,
-                               const T* __restrict VY, const T* __restrict VZ, const T* __restrict w,
-                               T* __restrict Gi, T* __restrict Gj, T* __restrict Qi, T* __restrict Qj) {
+                               const T* __restrict VY, const T* __restrict VZ, T* __restrict G, T* __restrict Q) {
   constexpr bool kPos = V == 1;   // HoVariant::AnalyticPosition
   constexpr bool kKc = V == 2;    // HoVariant::KangCho2011
   const T tiny = std::numeric_limits<T>::min();
-  const std::size_t c0 = Table ? static_cast<std::size_t>(ID[0]) : 0;
   for (Index r = 0; r < len; ++r) {
     const Index p = a + Step * r, q = p + off;
-    const std::size_t c = Table ? (Uniform ? c0 : static_cast<std::size_t>(ID[r])) : static_cast<std::size_t>(r);
+    const std::size_t c = Table ? static_cast<std::size_t>(ID[r]) : static_cast<std::size_t>(r);
     using std::sqrt;
     using std::abs;
     const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
@@ -99,41 +81,15 @@ inline void ho_window_impulses(Index len, Index a, Index off, Index i0, const st
       sv = KX[c] * delta + KV[c] * abs(ddot);
     else
       sv = KX[c] * delta + KV[c] * ddot;
-    const T g0 = sv * n0, g1 = sv * n1, g2 = sv * n2;
-    const T wi = w[i0 + Step * r], wj = w[i0 + off + Step * r];
-    Gi[r] = wi * g0;
-    Gi[Bk + r] = wi * g1;
-    Gi[2 * Bk + r] = wi * g2;
-    Gj[r] = wj * g0;
-    Gj[Bk + r] = wj * g1;
-    Gj[2 * Bk + r] = wj * g2;
+    G[r] = sv * n0;
+    G[Bk + r] = sv * n1;
+    G[2 * Bk + r] = sv * n2;
     if constexpr (kPos) {
       const T e = EX[c] * delta + EV[c] * ddot;
-      const T p0 = e * n0, p1 = e * n1, p2 = e * n2;
-      Qi[r] = wi * p0;
-      Qi[Bk + r] = wi * p1;
-      Qi[2 * Bk + r] = wi * p2;
-      Qj[r] = wj * p0;
-      Qj[Bk + r] = wj * p1;
-      Qj[2 * Bk + r] = wj * p2;
+      Q[r] = e * n0;
+      Q[Bk + r] = e * n1;
+      Q[2 * Bk + r] = e * n2;
     }
-  }
-}
-
-/// Adds +Gi at window vertices a + Step r, then -Gj at a + off + Step r (two passes: the ranges
-/// may overlap), per component: the order of the plain sweep's ho_segment_scatter.
-template <class T, int Step, Index Bk>
-inline void ho_window_scatter(Index len, Index a, Index off, T* __restrict AX, T* __restrict AY, T* __restrict AZ,
-                              const T* __restrict Gi, const T* __restrict Gj) {
-  for (Index r = 0; r < len; ++r) {
-    AX[a + Step * r] += Gi[r];
-    AY[a + Step * r] += Gi[Bk + r];
-    AZ[a + Step * r] += Gi[2 * Bk + r];
-  }
-  for (Index r = 0; r < len; ++r) {
-    AX[a + off + Step * r] -= Gj[r];
-    AY[a + off + Step * r] -= Gj[Bk + r];
-    AZ[a + off + Step * r] -= Gj[2 * Bk + r];
   }
 }
 
