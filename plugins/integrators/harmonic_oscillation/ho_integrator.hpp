@@ -57,7 +57,8 @@ struct HoSprings {
   std::vector<T> ex, ev;          ///< position constants (analytic_position only)
   // Table storage: when the springs have few distinct (l0, k, c, w_i + w_j), each spring stores
   // a 16-bit id into small tables instead of its own l0 and constants (10 instead of 32 bytes
-  // per spring in double); the per-spring kx, kv, ex, ev are then empty.
+  // per spring in double); the per-spring kx, kv, ex, ev are then empty. Not used on the
+  // windowed grouped sweep unless asked for (ho_tables_wanted): it streams per-spring constants.
   bool table = false;
   std::vector<std::uint16_t> id;
   std::vector<T> t_l0, t_kx, t_kv, t_ex, t_ev;
