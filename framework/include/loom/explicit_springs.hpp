@@ -233,12 +233,9 @@ struct SpringSweep {
         const SpringBlock& B = blocks[bk];
         const Index need = block_need[bk];
         window_make_room(A, narr, cap, need, qfin, fill, ws);
-        if (fill < need) {
-          window_load3(x, fill, need, ws, X, Y, Z);
-          if constexpr (Damped) window_load3(v, fill, need, ws, VX, VY, VZ);
-          window_zero3(fill, need, ws, FX, FY, FZ);
-          fill = need;
-        }
+        window_fill<T, Damped, false>(x, v, fill, need, ws, X, Y, Z, VX, VY, VZ, FX, FY, FZ, nullptr, nullptr,
+                                      nullptr);
+        fill = std::max(fill, need);
         for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
           const SpringSegment& G = segs[sg];
           const Index a = G.i0 - ws;

@@ -159,24 +159,28 @@ inline void window_arrays(T* win, int p, Index cap, T* (&A)[N]) {
   for (int e = 0; e < N; ++e) A[e] = base + static_cast<std::size_t>(e) * static_cast<std::size_t>(cap);
 }
 
-/// Copy the vertices [from, to) of an interleaved 3n array (x0 y0 z0 x1 ...) into the window
-/// arrays X, Y, Z (window slot = vertex - ws).
-template <class T>
-inline void window_load3(const T* __restrict src, Index from, Index to, Index ws, T* __restrict X, T* __restrict Y,
-                         T* __restrict Z) {
+/// Fill the window slots of the vertices [from, to) in one pass: x (interleaved 3n array, x0 y0
+/// z0 x1 ...) into X, Y, Z; with WithV also v into VX, VY, VZ; the accumulators A0, A1, A2 (and,
+/// with SixAcc, A3, A4, A5) zeroed. Window slot = vertex - ws.
+template <class T, bool WithV, bool SixAcc>
+inline void window_fill(const T* __restrict x, const T* __restrict v, Index from, Index to, Index ws,
+                        T* __restrict X, T* __restrict Y, T* __restrict Z, T* __restrict VX, T* __restrict VY,
+                        T* __restrict VZ, T* __restrict A0, T* __restrict A1, T* __restrict A2, T* __restrict A3,
+                        T* __restrict A4, T* __restrict A5) {
   for (Index q = from; q < to; ++q) {
     const std::size_t o = 3 * static_cast<std::size_t>(q);
     const Index l = q - ws;
-    X[l] = src[o];
-    Y[l] = src[o + 1];
-    Z[l] = src[o + 2];
+    X[l] = x[o];
+    Y[l] = x[o + 1];
+    Z[l] = x[o + 2];
+    A0[l] = A1[l] = A2[l] = T(0);
+    if constexpr (WithV) {
+      VX[l] = v[o];
+      VY[l] = v[o + 1];
+      VZ[l] = v[o + 2];
+    }
+    if constexpr (SixAcc) A3[l] = A4[l] = A5[l] = T(0);
   }
-}
-
-/// Zero the window slots of the vertices [from, to) in the arrays X, Y, Z.
-template <class T>
-inline void window_zero3(Index from, Index to, Index ws, T* __restrict X, T* __restrict Y, T* __restrict Z) {
-  for (Index l = from - ws; l < to - ws; ++l) X[l] = Y[l] = Z[l] = T(0);
 }
 
 /// A segment's per-spring vectors F (3 x Bk, structure of arrays) added at window vertices

@@ -493,13 +493,8 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
       const auto& B = s.blocks[bk];
       const Index need = s.block_need[bk];
       window_make_room(A, narr, cap, need, qfin, fill, ws);
-      if (fill < need) {
-        window_load3(x, fill, need, ws, X, Y, Z);
-        window_load3(v, fill, need, ws, VX, VY, VZ);
-        window_zero3(fill, need, ws, DX, DY, DZ);
-        if constexpr (kPos) window_zero3(fill, need, ws, PX, PY, PZ);
-        fill = need;
-      }
+      window_fill<T, true, kPos>(x, v, fill, need, ws, X, Y, Z, VX, VY, VZ, DX, DY, DZ, PX, PY, PZ);
+      fill = std::max(fill, need);
       for (Index sg = B.seg_begin; sg < B.seg_end; ++sg) {
         const auto& G = s.segs[sg];
         const std::size_t off = Table ? 0 : static_cast<std::size_t>(G.begin);
