@@ -1,5 +1,8 @@
-// The 3x3-block row product y_i = sum_k A_ik x_col(k), shared by the filtered PCG's SpMV
-// (eigen_pcg.cpp) and the smoothed-aggregation smoother and residual (sa_amg.cpp).
+// The block-row products y_i = sum_k A_ik x_col(k) over 3x3 and 6x6 blocks, one template for
+// blocks stored in double or in float (widened to double on load; x, y and every sum stay
+// double). Shared by the filtered PCG's SpMV (eigen_pcg.cpp, double A or its float copy,
+// float_spmv.hpp), the SpMV from the upper triangle (upper_spmv.hpp) and the
+// smoothed-aggregation smoother and residual (sa_amg.cpp, every level, either storage).
 #pragma once
 
 #if defined(__AVX2__) && defined(__FMA__)
@@ -7,26 +10,63 @@
 #endif
 
 #include <cstddef>
+#include <type_traits>
 
 #include "loom/common.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 
 namespace loom {
 
-// y_i = sum_k A_ik x_col(k) over block row i. The AVX2 path keeps one 4-lane accumulator
-// per block row (lane 3 multiplies a zero) and reduces once per vertex instead of once per
-// block; the scalar path is the shared kernel.
-inline void block_row_multiply3(const Index* rp, const Index* col, const double* val, const double* x, Index i,
-                         double* yi) {
 #if defined(__AVX2__) && defined(__FMA__)
+namespace block_row_detail {
+
+// 4 entries from p as doubles.
+template <class T>
+inline __m256d load4(const T* p) {
+  if constexpr (std::is_same_v<T, float>)
+    return _mm256_cvtps_pd(_mm_loadu_ps(p));
+  else
+    return _mm256_loadu_pd(p);
+}
+// 3 entries from p as doubles, lane 3 zero (reads nothing past p[2]).
+template <class T>
+inline __m256d load3(const T* p) {
+  if constexpr (std::is_same_v<T, float>)
+    return _mm256_cvtps_pd(_mm_maskload_ps(p, _mm_setr_epi32(-1, -1, -1, 0)));
+  else
+    return _mm256_maskload_pd(p, _mm256_setr_epi64x(-1, -1, -1, 0));
+}
+// 2 entries from p as doubles.
+template <class T>
+inline __m128d load2(const T* p) {
+  if constexpr (std::is_same_v<T, float>)
+    return _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
+  else
+    return _mm_loadu_pd(p);
+}
+
+}  // namespace block_row_detail
+#endif
+
+// y_i = sum_k A_ik x_col(k) over block row i of a 3x3-block matrix (9 values of T per block).
+// The AVX2 path keeps one 4-lane accumulator per block row and reduces once per vertex
+// instead of once per block; the first two rows of a block are read 4 wide, their 4th lane
+// (the next entry of the block, finite) multiplying x's masked zero, the last row by a masked
+// load, so nothing is read past the last block. The scalar double path is the shared kernel.
+template <class T>
+inline void block_row_multiply3(const Index* rp, const Index* col, const T* val, const double* x, Index i,
+                                double* yi) {
+  static_assert(std::is_same_v<T, double> || std::is_same_v<T, float>);
+#if defined(__AVX2__) && defined(__FMA__)
+  using namespace block_row_detail;
   const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
   __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd();
   for (Index k = rp[i]; k < rp[i + 1]; ++k) {
-    const double* B = val + 9 * static_cast<std::size_t>(k);
+    const T* B = val + 9 * static_cast<std::size_t>(k);
     const __m256d xv = _mm256_maskload_pd(x + 3 * static_cast<std::size_t>(col[k]), m3);
-    a0 = _mm256_fmadd_pd(_mm256_loadu_pd(B), xv, a0);
-    a1 = _mm256_fmadd_pd(_mm256_loadu_pd(B + 3), xv, a1);
-    a2 = _mm256_fmadd_pd(_mm256_maskload_pd(B + 6, m3), xv, a2);
+    a0 = _mm256_fmadd_pd(load4(B), xv, a0);
+    a1 = _mm256_fmadd_pd(load4(B + 3), xv, a1);
+    a2 = _mm256_fmadd_pd(load3(B + 6), xv, a2);
   }
   const __m256d h01 = _mm256_hadd_pd(a0, a1);  // [a0_0+a0_1, a1_0+a1_1, a0_2+a0_3, a1_2+a1_3]
   const __m128d s01 = _mm_add_pd(_mm256_castpd256_pd128(h01), _mm256_extractf128_pd(h01, 1));
@@ -35,7 +75,63 @@ inline void block_row_multiply3(const Index* rp, const Index* col, const double*
   yi[1] = _mm_cvtsd_f64(_mm_unpackhi_pd(s01, s01));
   yi[2] = _mm_cvtsd_f64(_mm_add_sd(l2, _mm_unpackhi_pd(l2, l2)));
 #else
-  kernels::bsr_row_multiply(rp, col, val, x, i, yi);
+  if constexpr (std::is_same_v<T, double>) {
+    kernels::bsr_row_multiply(rp, col, val, x, i, yi);
+  } else {
+    double y0 = 0, y1 = 0, y2 = 0;
+    for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+      const T* B = val + 9 * static_cast<std::size_t>(k);
+      const double* xj = x + 3 * static_cast<std::size_t>(col[k]);
+      y0 += double(B[0]) * xj[0] + double(B[1]) * xj[1] + double(B[2]) * xj[2];
+      y1 += double(B[3]) * xj[0] + double(B[4]) * xj[1] + double(B[5]) * xj[2];
+      y2 += double(B[6]) * xj[0] + double(B[7]) * xj[1] + double(B[8]) * xj[2];
+    }
+    yi[0] = y0;
+    yi[1] = y1;
+    yi[2] = y2;
+  }
+#endif
+}
+
+// y_i = sum_k A_ik x_col(k) over block row i of a 6x6-block matrix (36 values of T per
+// block): per row of the block one 4-lane and one 2-lane accumulator, reduced once per row.
+template <class T>
+inline void block_row_multiply6(const Index* rp, const Index* col, const T* val, const double* x, Index i,
+                                double* yi) {
+  static_assert(std::is_same_v<T, double> || std::is_same_v<T, float>);
+#if defined(__AVX2__) && defined(__FMA__)
+  using namespace block_row_detail;
+  __m256d a[6];
+  __m128d c[6];
+  for (int r = 0; r < 6; ++r) {
+    a[r] = _mm256_setzero_pd();
+    c[r] = _mm_setzero_pd();
+  }
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+    const T* B = val + 36 * static_cast<std::size_t>(k);
+    const double* xk = x + 6 * static_cast<std::size_t>(col[k]);
+    const __m256d x4 = _mm256_loadu_pd(xk);
+    const __m128d x2 = _mm_loadu_pd(xk + 4);
+    for (int r = 0; r < 6; ++r) {
+      a[r] = _mm256_fmadd_pd(load4(B + 6 * r), x4, a[r]);
+      c[r] = _mm_fmadd_pd(load2(B + 6 * r + 4), x2, c[r]);
+    }
+  }
+  for (int r = 0; r < 6; ++r) {
+    const __m128d h = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a[r]), _mm256_extractf128_pd(a[r], 1)), c[r]);
+    yi[r] = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
+  }
+#else
+  for (int r = 0; r < 6; ++r) yi[r] = 0;
+  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
+    const T* B = val + 36 * static_cast<std::size_t>(k);
+    const double* xk = x + 6 * static_cast<std::size_t>(col[k]);
+    for (int r = 0; r < 6; ++r) {
+      double s = 0;
+      for (int q = 0; q < 6; ++q) s += double(B[6 * r + q]) * xk[q];
+      yi[r] += s;
+    }
+  }
 #endif
 }
 

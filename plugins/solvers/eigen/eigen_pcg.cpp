@@ -277,7 +277,7 @@ struct CpuPcgOps {
     for (Index i = 0; i < n; ++i) {
       const std::size_t o = 3 * static_cast<std::size_t>(i);
       if (af)
-        block_row_multiply3f(rp, col, af, cp, i, qp + o);
+        block_row_multiply3(rp, col, af, cp, i, qp + o);
       else if (upper)
         upper->row(A, cp, i, qp + o);
       else
