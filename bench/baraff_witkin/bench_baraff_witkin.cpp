@@ -19,6 +19,8 @@
 //   LOOM_BENCH_SIZES=32,64,128,256,512 (default) selects the grids.
 #include <benchmark/benchmark.h>
 
+#include <dlfcn.h>
+
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -219,6 +221,17 @@ std::vector<SolverVariant> variants() {
   amg.amg.aggressive_levels = 2;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_aggressive2", false, amg});
   amg.amg.aggressive_levels = 0;
+  // The defaults before the range rule and the float diagonal inverses (A/B, issue 15):
+  // 8 ranges on every threaded level, double diagonal inverses; and each change alone.
+  amg.amg.min_part_dofs = 0;
+  amg.amg.float_diagonal = false;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_before", false, amg});
+  amg.amg.float_diagonal = true;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_ranges8", false, amg});
+  amg.amg.min_part_dofs = loom::amg::SaAmgOptions{}.min_part_dofs;
+  amg.amg.float_diagonal = false;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_doublediag", false, amg});
+  amg.amg.float_diagonal = true;
   amg.amg.float_storage = false;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_double", false, amg});
   amg.amg.float_storage = true;
@@ -300,8 +313,49 @@ void BM_DrapeSolver(benchmark::State& st, SolverVariant var, int n, int warmup) 
   });
 }
 
+// Bytes one PCG iteration with the sa_amg V-cycle reads and writes, by a count over the
+// hierarchy (NUMERICS.md 3.6): matrix blocks with their column index per pass, the diagonal
+// inverses, P and R, the dense coarsest factor, and the vectors, each once per kernel that
+// streams it. Level passes: the fused first sweep reads a clean row once, another interior
+// row 1.5 times (the lower part, then the whole row) and a boundary row twice; the backward
+// sweep once. Counter `mb_per_iter`; `gb_per_s` divides it by the CPU time per iteration.
+double model_bytes_per_iteration(const loom::EigenPcg& pcg) {
+  const loom::amg::SaAmg* amg = const_cast<loom::EigenPcg&>(pcg).amg();
+  if (!amg) return 0;
+  const auto& lv = amg->levels();
+  const double vb = amg->options().float_storage ? 4.0 : 8.0;
+  const double db = amg->options().float_storage && amg->options().float_diagonal ? 4.0 : 8.0;
+  const double n0 = static_cast<double>(lv[0].rows);
+  double bytes = static_cast<double>(lv[0].nnz_blocks) * (72 + 4) + 4 * n0;  // the PCG's double SpMV
+  bytes += 17 * 24 * n0;  // SpMV c, q; update x, c, r, q (+x, r written); xpby s, c (+c); filter s, s; dot r, s
+  for (std::size_t l = 0; l < lv.size(); ++l) {
+    const auto& L = lv[l];
+    const double rows = static_cast<double>(L.rows), b = L.block;
+    const double dofs = rows * b;
+    if (l + 1 == lv.size()) {
+      bytes += dofs * dofs * 8 + 3 * dofs * 8;  // two triangular solves on the dense factor
+      break;
+    }
+    const double row_bytes = static_cast<double>(L.nnz_blocks) / rows * (b * b * vb + 4) + 4;
+    const double clean = static_cast<double>(L.clean_rows), bnd = static_cast<double>(L.boundary_rows);
+    const double interior_other = rows - clean - bnd;
+    bytes += row_bytes * (clean + 1.5 * interior_other + 2 * bnd);  // fused forward sweep + residual
+    bytes += row_bytes * rows;                                     // backward sweep
+    bytes += 2 * rows * b * b * db;                                // diagonal inverses, both sweeps
+    const double m = lv[l + 1].block;
+    bytes += 2 * (static_cast<double>(L.p_nnz_blocks) * (b * m * vb + 4) + 4 * rows);  // R, P
+    bytes += 10 * dofs * 8;  // b, x, r in the sweeps, r in R r, x in x += P xc
+  }
+  return bytes;
+}
+
 void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, const std::function<double()>& step) {
   t->reset_counts();
+  // Heap allocations in the timed steps, when the run preloads a malloc counter exporting
+  // `loom_probe_mallocs` (NUMERICS.md 3.6 has the 20-line preload library and the command).
+  using Count = unsigned long long (*)();
+  const auto mallocs = reinterpret_cast<Count>(dlsym(RTLD_DEFAULT, "loom_probe_mallocs"));
+  const unsigned long long m_start = mallocs ? mallocs() : 0;
   const loom::amg::SaAmgTimings t_start = pcg && pcg->amg() ? pcg->amg()->timings() : loom::amg::SaAmgTimings{};
   double step_s = 0, assemble = 0;
   long steps = 0;
@@ -314,6 +368,7 @@ void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, cons
   }
   if (t->measure_saved)
     st.counters["iters_saved"] = static_cast<double>(t->cold_iterations - t->iterations) / std::max(1L, t->solves);
+  if (mallocs) st.counters["mallocs_per_step"] = static_cast<double>(mallocs() - m_start) / std::max(1L, steps);
   st.counters["vertices"] = n * n;
   st.counters["setup_ms"] = 1e3 * t->setup;
   st.counters["factorize_ms"] = 1e3 * t->factorize_total / std::max(1L, t->solves);
@@ -338,9 +393,14 @@ void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, cons
     const auto& lv = pcg->amg()->levels();
     st.counters["l0_blocks_per_row"] = static_cast<double>(lv[0].nnz_blocks) / lv[0].rows;
     st.counters["l0_p_blocks_per_row"] = static_cast<double>(lv[0].p_nnz_blocks) / lv[0].rows;
+    st.counters["l0_boundary_frac"] = static_cast<double>(lv[0].boundary_rows) / lv[0].rows;
+    st.counters["l0_clean_frac"] = static_cast<double>(lv[0].clean_rows) / lv[0].rows;
+    st.counters["mb_per_iter"] = 1e-6 * model_bytes_per_iteration(*pcg);
     if (lv.size() > 1) {
       st.counters["l1_rows"] = static_cast<double>(lv[1].rows);
       st.counters["l1_blocks_per_row"] = static_cast<double>(lv[1].nnz_blocks) / lv[1].rows;
+      st.counters["l1_boundary_frac"] = static_cast<double>(lv[1].boundary_rows) / lv[1].rows;
+      st.counters["l1_clean_frac"] = static_cast<double>(lv[1].clean_rows) / lv[1].rows;
     }
   }
 }

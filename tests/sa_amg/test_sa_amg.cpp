@@ -8,6 +8,7 @@
 #include <omp.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <random>
@@ -230,6 +231,7 @@ TEST(SaAmg, SameAnswerOnOneAndTwoThreads) {
     auto o = amg_pcg(1e-8);
     o.parallel_min_rows = 0;       // the threaded loops, on a small system
     o.amg.parallel_min_dofs = 0;
+    o.amg.min_part_dofs = 0;  // 8 ranges
     o.amg.coarse_dofs = 100;
     loom::EigenPcg p(o);
     p.set_coordinates(s.x);
@@ -243,6 +245,55 @@ TEST(SaAmg, SameAnswerOnOneAndTwoThreads) {
   omp_set_num_threads(saved);
   const Eigen::Map<const Eigen::VectorXd> b(out[1].data(), static_cast<Eigen::Index>(out[1].size()));
   EXPECT_LT(ts::rel_diff(out[0], b), 1e-8);
+}
+
+// min_part_dofs: a threaded level is cut into clamp(DOFs / min_part_dofs, 2, 8) row ranges
+// (8 when 0). Fewer, longer ranges leave fewer boundary rows (the rows swept by colour, which
+// read their row twice in the fused first sweep). The count follows the level's size, so the
+// V-cycle is the same on one and two threads (bitwise), and it stays symmetric and SPD.
+TEST(SaAmg, RangeCountFollowsLevelSizeSameOnAnyThreadsAndSpd) {
+  ts::System s = ts::cloth(14, 1e-3, 1e3, 23);  // 588 DOFs
+  std::mt19937_64 rng(23);
+  ts::random_constraints(s, rng, 0.01, 0.05, 0.05, true);
+  const int saved = omp_get_max_threads();
+  SaAmgOptions o = small_coarse();
+  o.parallel_min_dofs = 0;
+  o.min_part_dofs = 190;
+  SaAmgOptions o8 = o;
+  o8.min_part_dofs = 0;
+  std::string msg;
+  SaAmg M8(o8), M(o);
+  ASSERT_TRUE(M8.setup(s.A, s.S, s.x, msg)) << msg;
+  ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
+  const auto& lv = M.levels();
+  ASSERT_GE(lv.size(), 3u);
+  for (std::size_t l = 0; l + 1 < lv.size(); ++l) {
+    const Index dofs = lv[l].rows * lv[l].block;
+    EXPECT_EQ(lv[l].parts, std::clamp<Index>(dofs / 190, 2, 8)) << "level " << l;
+    EXPECT_EQ(M8.levels()[l].parts, 8) << "level " << l;
+  }
+  EXPECT_EQ(lv[0].parts, 3);
+  EXPECT_LT(lv[0].boundary_rows, M8.levels()[0].boundary_rows);
+  EXPECT_GT(lv[0].clean_rows, M8.levels()[0].clean_rows);
+  // The V-cycle (set up once) applied on one and on two threads: bitwise the same.
+  std::vector<double> r(3 * s.n);
+  for (std::size_t k = 0; k < r.size(); ++k) r[k] = std::sin(0.37 * static_cast<double>(k) + 0.1);
+  loom::solver::filter(s.S, r);
+  std::vector<std::vector<double>> out;
+  for (int t : {1, 2}) {
+    omp_set_num_threads(t);
+    out.emplace_back(r.size());
+    M.apply(r.data(), out.back().data());
+  }
+  omp_set_num_threads(1);  // the dense check: one thread (barriers on a loaded machine are slow)
+  EXPECT_EQ(out[0], out[1]) << "the range schedule must not depend on the threads";
+  const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
+  EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11);
+  const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
+  const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
+  EXPECT_GT(es.eigenvalues().minCoeff(), 0.0);
+  omp_set_num_threads(saved);
 }
 
 TEST(SaAmg, IndefiniteSystemIsReported) {
@@ -429,6 +480,19 @@ TEST(SaAmg, FloatStorageStaysSpdAndExact) {
     const Eigen::MatrixXd Dd = dense_preconditioner(Md, s.S, s.n);
     EXPECT_LT((D - Dd).cwiseAbs().maxCoeff() / Dd.cwiseAbs().maxCoeff(), 1e-4) << "n " << s.n;
     EXPECT_GT((D - Dd).cwiseAbs().maxCoeff(), 0.0) << "the float copies must be what the V-cycle reads";
+    // float_diagonal (the default): the smoother's diagonal inverses are the symmetrised float
+    // copies; with double ones the V-cycle is also symmetric and SPD, and the two differ by
+    // float rounding (and do differ: the float inverses are what the sweeps read).
+    SaAmgOptions fdd = small_coarse();
+    fdd.float_diagonal = false;
+    SaAmg Mfd(fdd);
+    ASSERT_TRUE(Mfd.setup(s.A, s.S, s.x, msg)) << msg;
+    const Eigen::MatrixXd Dfd = dense_preconditioner(Mfd, s.S, s.n);
+    EXPECT_LT((Dfd - Dfd.transpose()).cwiseAbs().maxCoeff() / Dfd.cwiseAbs().maxCoeff(), 1e-11) << "n " << s.n;
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> esd(0.5 * (Dfd + Dfd.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
+    EXPECT_GT(esd.eigenvalues().minCoeff(), 0.0) << "n " << s.n;
+    EXPECT_LT((D - Dfd).cwiseAbs().maxCoeff() / Dfd.cwiseAbs().maxCoeff(), 1e-4) << "n " << s.n;
+    EXPECT_GT((D - Dfd).cwiseAbs().maxCoeff(), 0.0) << "the float diagonal inverses must be what the sweeps read";
 
     int its[2] = {0, 0};
     for (int f = 0; f < 2; ++f) {
@@ -461,6 +525,7 @@ TEST(SaAmg, RangeScheduleWithBoundaryRowsIsSpdAndExact) {
   for (ts::System& s : systems()) {
     SaAmgOptions o = small_coarse();
     o.parallel_min_dofs = 0;
+    o.min_part_dofs = 0;  // 8 ranges
     SaAmg M(o);
     std::string msg;
     ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
@@ -510,6 +575,7 @@ TEST(SaAmg, SweepCountsPerLevelStaySpdMonotoneAndExact) {
         o.smoothing_sweeps = fine;
         o.coarse_smoothing_sweeps = coarse;
         o.parallel_min_dofs = min_dofs;
+        o.min_part_dofs = 0;  // 8 ranges when threaded
         SaAmg M(o);
         std::string msg;
         ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;

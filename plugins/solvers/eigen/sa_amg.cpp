@@ -64,96 +64,6 @@ inline void gemm_add(const double* A, const double* B, double* Cm) {
 }
 
 
-// y = sum_k A_ik x_col(k) over block row i of a 6x6-block matrix: per row of the block one
-// 4-lane and one 2-lane accumulator, reduced once per block row.
-inline void row_multiply6(const Index* rp, const Index* col, const double* val, const double* x, Index i,
-                          double* yi) {
-#if defined(__AVX2__) && defined(__FMA__)
-  __m256d a[6];
-  __m128d c[6];
-  for (int r = 0; r < 6; ++r) {
-    a[r] = _mm256_setzero_pd();
-    c[r] = _mm_setzero_pd();
-  }
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
-    const double* B = val + 36 * static_cast<std::size_t>(k);
-    const double* xk = x + 6 * static_cast<std::size_t>(col[k]);
-    const __m256d x4 = _mm256_loadu_pd(xk);
-    const __m128d x2 = _mm_loadu_pd(xk + 4);
-    for (int r = 0; r < 6; ++r) {
-      a[r] = _mm256_fmadd_pd(_mm256_loadu_pd(B + 6 * r), x4, a[r]);
-      c[r] = _mm_fmadd_pd(_mm_loadu_pd(B + 6 * r + 4), x2, c[r]);
-    }
-  }
-  for (int r = 0; r < 6; ++r) {
-    const __m128d h = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a[r]), _mm256_extractf128_pd(a[r], 1)), c[r]);
-    yi[r] = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
-  }
-#else
-  for (int r = 0; r < 6; ++r) yi[r] = 0;
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<6, 6>(val + 36 * static_cast<std::size_t>(k), x + 6 * static_cast<std::size_t>(col[k]), yi);
-#endif
-}
-
-// Float-storage versions of the two block-row products (sa_amg storage: float): the blocks
-// are read as floats and widened, the sums are in double.
-inline void row_multiply3f(const Index* rp, const Index* col, const float* val, const double* x, Index i,
-                           double* yi) {
-#if defined(__AVX2__) && defined(__FMA__)
-  const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
-  const __m128i m3f = _mm_setr_epi32(-1, -1, -1, 0);
-  __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd();
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
-    const float* B = val + 9 * static_cast<std::size_t>(k);
-    const __m256d xv = _mm256_maskload_pd(x + 3 * static_cast<std::size_t>(col[k]), m3);
-    a0 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B)), xv, a0);
-    a1 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B + 3)), xv, a1);
-    a2 = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_maskload_ps(B + 6, m3f)), xv, a2);
-  }
-  // lane 3 of a0 and a1 multiplies x's masked zero (the float read past the row is finite:
-  // the next block's entry or, for the last block, lane 3 of the masked load).
-  const __m256d h01 = _mm256_hadd_pd(a0, a1);
-  const __m128d s01 = _mm_add_pd(_mm256_castpd256_pd128(h01), _mm256_extractf128_pd(h01, 1));
-  const __m128d l2 = _mm_add_pd(_mm256_castpd256_pd128(a2), _mm256_extractf128_pd(a2, 1));
-  yi[0] = _mm_cvtsd_f64(s01);
-  yi[1] = _mm_cvtsd_f64(_mm_unpackhi_pd(s01, s01));
-  yi[2] = _mm_cvtsd_f64(_mm_add_sd(l2, _mm_unpackhi_pd(l2, l2)));
-#else
-  for (int r = 0; r < 3; ++r) yi[r] = 0;
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<3, 3>(val + 9 * static_cast<std::size_t>(k), x + 3 * static_cast<std::size_t>(col[k]), yi);
-#endif
-}
-
-inline void row_multiply6f(const Index* rp, const Index* col, const float* val, const double* x, Index i,
-                           double* yi) {
-#if defined(__AVX2__) && defined(__FMA__)
-  __m256d a[6];
-  __m128d c[6];
-  for (int r = 0; r < 6; ++r) {
-    a[r] = _mm256_setzero_pd();
-    c[r] = _mm_setzero_pd();
-  }
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) {
-    const float* B = val + 36 * static_cast<std::size_t>(k);
-    const double* xk = x + 6 * static_cast<std::size_t>(col[k]);
-    const __m256d x4 = _mm256_loadu_pd(xk);
-    const __m128d x2 = _mm_loadu_pd(xk + 4);
-    for (int r = 0; r < 6; ++r) {
-      a[r] = _mm256_fmadd_pd(_mm256_cvtps_pd(_mm_loadu_ps(B + 6 * r)), x4, a[r]);
-      const __m128 f2 = _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(B + 6 * r + 4)));
-      c[r] = _mm_fmadd_pd(_mm_cvtps_pd(f2), x2, c[r]);
-    }
-  }
-  for (int r = 0; r < 6; ++r) {
-    const __m128d h = _mm_add_pd(_mm_add_pd(_mm256_castpd256_pd128(a[r]), _mm256_extractf128_pd(a[r], 1)), c[r]);
-    yi[r] = _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
-  }
-#else
-  for (int r = 0; r < 6; ++r) yi[r] = 0;
-  for (Index k = rp[i]; k < rp[i + 1]; ++k) gemv_add<6, 6>(val + 36 * static_cast<std::size_t>(k), x + 6 * static_cast<std::size_t>(col[k]), yi);
-#endif
-}
-
 // The values of M in storage T: the doubles, or their float copy (sync_float()).
 template <class T>
 const T* values(const BlockMatrix& M) {
@@ -168,14 +78,10 @@ template <int B, class T>
 inline void row_residual(const BlockMatrix& A, const double* b, const double* x, Index i, double* acc) {
   const T* val = values<T>(A);
   double ax[B];
-  if constexpr (B == 6 && std::is_same_v<T, double>)
-    row_multiply6(A.rp.data(), A.ci.data(), val, x, i, ax);
-  else if constexpr (B == 6)
-    row_multiply6f(A.rp.data(), A.ci.data(), val, x, i, ax);
-  else if constexpr (std::is_same_v<T, double>)
-    block_row_multiply3(A.rp.data(), A.ci.data(), val, x, i, ax);
+  if constexpr (B == 6)
+    block_row_multiply6(A.rp.data(), A.ci.data(), val, x, i, ax);
   else
-    row_multiply3f(A.rp.data(), A.ci.data(), val, x, i, ax);
+    block_row_multiply3(A.rp.data(), A.ci.data(), val, x, i, ax);
   for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - ax[a];
 }
 
@@ -184,14 +90,10 @@ template <int B, class T>
 inline void row_partial(const BlockMatrix& A, Index k0, Index k1, const double* x, double* out) {
   const Index range[2] = {k0, k1};
   const T* val = values<T>(A);
-  if constexpr (B == 6 && std::is_same_v<T, double>)
-    row_multiply6(range, A.ci.data(), val, x, 0, out);
-  else if constexpr (B == 6)
-    row_multiply6f(range, A.ci.data(), val, x, 0, out);
-  else if constexpr (std::is_same_v<T, double>)
-    block_row_multiply3(range, A.ci.data(), val, x, 0, out);
+  if constexpr (B == 6)
+    block_row_multiply6(range, A.ci.data(), val, x, 0, out);
   else
-    row_multiply3f(range, A.ci.data(), val, x, 0, out);
+    block_row_multiply3(range, A.ci.data(), val, x, 0, out);
 }
 
 // Inverse of a B x B SPD matrix by Cholesky; false when it is not (numerically) SPD.
@@ -380,7 +282,10 @@ void SaAmg::aggregate(std::size_t l) {
 void SaAmg::colour(std::size_t l) {
   Level& L = L_[l];
   const Index n = L.A.rows;
-  const int parts = static_cast<Index>(n) * L.A.br >= o_.parallel_min_dofs ? 8 : 1;
+  const Index dofs = static_cast<Index>(n) * L.A.br;
+  int parts = 1;
+  if (dofs >= o_.parallel_min_dofs)
+    parts = o_.min_part_dofs <= 0 ? 8 : static_cast<int>(std::clamp<Index>(dofs / o_.min_part_dofs, 2, 8));
   auto part = [&](Index i) { return static_cast<int>(static_cast<long long>(i) * parts / n); };
   std::vector<char> boundary(n, 0);
   for (Index i = 0; i < n; ++i)
@@ -807,6 +712,18 @@ void SaAmg::sync_float(bool level0_only) {
   for (std::size_t l = 0; l < L_.size(); ++l) {
     Level& L = L_[l];
     copy(L.A, parallel(L));
+    // The diagonal inverses, symmetrised then rounded: the backward sweep stays the exact
+    // adjoint of the forward one (NUMERICS.md 3.6).
+    const int b = L.A.br;
+    const Index n = o_.float_diagonal ? L.A.rows : 0;
+    L.dinv_f.resize(o_.float_diagonal ? L.dinv.size() : 0);
+#pragma omp parallel for schedule(static) if (parallel(L))
+    for (Index i = 0; i < n; ++i) {
+      const double* D = L.dinv.data() + static_cast<std::size_t>(b * b) * i;
+      float* F = L.dinv_f.data() + static_cast<std::size_t>(b * b) * i;
+      for (int a = 0; a < b; ++a)
+        for (int c = 0; c < b; ++c) F[a * b + c] = static_cast<float>(0.5 * (D[a * b + c] + D[c * b + a]));
+    }
     if (level0_only) break;
     if (l + 1 < L_.size()) {
       copy(L.P, parallel(L));
@@ -945,7 +862,9 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   for (const Level& L : L_)
     info_.push_back({L.A.rows, L.A.br, L.A.nnz(),
                      L.colour_ptr.empty() ? 0 : static_cast<int>(L.colour_ptr.size()) - 1,
-                     L.part_ptr.empty() ? 0 : static_cast<int>(L.part_ptr.size()) - 1, L.P.nnz()});
+                     L.part_ptr.empty() ? 0 : static_cast<int>(L.part_ptr.size()) - 1, L.P.nnz(),
+                     static_cast<Index>(L.colour_rows.size()),
+                     static_cast<Index>(std::count(L.clean.begin(), L.clean.end(), std::uint8_t{1}))});
   return true;
 }
 
@@ -956,8 +875,8 @@ namespace {
 // one colour are not coupled). Backward: exactly the reverse order. Every update is a
 // sequential Gauss-Seidel step in one fixed row order, so the backward sweep is the adjoint
 // of the forward one, with no races and the same result on any number of threads.
-template <int B, class T>
-void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::vector<Index>& cp,
+template <int B, class T, class D>
+void gs_sweep(const BlockMatrix& A, const D* dinv, const std::vector<Index>& cp,
               const std::vector<Index>& cr, const std::vector<Index>& pp, const std::vector<Index>& pr,
               const double* b, double* x, bool forward, bool par) {
   const int nc = static_cast<int>(cp.size()) - 1;
@@ -965,7 +884,7 @@ void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::
   auto update = [&](Index i) {
     double acc[B];
     row_residual<B, T>(A, b, x, i, acc);
-    gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+    gemv_add<B, B>(dinv + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
   };
 #pragma omp parallel if (par)
   {
@@ -996,9 +915,9 @@ void gs_sweep(const BlockMatrix& A, const std::vector<double>& dinv, const std::
 // r_i = acc_i - sum_{j>=i} A_ij x_j, the blocks from the diagonal on; every other row gets
 // the full b_i - (A x)_i. Together one pass over A instead of two (a sweep and a residual),
 // the same operator as gs_sweep + residual up to rounding.
-template <int B, class T>
+template <int B, class T, class D>
 void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<Index>& diag,
-                                       const std::vector<double>& dinv, const std::vector<std::uint8_t>& clean,
+                                       const D* dinv, const std::vector<std::uint8_t>& clean,
                                        const std::vector<Index>& cp, const std::vector<Index>& cr,
                                        const std::vector<Index>& pp, const std::vector<Index>& pr, const double* b,
                                        double* x, double* r, bool par, bool with_residual = true) {
@@ -1015,7 +934,7 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
         row_partial<B, T>(A, A.rp[i], diag[i], x, lo);
         double* acc = r + static_cast<std::size_t>(B) * i;
         for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - lo[a];
-        gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+        gemv_add<B, B>(dinv + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
       }
     for (int c = 0; c < nc; ++c) {
 #pragma omp for schedule(static)
@@ -1023,7 +942,7 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
         const Index i = cr[t];
         double acc[B];
         row_residual<B, T>(A, b, x, i, acc);
-        gemv_add<B, B>(dinv.data() + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+        gemv_add<B, B>(dinv + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
       }
     }
     if (with_residual) {
@@ -1044,13 +963,18 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
 
 }  // namespace
 
-template <class T>
+template <class T, class D>
 void SaAmg::cycle(std::size_t l, const double* b, double* x) {
   Level& L = L_[l];
   const Index n = L.A.rows;
   const int bs = L.A.br;
   const std::size_t N = static_cast<std::size_t>(n) * bs;
   const bool par = parallel(L);
+  const D* Dv;  // the smoother's diagonal inverses: double, or their symmetrised float copy
+  if constexpr (std::is_same_v<D, float>)
+    Dv = L.dinv_f.data();
+  else
+    Dv = L.dinv.data();
   if (l + 1 == L_.size()) {
     if (coarse_direct_) {
       Eigen::Map<Eigen::VectorXd> xv(x, static_cast<Eigen::Index>(N));
@@ -1062,8 +986,8 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       with_size(bs, [&](auto Bc) {
         constexpr int B = decltype(Bc)::value;
         for (int s = 0; s < 2; ++s) {
-          gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
-          gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+          gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+          gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
         }
       });
     }
@@ -1091,10 +1015,10 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
     const bool from_zero = L.clean.size() == static_cast<std::size_t>(n);
     const bool fused = sweeps == 1 && from_zero;
     if (from_zero)
-      gs_forward_from_zero_and_residual<B, T>(L.A, L.diag, L.dinv, L.clean, L.colour_ptr, L.colour_rows, L.part_ptr,
+      gs_forward_from_zero_and_residual<B, T>(L.A, L.diag, Dv, L.clean, L.colour_ptr, L.colour_rows, L.part_ptr,
                                               L.part_rows, b, x, r, par, fused);
     for (int s = from_zero ? 1 : 0; s < sweeps; ++s)
-      gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+      gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
     lap(t_.apply_fine_smooth);
 #pragma omp parallel if (par)
     {
@@ -1113,7 +1037,7 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       }
     }
     lap(t_.apply_fine_transfer);
-    cycle<T>(l + 1, C.b.data(), C.x.data());
+    cycle<T, D>(l + 1, C.b.data(), C.x.data());
     lap(t_.apply_coarse);
 #pragma omp parallel for schedule(static) if (par)
     for (Index i = 0; i < n; ++i)
@@ -1121,7 +1045,7 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
         gemv_add<B, M>(values<T>(L.P) + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
                        x + static_cast<std::size_t>(B) * i);
     lap(t_.apply_fine_transfer);
-    for (int s = 0; s < sweeps; ++s) gs_sweep<B, T>(L.A, L.dinv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+    for (int s = 0; s < sweeps; ++s) gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
     lap(t_.apply_fine_smooth);
   });
 }
@@ -1129,10 +1053,12 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
 void SaAmg::apply(const double* r, double* z) {
   if (!built_) throw std::logic_error("sa_amg: apply() before a successful setup()");
   const auto t0 = Clock::now();
-  if (o_.float_storage)
-    cycle<float>(0, r, z);
+  if (o_.float_storage && o_.float_diagonal)
+    cycle<float, float>(0, r, z);
+  else if (o_.float_storage)
+    cycle<float, double>(0, r, z);
   else
-    cycle<double>(0, r, z);
+    cycle<double, double>(0, r, z);
   t_.apply += since(t0);
   ++t_.applies;
 }

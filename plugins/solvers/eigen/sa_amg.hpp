@@ -54,9 +54,21 @@ struct SaAmgOptions {
   /// The V-cycle reads float copies of the level matrices and transfer operators (set-up and
   /// all arithmetic stay double): half the memory traffic of the bandwidth-bound V-cycle. The
   /// V-cycle is still exactly symmetric (the smoother and residual use the same rounded
-  /// matrix, R is the exact transpose of P; NUMERICS.md 3.6).
+  /// matrix, R is the exact transpose of P, the smoother's diagonal inverses are symmetrised
+  /// before rounding; NUMERICS.md 3.6).
   bool float_storage = true;
+  /// With float_storage: the smoother's diagonal inverses in float too (symmetrised, then
+  /// rounded; 2 of the ~12 MB that level 0 streams per V-cycle at 256^2). false: double, the
+  /// previous default (the benchmark's `_before` variant).
+  bool float_diagonal = true;
   Index parallel_min_dofs = 6144;  ///< loops run on all OpenMP threads from this many DOFs on
+  /// The Gauss-Seidel row ranges of a threaded level hold at least this many DOFs (2 to 8
+  /// ranges; 0: always 8). Rows coupled to another range are swept by colour and read their
+  /// row twice in the fused first sweep, so short ranges cost passes: with 8 ranges, level 1 of
+  /// the 256^2 wool hang had 25% boundary rows (53% at 128^2), with this rule 2 ranges and
+  /// about 7% (NUMERICS.md 3.6). The range count depends on the level's size only, never on
+  /// the thread count, so the result is the same on any number of threads.
+  Index min_part_dofs = 24576;
 };
 
 /// Block-sparse matrix with BR x BC blocks (row-major, 9 or 18 or 36 doubles per block).
@@ -94,6 +106,8 @@ struct LevelInfo {
   int colours = 0;   ///< colours of the part-boundary rows
   int parts = 0;     ///< row blocks smoothed lexicographically in parallel
   Index p_nnz_blocks = 0;  ///< blocks of the prolongator to the next level (0 on the coarsest)
+  Index boundary_rows = 0;  ///< rows coupled to another part (swept by colour)
+  Index clean_rows = 0;     ///< interior rows with no boundary neighbour (one pass in the fused sweep)
 };
 
 class SaAmg {
@@ -124,6 +138,7 @@ class SaAmg {
     BlockMatrix A;                    // b x b blocks
     std::vector<Index> diag;          // position of (i, i)
     std::vector<double> dinv;         // b*b per row: inverse of the diagonal block
+    std::vector<float> dinv_f;        // float storage: dinv symmetrised and rounded (the V-cycle's)
     std::vector<Index> colour_ptr, colour_rows;  // boundary rows (coupled to another part) by colour
     std::vector<Index> part_ptr, part_rows;      // interior rows of each part, increasing
     std::vector<std::uint8_t> clean;  // interior row with no boundary neighbour (fused residual)
@@ -151,7 +166,7 @@ class SaAmg {
   void aggregate(std::size_t l);
   void colour(std::size_t l);
   void build_patterns(std::size_t l);
-  template <class T>
+  template <class T, class D>
   void cycle(std::size_t l, const double* b, double* x);
   void sync_float(bool level0_only);
   bool filter_changed(const Filter& S) const;
