@@ -352,7 +352,7 @@ double model_bytes_per_iteration(const loom::EigenPcg& pcg) {
 void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, const std::function<double()>& step) {
   t->reset_counts();
   // Heap allocations in the timed steps, when the run preloads a malloc counter exporting
-  // `loom_probe_mallocs` (NUMERICS.md 3.6 has the 20-line preload library and the command).
+  // `loom_probe_mallocs` (bench/baraff_witkin/malloc_count.c, with the command).
   using Count = unsigned long long (*)();
   const auto mallocs = reinterpret_cast<Count>(dlsym(RTLD_DEFAULT, "loom_probe_mallocs"));
   const unsigned long long m_start = mallocs ? mallocs() : 0;
