@@ -17,6 +17,7 @@
 
 #include "baraff_witkin.hpp"
 #include "eigen_ldlt.hpp"
+#include "eigen_pcg.hpp"
 #include "loom/intersection_check.hpp"
 #include "loom/mesh.hpp"
 #include "loom/params.hpp"
@@ -38,6 +39,9 @@ bool verbose() { return std::getenv("LOOM_TEST_VERBOSE") != nullptr; }
 constexpr Index kN = 5;          // vertices per side of each layer
 constexpr double kDx = 0.1;      // spacing (m)
 constexpr double kThick = 0.01;  // self-collision thickness (m)
+// two_layers' solver: eigen_ldlt (the springs assembled into A), or filtered_pcg at tolerance
+// 1e-12 (the springs applied matrix-free, test_bw_contact_operator.cpp).
+bool g_matrix_free = false;
 
 // Two horizontal kN x kN layers (xz plane): the lower at y = 0, the upper at y = gap, shifted
 // sideways by a fraction of a cell so that no vertex lies over an edge. Structural and shear
@@ -80,7 +84,14 @@ void two_layers(Scene& sc, double gap, double mu, std::uint32_t seed = 0, double
                             std::make_unique<loom::testing::SpringMaterial>(std::vector<double>(nv + nu, 0.01),
                                                                             springs, true));
   sc.gravity = {0, 0, 0};
-  sc.solver = std::make_unique<loom::EigenLdlt>();
+  if (g_matrix_free) {
+    loom::PcgOptions po;
+    po.tolerance = 1e-12;
+    po.max_iterations = 10000;
+    sc.solver = std::make_unique<loom::EigenPcg>(po);
+  } else {
+    sc.solver = std::make_unique<loom::EigenLdlt>();
+  }
   loom::SelfCollision::Options o;
   o.thickness = kThick;
   o.friction = mu;
@@ -191,7 +202,7 @@ TEST(BwSelfContact, SystemStaysSpdAndContactBlocksAreTheFiniteDifferenceJacobian
 // thickness (within 1 %), so the after-step response has nothing left but a push of under 1 %
 // of the thickness, and no CCD; without the implicit term the same layer is stopped only by the
 // after-step response.
-TEST(BwSelfContact, FallingLayerLandsInTheStepOfTheExactContactTime) {
+static void falling_layer_lands() {
   const double h = 0.01, u = 1.0, g0 = 0.0537;
   Scene sc;
   two_layers(sc, g0, 0.3);
@@ -211,6 +222,7 @@ TEST(BwSelfContact, FallingLayerLandsInTheStepOfTheExactContactTime) {
   };
   BaraffWitkin bw;
   bw.prepare(sc, h);
+  ASSERT_EQ(bw.self_contact_matrix_free(), g_matrix_free);
   const double t_star = (g0 - kThick) / u;
   const int landing_step = static_cast<int>(std::ceil(t_star / h));
   ASSERT_EQ(landing_step, 5);
@@ -263,7 +275,15 @@ TEST(BwSelfContact, FallingLayerLandsInTheStepOfTheExactContactTime) {
 // step, 3 % allowed). The same layer landing with that
 // sideways velocity (falling onto the lower one without gravity) keeps it: no friction while
 // landing.
-TEST(BwSelfContact, FrictionSlowsASlidingLayerByMuGhPerStepAndNotALandingOne) {
+TEST(BwSelfContact, FallingLayerLandsInTheStepOfTheExactContactTime) { falling_layer_lands(); }
+// The same with filtered_pcg: the springs applied matrix-free.
+TEST(BwSelfContact, FallingLayerLandsInTheStepOfTheExactContactTimeMatrixFree) {
+  g_matrix_free = true;
+  falling_layer_lands();
+  g_matrix_free = false;
+}
+
+static void friction_slows_sliding_not_landing() {
   const double h = 0.01, mu = 0.3, g = 9.81, u = 0.5;
   for (const bool landing : {false, true}) {
     SCOPED_TRACE(landing ? "landing" : "sliding");
@@ -300,6 +320,14 @@ TEST(BwSelfContact, FrictionSlowsASlidingLayerByMuGhPerStepAndNotALandingOne) {
       before = now;
     }
   }
+}
+
+TEST(BwSelfContact, FrictionSlowsASlidingLayerByMuGhPerStepAndNotALandingOne) { friction_slows_sliding_not_landing(); }
+// The same with filtered_pcg: the springs applied matrix-free.
+TEST(BwSelfContact, FrictionSlowsASlidingLayerByMuGhPerStepAndNotALandingOneMatrixFree) {
+  g_matrix_free = true;
+  friction_slows_sliding_not_landing();
+  g_matrix_free = false;
 }
 
 // A steady contact state makes no allocation in a step after warm-up: the contact blocks that

@@ -127,12 +127,13 @@ constexpr double kFoldThickness = 0.004;
 constexpr int kFoldFrames = 50;   // 0.5 s: the cloth has collapsed and lies in folds
 
 // The draped-ball scene (scenes/draped_ball_*.yaml) at 24 x 24 vertices for 45 frames (0.75 s).
-std::string draped_ball(const std::string& material, const std::string& integrator, const std::string& self) {
+std::string draped_ball(const std::string& material, const std::string& integrator, const std::string& self,
+                        const std::string& solver = "{type: eigen_ldlt}") {
   return R"(
 mesh: {grid: {nx: 24, ny: 24, width: 1.0, height: 1.0, plane: xz}}
 material: )" + material + R"(
 integrator: )" + integrator + R"(
-solver: {type: eigen_ldlt}
+solver: )" + solver + R"(
 threads: 1
 colliders:
   - {type: sphere, center: [0.5, -0.35, -0.5], radius: 0.3, thickness: 0.004, friction: {static: 0.5, kinetic: 0.4},
@@ -182,9 +183,10 @@ TEST_F(SelfCollisionScenes, WithoutSelfCollisionTheDrapedBallPassesThroughItself
   EXPECT_GT(run_and_check(*sim, 25, 0).max_intersections, 0);
 }
 
-void check_draped(SelfCollisionScenes& t, const std::string& mat, const std::string& integ, int frames) {
-  SCOPED_TRACE(integ);
-  auto sim = t.make(draped_ball(mat, integ, "self_collision: {thickness: 0.006, friction: 0.3}\n"));
+void check_draped(SelfCollisionScenes& t, const std::string& mat, const std::string& integ, int frames,
+                  const std::string& solver = "{type: eigen_ldlt}") {
+  SCOPED_TRACE(integ + " " + solver);
+  auto sim = t.make(draped_ball(mat, integ, "self_collision: {thickness: 0.006, friction: 0.3}\n", solver));
   const RunResult r = run_and_check(*sim, frames, kBallThickness);
   EXPECT_EQ(r.max_intersections, 0) << "first at frame " << r.first_bad_frame;
   EXPECT_GE(r.min_distance, 0.5 * kBallThickness);
@@ -203,6 +205,13 @@ TEST_F(SelfCollisionScenes, DrapedBallNeverIntersectsItselfWithTheExplicitIntegr
 
 TEST_F(SelfCollisionScenes, DrapedBallNeverIntersectsItselfWithBaraffWitkin) {
   check_draped(*this, kWool, "{type: baraff_witkin, dt: 2.0e-3, substeps: 8, kang_cho_damping: 0.001}", kBallFrames);
+}
+
+// With filtered_pcg the self-contact springs are applied matrix-free inside the solver's product
+// (test_bw_contact_operator.cpp): the same guarantee.
+TEST_F(SelfCollisionScenes, DrapedBallNeverIntersectsItselfWithBaraffWitkinMatrixFree) {
+  check_draped(*this, kWool, "{type: baraff_witkin, dt: 2.0e-3, substeps: 8, kang_cho_damping: 0.001}", kBallFrames,
+               "{type: filtered_pcg}");
 }
 
 TEST_F(SelfCollisionScenes, BadSelfCollisionKeysAreRefusedWithFileLineAndFix) {

@@ -21,6 +21,19 @@ struct SolveReport {
   std::string message;         ///< why it failed, when it failed
 };
 
+/// A symmetric positive semidefinite operator E that a solver adds to A without storing it
+/// (matrix-free terms, e.g. baraff_witkin's self-contact springs: their blocks couple vertices
+/// the material does not, and would otherwise grow A's pattern whenever contacts come and go).
+/// The solve is then of (A + E) on range(S): S (A + E) dv = S b, (I - S) dv = z.
+class ExtraOperator {
+ public:
+  virtual ~ExtraOperator() = default;
+  /// y += scale E x (3n entries each; E's rows and columns over every vertex, unfiltered).
+  virtual void apply_add(const double* x, double* y, double scale) const = 0;
+  /// D_i += E_ii for every vertex i (D: 9 doubles per vertex, row-major).
+  virtual void add_diagonal(double* D) const = 0;
+};
+
 class LinearSolver {
  public:
   virtual ~LinearSolver() = default;
@@ -37,6 +50,12 @@ class LinearSolver {
   /// that use geometry read them (the rigid-body near-null space of eigen_pcg's sa_amg and of
   /// petsc's gamg / boomeramg); the others ignore them.
   virtual void set_coordinates(std::span<const double> x) { (void)x; }
+  /// Whether set_extra_operator() is honoured (filtered_pcg with preconditioner none, jacobi
+  /// or block_jacobi); an integrator assembles the terms into A for the others.
+  virtual bool supports_extra_operator() const { return false; }
+  /// From the next factorize() on, solve with A + E (E's diagonal blocks join the
+  /// preconditioner's); null removes it. E must stay alive and unchanged until then.
+  virtual void set_extra_operator(const ExtraOperator* E) { (void)E; }
 };
 
 }  // namespace loom

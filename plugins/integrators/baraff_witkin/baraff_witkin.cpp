@@ -98,6 +98,8 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
     self_contact_ = std::make_unique<ImplicitSelfContact>();
     self_contact_->prepare(scene.mesh, scene.self_collision->options().thickness,
                            scene.self_collision->options().friction);
+    // Matrix-free when the solver can apply the springs itself: the pattern never grows.
+    self_contact_->set_matrix_free(scene.solver->supports_extra_operator());
     self_contact_->bind(*pattern_, material_pattern_);
   }
   scene.material->bind_pattern(*pattern_);
@@ -122,6 +124,8 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
   in_contact_.assign(scene.colliders.empty() ? 0 : n, 0);
   frames0_.resize(scene.colliders.size());
   frames1_.resize(scene.colliders.size());
+  scene.solver->set_extra_operator(nullptr);
+  edv_.assign(self_contact_matrix_free() && !s.pin_list.empty() ? N : 0, 0.0);
   scene.solver->analyze_pattern(A_, S_);
   last_ = {};
 }
@@ -382,6 +386,8 @@ struct BaraffWitkin::StepOps {
       }
       const double ts = thread_seconds();
       bw.self_contact_->add_terms(bw.A_, bw.b_, s.v, h);
+      const bool mf = bw.self_contact_->matrix_free();
+      if (mf) scene.solver->set_extra_operator(bw.self_contact_.get());  // the springs' matrix term
       ok = solve_once();
       ++sst.solves;
       for (int r = 0; ok && r < ImplicitSelfContact::kMaxReleaseSolves &&
@@ -390,6 +396,7 @@ struct BaraffWitkin::StepOps {
         ok = solve_once();
         ++sst.solves;
       }
+      if (mf) scene.solver->set_extra_operator(nullptr);
       sst.solve_seconds = thread_seconds() - ts;
     }
     return ok;
@@ -446,9 +453,17 @@ void BaraffWitkin::record_pin_forces(Scene& scene, double h) {
   if (out.size() != 3 * s.pin_list.size()) return;  // sized in prepare(); pins added later are not recorded
   const BsrPattern& P = *pattern_;
   const double* a = A_.values().data();
+  // Matrix-free self-contact springs: their part of A dv (the step's contacts, if any).
+  const bool springs = !edv_.empty() && !self_contact_->contacts().empty();
+  if (springs) {
+    std::fill(edv_.begin(), edv_.end(), 0.0);
+    self_contact_->apply_add(dv_.data(), edv_.data(), 1.0);
+  }
   for (std::size_t k = 0; k < s.pin_list.size(); ++k) {
     const Index i = s.pin_list[k];
     double r[3] = {0, 0, 0};
+    if (springs)
+      for (int c = 0; c < 3; ++c) r[c] = edv_[3 * static_cast<std::size_t>(i) + c];
     for (Index q = P.row_ptr[i]; q < P.row_ptr[i + 1]; ++q)
       kernels::mat3_mul_add(a + 9 * static_cast<std::size_t>(q), &dv_[3 * static_cast<std::size_t>(P.col[q])], r);
     const double* bi = &b_[3 * static_cast<std::size_t>(i)];

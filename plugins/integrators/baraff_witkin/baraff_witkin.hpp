@@ -72,6 +72,9 @@ class BaraffWitkin final : public Integrator {
   /// implicit_self_contact is on), and how often the pattern was extended for them.
   const ImplicitSelfContact* self_contact() const { return self_contact_.get(); }
   int pattern_rebuilds() const { return pattern_rebuilds_; }
+  /// Whether the self-contact springs are applied matrix-free by the solver (it supports an
+  /// ExtraOperator: filtered_pcg without sa_amg); else they are assembled into A.
+  bool self_contact_matrix_free() const { return self_contact_ && self_contact_->matrix_free(); }
 
  private:
   struct StepOps;  // the operations of the shared step skeleton (bw_step.hpp)
@@ -119,6 +122,7 @@ class BaraffWitkin final : public Integrator {
   Filter S_;
   std::vector<double> degree_;           // graph-Laplacian diagonal n_i
   std::vector<double> f_, b_, z_, dv_;
+  std::vector<double> edv_;              // E dv of matrix-free self-contacts (pin forces)
   Index n_ = -1;
   double t0_ = 0;                        // start time of the (sub)step being solved
   StepStats last_;

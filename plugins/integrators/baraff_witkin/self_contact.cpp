@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <ctime>
+#include <iterator>
 
 namespace loom {
 
@@ -57,6 +58,7 @@ bool ImplicitSelfContact::find(SelfCollision& sc, const State& s, const std::vec
   stats_.pairs_seconds = thread_seconds() - t0;
   bool complete = true;
   const double th = thickness_;
+  h_ = h;
   for (const ProximityPair& p : pairs_) {
     double W = 0, dn = 0;
     for (int a = 0; a < 4; ++a) {
@@ -80,6 +82,11 @@ bool ImplicitSelfContact::find(SelfCollision& sc, const State& s, const std::vec
     c.lambda = 0;
     c.c1 = 0;
     c.touching = p.distance < th * (1 + kTouchingTolerance);
+    if (matrix_free_) {  // the solver applies the term: no blocks needed
+      std::fill(std::begin(c.blk), std::end(c.blk), Index{-1});
+      contacts_.push_back(c);
+      continue;
+    }
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b) {
         const Index q = P.find(c.v[a], c.v[b]);
@@ -174,12 +181,38 @@ void ImplicitSelfContact::add_term(const Contact& c, BsrMatrix& A, std::vector<d
     double* ba = &b[3 * static_cast<std::size_t>(c.v[a])];
     const double fa = -hk * c.w[a] * (C0 + h * un);
     for (int k = 0; k < 3; ++k) ba[k] += fa * c.n[k];
+    if (matrix_free_) continue;  // the matrix term is applied by the solver (apply_add)
     for (int bb = 0; bb < 4; ++bb) {
       double* blk = A.block(c.blk[4 * a + bb]);
       const double s = h * hk * c.w[a] * c.w[bb];
       for (int e = 0; e < 9; ++e) blk[e] += s * nn[e];
     }
   }
+}
+
+void ImplicitSelfContact::apply_add(const double* x, double* y, double scale) const {
+  const double hh = scale * h_ * h_;
+  for (const Contact& c : contacts_) {
+    double g = 0;  // n . sum_b w_b x_b
+    for (int b = 0; b < 4; ++b) g += c.w[b] * dot3(&x[3 * static_cast<std::size_t>(c.v[b])], c.n);
+    const double t = hh * c.k * g;
+    for (int a = 0; a < 4; ++a) {
+      double* ya = &y[3 * static_cast<std::size_t>(c.v[a])];
+      const double q = t * c.w[a];
+      for (int k = 0; k < 3; ++k) ya[k] += q * c.n[k];
+    }
+  }
+}
+
+void ImplicitSelfContact::add_diagonal(double* D) const {
+  const double hh = h_ * h_;
+  for (const Contact& c : contacts_)
+    for (int a = 0; a < 4; ++a) {
+      double* Da = &D[9 * static_cast<std::size_t>(c.v[a])];
+      const double s = hh * c.k * c.w[a] * c.w[a];
+      for (int r = 0; r < 3; ++r)
+        for (int q = 0; q < 3; ++q) Da[3 * r + q] += s * c.n[r] * c.n[q];
+    }
 }
 
 void ImplicitSelfContact::add_terms(BsrMatrix& A, std::vector<double>& b, const std::vector<double>& v,

@@ -134,12 +134,19 @@ EigenPcg::EigenPcg(PcgOptions options, std::string name) : options_(options), na
 
 void EigenPcg::set_coordinates(std::span<const double> x) { coords_.assign(x.begin(), x.end()); }
 
+void EigenPcg::set_extra_operator(const ExtraOperator* E) {
+  if (E && !supports_extra_operator())
+    throw std::logic_error(name_ + ": a matrix-free operator needs preconditioner none, jacobi or block_jacobi");
+  extra_ = E;
+}
+
 void EigenPcg::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   (void)S;
   if (amg_) amg_->invalidate();
   n_ = A.rows();
   const std::size_t N = 3 * static_cast<std::size_t>(n_);
   pinv_.assign(9 * static_cast<std::size_t>(n_), 0.0);
+  diag_.assign(9 * static_cast<std::size_t>(n_), 0.0);
   r_.assign(N, 0.0);
   c_.assign(N, 0.0);
   q_.assign(N, 0.0);
@@ -176,6 +183,14 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
     }
     return ok;
   }
+  // With a matrix-free term E, the preconditioner's diagonal blocks are those of A + E.
+  const bool with_extra = extra_ && pc != PcgPreconditioner::None;
+  if (with_extra) {
+    if (diag_.size() != 9 * static_cast<std::size_t>(n)) diag_.assign(9 * static_cast<std::size_t>(n), 0.0);
+#pragma omp parallel for schedule(static) if (n >= solver::kParallelMinRows)
+    for (Index i = 0; i < n; ++i) std::copy_n(A.block(P.diag[i]), 9, diag_.data() + 9 * static_cast<std::size_t>(i));
+    extra_->add_diagonal(diag_.data());
+  }
   Index bad = INT_MAX;
 #pragma omp parallel for schedule(static) reduction(min : bad) if (n >= solver::kParallelMinRows)
   for (Index i = 0; i < n; ++i) {
@@ -185,7 +200,7 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
       for (int e = 0; e < 9; ++e) Pi[e] = 0.0;
       continue;
     }
-    const double* D = A.block(P.diag[i]);
+    const double* D = with_extra ? diag_.data() + 9 * static_cast<std::size_t>(i) : A.block(P.diag[i]);
     double M[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};
     switch (pc) {
       case PcgPreconditioner::None:
@@ -242,6 +257,7 @@ struct CpuPcgOps {
   amg::SaAmg* amg;      // the V-cycle (null without)
   const UpperTriangleSpmv* upper;  // the SpMV from the upper triangle (null: full rows)
   const float* af;      // the SpMV from A's values in float (null: double)
+  const ExtraOperator* extra;  // the matrix-free term E (null: none): the operator is A + E
   bool par;
   Index n;
 
@@ -254,6 +270,23 @@ struct CpuPcgOps {
     double* o = out.data();
     const double* bp = b.data();
     double sum = 0;
+    if (extra) {  // out = b - A x - E x, then the filter
+#pragma omp parallel for schedule(static) if (par)
+      for (Index i = 0; i < n; ++i) {
+        const std::size_t k = 3 * static_cast<std::size_t>(i);
+        double ax[3];
+        kernels::bsr_row_multiply(rp, col, val, xp, i, ax);
+        for (int a = 0; a < 3; ++a) o[k + a] = bp[k + a] - ax[a];
+      }
+      extra->apply_add(xp, o, -1.0);
+#pragma omp parallel for schedule(static) reduction(+ : sum) if (par)
+      for (Index i = 0; i < n; ++i) {
+        const std::size_t k = 3 * static_cast<std::size_t>(i);
+        solver::filter_vertex(S, i, o + k);
+        sum += kernels::dot3(o + k, o + k);
+      }
+      return sum;
+    }
 #pragma omp parallel for schedule(static) reduction(+ : sum) if (par)
     for (Index i = 0; i < n; ++i) {
       const std::size_t k = 3 * static_cast<std::size_t>(i);
@@ -273,6 +306,27 @@ struct CpuPcgOps {
     const double* cp = c.data();
     double* qp = q.data();
     double cq = 0;
+    if (extra) {  // q = A c + E c, then the filter
+#pragma omp parallel for schedule(static) if (par)
+      for (Index i = 0; i < n; ++i) {
+        const std::size_t o = 3 * static_cast<std::size_t>(i);
+        if (af)
+          block_row_multiply3(rp, col, af, cp, i, qp + o);
+        else if (upper)
+          upper->row(A, cp, i, qp + o);
+        else
+          block_row_multiply3(rp, col, val, cp, i, qp + o);
+      }
+      extra->apply_add(cp, qp, 1.0);
+#pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
+      for (Index i = 0; i < n; ++i) {
+        const std::size_t o = 3 * static_cast<std::size_t>(i);
+        const int f = S.free_dofs(i);
+        if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), qp + o);
+        cq += kernels::dot3(cp + o, qp + o);
+      }
+      return cq;
+    }
 #pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
     for (Index i = 0; i < n; ++i) {
       const std::size_t o = 3 * static_cast<std::size_t>(i);
@@ -352,7 +406,7 @@ SolveReport EigenPcg::solve(const BsrMatrix& A, const Filter& S, std::span<const
   const bool use_amg = options_.preconditioner == PcgPreconditioner::SaAmg;
   const bool use_float = options_.float_spmv && af_.size() == A.values().size() + 4;
   CpuPcgOps ops{A, S, b, z, pinv_.data(), use_amg ? amg_.get() : nullptr, use_upper_ ? &upper_ : nullptr,
-                use_float ? af_.data() : nullptr, n_ >= options_.parallel_min_rows, n_};
+                use_float ? af_.data() : nullptr, extra_, n_ >= options_.parallel_min_rows, n_};
   pcg::Settings set;
   set.tolerance = options_.tolerance;
   set.max_iterations = options_.max_iterations;

@@ -60,6 +60,11 @@ class EigenPcg final : public LinearSolver {
   SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                     std::span<const double> z, std::span<double> dv) override;
   void set_coordinates(std::span<const double> x) override;
+  /// The matrix-free term E (linear_solver.hpp) joins the SpMV and the residuals, and its
+  /// diagonal blocks the (block) Jacobi preconditioner; not with sa_amg, whose hierarchy is
+  /// built from A's blocks alone.
+  bool supports_extra_operator() const override { return options_.preconditioner != PcgPreconditioner::SaAmg; }
+  void set_extra_operator(const ExtraOperator* E) override;
   const PcgOptions& options() const { return options_; }
   /// The multigrid hierarchy (preconditioner: sa_amg), null before the first factorize().
   amg::SaAmg* amg() { return amg_.get(); }
@@ -70,6 +75,8 @@ class EigenPcg final : public LinearSolver {
   std::vector<double> coords_;
   Index n_ = 0;
   std::vector<double> pinv_;  // 9 per vertex: S_i P_i^{-1} S_i
+  const ExtraOperator* extra_ = nullptr;  // E of set_extra_operator (null: none)
+  std::vector<double> diag_;  // 9 per vertex: A_ii + E_ii (with extra_)
   std::vector<double> r_, c_, q_, s_;
   std::string name_;
   UpperTriangleSpmv upper_;
