@@ -251,6 +251,7 @@ void BM_BwStepSplit(benchmark::State& st) {
   double with = 0, bw_t = 0, resolve = 0, find = 0, pattern = 0, spring_solve = 0, broad = 0, narrow = 0, response = 0;
   double pairs_t = 0, pairs = 0, material_blocks = 0, pattern_blocks = 0;
   double contacts = 0, solves = 0, spring_its = 0, all_its = 0, growths = 0, candidates = 0, impulses = 0;
+  double find_lists = 0, resolve_lists = 0, near = 0, ccd_passes = 0, ccd_tests = 0, frozen = 0, refreshed = 0;
   for (auto _ : st) {
     auto sim = loom::Simulation::from_string(scene(n, "baraff_witkin", true), "bench.yaml", ".", {"threads=1"}, loader());
     omp_set_num_threads(1);
@@ -262,7 +263,9 @@ void BM_BwStepSplit(benchmark::State& st) {
       const double t0 = thread_cpu_seconds();
       sc.self_collision->begin_step(sc.state);
       const int g0 = bw.pattern_rebuilds();
+      const int lists0 = sc.self_collision->last_stats().rebuilds;
       bw.step(sc, h);
+      const int lists1 = sc.self_collision->last_stats().rebuilds;  // + those of proximity_pairs
       const double t1 = thread_cpu_seconds();
       sc.self_collision->resolve(sc.state, h);
       const double t2 = thread_cpu_seconds();
@@ -287,6 +290,13 @@ void BM_BwStepSplit(benchmark::State& st) {
       response += s.response_seconds;
       candidates += static_cast<double>(s.candidates_vt + s.candidates_ee);
       impulses += static_cast<double>(s.proximity + s.ccd_collisions);
+      find_lists += lists1 - lists0;
+      resolve_lists += s.rebuilds;
+      near += static_cast<double>(s.near);
+      ccd_passes += s.ccd_iterations;
+      ccd_tests += static_cast<double>(s.ccd_tests);
+      frozen += static_cast<double>(s.frozen);
+      refreshed += static_cast<double>(s.refreshed);
     };
     material_blocks = static_cast<double>(bw.pattern().nnz_blocks());
     for (int k = 0; k < 2; ++k) one(false);
@@ -315,6 +325,16 @@ void BM_BwStepSplit(benchmark::State& st) {
   st.counters["pattern_blocks"] = static_cast<double>(pattern_blocks);
   st.counters["candidates"] = candidates / total;
   st.counters["impulses"] = impulses / total;
+  // Work of the candidate lists and the after-step response, per step: full rebuilds in
+  // find() (proximity_pairs) and in resolve(), vertices refreshed by resolve(), pairs of the
+  // lists that resolve() treats as near, CCD passes, CCD cubics solved, frozen vertices.
+  st.counters["find_rebuilds"] = find_lists / total;
+  st.counters["resolve_rebuilds"] = resolve_lists / total;
+  st.counters["refreshed"] = refreshed / total;
+  st.counters["near"] = near / total;
+  st.counters["ccd_passes"] = ccd_passes / total;
+  st.counters["ccd_tests"] = ccd_tests / total;
+  st.counters["frozen"] = frozen / total;
 }
 BENCHMARK(BM_BwStepSplit)->Args({64, 40})->Args({128, 12})->Args({256, 2})->Iterations(1)->Unit(benchmark::kMillisecond);
 

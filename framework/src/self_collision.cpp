@@ -857,7 +857,10 @@ void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
 
 double SelfCollision::reach_for(Index i) const {
   const double th = opt_.thickness, s = step_len_[i];
-  return std::max(kReachMin * th, 2 * s) + std::min(kReachSteps * s, kReachMin * th);
+  // Large steps (proximity_pairs' caller moves vertices by a thickness or more per step, so
+  // the lists are renewed about every step whatever the reach): one displacement, not two,
+  // which halves the boxes' growth and so the pairs listed (about 2.5 million at 128^2).
+  return std::max(kReachMin * th, (large_steps_ ? 1 : 2) * s) + std::min(kReachSteps * s, kReachMin * th);
 }
 
 void SelfCollision::rebuild(const double* x0) {
@@ -1008,6 +1011,10 @@ bool SelfCollision::keep_outside(State& s, double h, const ColliderSet& collider
   return moved;
 }
 
+namespace {
+double relative_motion(bool vt, const Index idx[4], const double* p, const double* q);
+}  // namespace
+
 Index SelfCollision::freeze_pass(State& s, bool changed_only) {
   // Fail-safe: every vertex of a pair that still collides returns to its start position and
   // stops. A pass ends when no collision remains; each pass freezes at least one moving vertex.
@@ -1035,6 +1042,9 @@ Index SelfCollision::freeze_pass(State& s, bool changed_only) {
         for (int i = 0; i < 4; ++i) m[i] = moved_[idx[i]] + step_len_[idx[i]];
         const double mv = vt ? m[0] + std::max({m[1], m[2], m[3]}) : std::max(m[0], m[1]) + std::max(m[2], m[3]);
         if (p.dist_ref - mv > tol) continue;
+        if (p.dist_ref - relative_motion(vt, idx, x0_.data(), ref_x_.data()) -
+                relative_motion(vt, idx, d_.data(), nullptr) > tol)
+          continue;  // relative motion (see resolve()): cannot meet within the step
         double t;
         if (!pair_ccd(vt, idx, tol, t)) continue;
         ++found;
@@ -1135,7 +1145,12 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
     const Pair& p = vt ? vt_[q] : ee_[q - nvt];
     Index idx[4];
     pair_vertices(vt, p, idx);
-    near_flag_[q] = p.dist_ref - bound(vt, idx) < th;
+    // Tighter from relative motion, as in proximity_pairs: the distance moves by at most the
+    // largest |u_a - u_b| (a vertex of each element), u the motion since the reference, plus
+    // that of the step's d (a sheet moving as a whole has most pairs near by the bound above).
+    near_flag_[q] = p.dist_ref - bound(vt, idx) < th &&
+                    p.dist_ref - relative_motion(vt, idx, x0_.data(), ref_x_.data()) -
+                            relative_motion(vt, idx, d_.data(), nullptr) < th;
   }
   near_.clear();
   for (Index q = 0; q < npairs; ++q)
@@ -1182,7 +1197,18 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
     ++stats_.ccd_iterations;
     Index hits = 0;
     const Index nvt_now = static_cast<Index>(vt_.size());
-    const bool use_near = near_valid && 2 * max_growth_ < th - tol;
+    // Responses change d by at most max_change (per vertex, |d - d at the start|), so relative
+    // displacements by at most 2 max_change (max_growth_ <= max_change).
+    double max_change = 0;
+    for (const Index v : touched_) {
+      double c2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const double c = x0_[3 * v + k] + d_[3 * v + k] - x[3 * v + k];
+        c2 += c * c;
+      }
+      max_change = std::max(max_change, std::sqrt(c2));
+    }
+    const bool use_near = near_valid && 2 * std::max(max_growth_, max_change) < th - tol;
     const Index count = use_near ? static_cast<Index>(near_.size()) : nvt_now + static_cast<Index>(ee_.size());
     for (Index r = 0; r < count; ++r) {
       const Index q = use_near ? near_[r] : r;
@@ -1196,6 +1222,10 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
         // (d as the responses have changed it so far), absolute or relative (max |d_a - d_b|).
         if (use_near && near_dist_[r] >= 0 &&
             near_dist_[r] - std::min(step_bound(vt, idx), relative_motion(vt, idx, d_.data(), nullptr)) > tol)
+          continue;
+        // Over the whole lists: the relative bound of the near filter, with d as it is now.
+        if (!use_near && p.dist_ref - relative_motion(vt, idx, x0_.data(), ref_x_.data()) -
+                                 relative_motion(vt, idx, d_.data(), nullptr) > tol)
           continue;
         ++stats_.ccd_tests;
         double t;
@@ -1272,6 +1302,7 @@ namespace loom {
 
 void SelfCollision::proximity_pairs(const double* x, const double* d, std::vector<ProximityPair>& out) {
   out.clear();
+  large_steps_ = true;
   const double th = opt_.thickness;
   // The same lists as resolve(): kept while every vertex stays within its reach over the
   // motion since the lists' reference positions plus the predicted step d; otherwise refreshed

@@ -337,6 +337,9 @@ class SelfCollision {
   std::vector<Index> qstack_;                              ///< TriangleBvh::query stack
   std::vector<std::uint8_t> frozen_;
   bool have_candidates_ = false;
+  /// Set by proximity_pairs (an integrator with large steps, baraff_witkin): a vertex's reach
+  /// grows by one step's displacement instead of two (see reach_for in self_collision.cpp).
+  bool large_steps_ = false;
   SelfCollisionStats stats_;
 };
 
