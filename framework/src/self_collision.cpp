@@ -490,6 +490,8 @@ constexpr double kCcdSeparation = 0.1;       ///< CCD impulses leave this gap, t
 // (implicit ones) rebuild every step or two with boxes a few displacements wide.
 constexpr double kReachMin = 0.5;
 constexpr double kReachSteps = 16.0;
+// Under proximity_pairs (large steps), a refresh instead of a rebuild up to this fraction of the vertices.
+constexpr double kLargeStepRefreshFraction = 1.0 / 16;
 // Traversal tasks of a parallel rebuild (fixed, so the pairs' order does not depend on the threads).
 constexpr std::size_t kTraversalTasks = 64;
 
@@ -877,7 +879,11 @@ void SelfCollision::update_candidates(const double* x0) {
   // vertex; a rebuild also restarts every vertex's allowance. Measured on the draped cloth at
   // 64^2 (one thread): refreshing up to 1/256 of the vertices, else rebuilding, cost 0.86 ms
   // per step against 1.05 ms (up to 1/64), 1.90 ms (up to 1/16) and 1.55 ms (always rebuild).
-  if (!have_candidates_ || static_cast<double>(refresh_v_.size()) > opt_.refresh_fraction * nv_)
+  // Large steps (baraff_witkin): a refresh of a few hundred vertices (the springs moved them
+  // past the reach proximity_pairs set from the contact-free solve) costs far less than a
+  // rebuild of lists that hold hundreds of pairs per vertex.
+  const double fraction = large_steps_ ? std::max(opt_.refresh_fraction, kLargeStepRefreshFraction) : opt_.refresh_fraction;
+  if (!have_candidates_ || static_cast<double>(refresh_v_.size()) > fraction * nv_)
     rebuild(x0);
   else if (!refresh_v_.empty())
     refresh(x0);
