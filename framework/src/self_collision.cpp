@@ -1163,6 +1163,9 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
     if (near_flag_[q]) near_.push_back(q);
   stats_.near = static_cast<Index>(near_.size());
   near_dist_.assign(near_.size(), -1.0);
+  near_clean_.assign(near_.size(), 0);
+  vstamp_.assign(nv_, 0);
+  ccd_clock_ = 0;
   max_growth_ = 0;
   responded_ = false;
   Index proximity = 0;
@@ -1223,19 +1226,34 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
       {
         Index idx[4];
         pair_vertices(vt, p, idx);
-        if (p.dist_ref - bound(vt, idx) > tol) continue;
+        // A near pair found clean by an earlier pass stays clean until an impulse changes the d
+        // of one of its vertices: its test depends on x0 and on those d only.
+        if (use_near && near_clean_[r] > std::max({vstamp_[idx[0]], vstamp_[idx[1]], vstamp_[idx[2]], vstamp_[idx[3]]}))
+          continue;
+        const auto clean_now = [&] {
+          if (use_near) near_clean_[r] = ccd_clock_ + 1;
+        };
+        if (p.dist_ref - bound(vt, idx) > tol) {
+          clean_now();
+          continue;
+        }
         // Tighter for a near pair: its distance at the step's start less the motion in the step
         // (d as the responses have changed it so far), absolute or relative (max |d_a - d_b|).
         if (use_near && near_dist_[r] >= 0 &&
-            near_dist_[r] - std::min(step_bound(vt, idx), relative_motion(vt, idx, d_.data(), nullptr)) > tol)
+            near_dist_[r] - std::min(step_bound(vt, idx), relative_motion(vt, idx, d_.data(), nullptr)) > tol) {
+          clean_now();
           continue;
+        }
         // Over the whole lists: the relative bound of the near filter, with d as it is now.
         if (!use_near && p.dist_ref - relative_motion(vt, idx, x0_.data(), ref_x_.data()) -
                                  relative_motion(vt, idx, d_.data(), nullptr) > tol)
           continue;
         ++stats_.ccd_tests;
         double t;
-        if (!pair_ccd(vt, idx, tol, t)) continue;
+        if (!pair_ccd(vt, idx, tol, t)) {
+          clean_now();
+          continue;
+        }
         ++hits;
         // Normal and weights at the collision time, oriented from the start-of-step side.
         double xt[4][3], w[4], nrm[3];
@@ -1278,6 +1296,8 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
         }
         const double dpos = std::max(kCcdSeparation * th - (sep0 + dn), 0.05 * th);
         respond(idx, w, nrm, dpos, h, s);
+        ++ccd_clock_;
+        for (int i = 0; i < 4; ++i) vstamp_[idx[i]] = ccd_clock_;
       }
     }
     stats_.ccd_collisions += hits;

@@ -321,6 +321,9 @@ class SelfCollision {
   std::vector<std::uint8_t> near_flag_;          ///< per pair (VT then EE): could be within the thickness this step
   std::vector<Index> near_;                      ///< those pairs (index into VT then EE)
   std::vector<double> near_dist_;                ///< per near pair: its distance at the step's start (-1: not computed)
+  std::vector<std::uint32_t> near_clean_;        ///< per near pair: found clean by a CCD pass at ccd_clock_ < this
+  std::vector<std::uint32_t> vstamp_;            ///< per vertex: ccd_clock_ after the last CCD impulse that moved it
+  std::uint32_t ccd_clock_ = 0;                  ///< CCD impulses so far in this resolve()
   std::vector<double> len0_;                     ///< per vertex |d| before any response this step
   double max_growth_ = 0;                        ///< largest |d| - len0 after responses
   bool responded_ = false;                       ///< d or v changed this step
