@@ -1143,24 +1143,31 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
     if (vt) return step_len_[idx[0]] + std::max({step_len_[idx[1]], step_len_[idx[2]], step_len_[idx[3]]});
     return std::max(step_len_[idx[0]], step_len_[idx[1]]) + std::max(step_len_[idx[2]], step_len_[idx[3]]);
   };
-  const Index nvt = static_cast<Index>(vt_.size()), npairs = nvt + static_cast<Index>(ee_.size());
-  near_flag_.resize(npairs);
-#pragma omp parallel for schedule(static) if (npairs >= 4 * kParallelMinVertices)
-  for (Index q = 0; q < npairs; ++q) {
-    const bool vt = q < nvt;
-    const Pair& p = vt ? vt_[q] : ee_[q - nvt];
-    Index idx[4];
-    pair_vertices(vt, p, idx);
-    // Tighter from relative motion, as in proximity_pairs: the distance moves by at most the
-    // largest |u_a - u_b| (a vertex of each element), u the motion since the reference, plus
-    // that of the step's d (a sheet moving as a whole has most pairs near by the bound above).
-    near_flag_[q] = p.dist_ref - bound(vt, idx) < th &&
-                    p.dist_ref - relative_motion(vt, idx, x0_.data(), ref_x_.data()) -
-                            relative_motion(vt, idx, d_.data(), nullptr) < th;
-  }
-  near_.clear();
-  for (Index q = 0; q < npairs; ++q)
-    if (near_flag_[q]) near_.push_back(q);
+  const Index nvt = static_cast<Index>(vt_.size());
+  // The near list over the current lists, with d as it is now (also after the lists were
+  // renewed during the CCD passes: then with a snapshot of d, so that the passes can bound the
+  // change of the responses since).
+  const auto build_near = [&] {
+    const Index nvt_now = static_cast<Index>(vt_.size()), np = nvt_now + static_cast<Index>(ee_.size());
+    near_flag_.resize(np);
+#pragma omp parallel for schedule(static) if (np >= 4 * kParallelMinVertices)
+    for (Index q = 0; q < np; ++q) {
+      const bool vt = q < nvt_now;
+      const Pair& p = vt ? vt_[q] : ee_[q - nvt_now];
+      Index idx[4];
+      pair_vertices(vt, p, idx);
+      // Tighter from relative motion, as in proximity_pairs: the distance moves by at most the
+      // largest |u_a - u_b| (a vertex of each element), u the motion since the reference, plus
+      // that of the step's d (a sheet moving as a whole has most pairs near by the bound above).
+      near_flag_[q] = p.dist_ref - bound(vt, idx) < th &&
+                      p.dist_ref - relative_motion(vt, idx, x0_.data(), ref_x_.data()) -
+                              relative_motion(vt, idx, d_.data(), nullptr) < th;
+    }
+    near_.clear();
+    for (Index q = 0; q < np; ++q)
+      if (near_flag_[q]) near_.push_back(q);
+  };
+  build_near();
   stats_.near = static_cast<Index>(near_.size());
   near_dist_.assign(near_.size(), -1.0);
   near_clean_.assign(near_.size(), 0);
@@ -1197,27 +1204,33 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
   // Pairs outside the near list were farther than the thickness plus their motion; responses
   // lengthen displacements by at most max_growth_, so the list stays complete for CCD while
   // 2 max_growth_ < thickness - tol (after a new traversal, all pairs are visited).
-  bool near_valid = true;
+  bool near_valid = true, near_renewed = false;
   for (int it = 0; it < opt_.ccd_iterations && !clean; ++it) {
     if (responded_ && !candidates_valid()) {
       update_candidates(x0_.data());
-      near_valid = false;
+      // New lists: a near list over them from the d of now (its start distances are not known).
+      build_near();
+      near_dist_.assign(near_.size(), -1.0);
+      near_clean_.assign(near_.size(), 0);
+      d_near_.assign(d_.begin(), d_.end());
+      near_renewed = true;
     }
     ++stats_.ccd_iterations;
     Index hits = 0;
     const Index nvt_now = static_cast<Index>(vt_.size());
     // Responses change d by at most max_change (per vertex, |d - d at the start|), so relative
     // displacements by at most 2 max_change (max_growth_ <= max_change).
+    // After a renewal of the near list: the change since its snapshot of d.
     double max_change = 0;
     for (const Index v : touched_) {
       double c2 = 0;
       for (int k = 0; k < 3; ++k) {
-        const double c = x0_[3 * v + k] + d_[3 * v + k] - x[3 * v + k];
+        const double c = near_renewed ? d_[3 * v + k] - d_near_[3 * v + k] : x0_[3 * v + k] + d_[3 * v + k] - x[3 * v + k];
         c2 += c * c;
       }
       max_change = std::max(max_change, std::sqrt(c2));
     }
-    const bool use_near = near_valid && 2 * std::max(max_growth_, max_change) < th - tol;
+    const bool use_near = near_valid && 2 * (near_renewed ? max_change : std::max(max_growth_, max_change)) < th - tol;
     const Index count = use_near ? static_cast<Index>(near_.size()) : nvt_now + static_cast<Index>(ee_.size());
     for (Index r = 0; r < count; ++r) {
       const Index q = use_near ? near_[r] : r;

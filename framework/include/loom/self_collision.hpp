@@ -324,6 +324,7 @@ class SelfCollision {
   std::vector<std::uint32_t> near_clean_;        ///< per near pair: found clean by a CCD pass at ccd_clock_ < this
   std::vector<std::uint32_t> vstamp_;            ///< per vertex: ccd_clock_ after the last CCD impulse that moved it
   std::uint32_t ccd_clock_ = 0;                  ///< CCD impulses so far in this resolve()
+  std::vector<double> d_near_;                   ///< d when the near list was renewed during the CCD passes
   std::vector<double> len0_;                     ///< per vertex |d| before any response this step
   double max_growth_ = 0;                        ///< largest |d| - len0 after responses
   bool responded_ = false;                       ///< d or v changed this step
