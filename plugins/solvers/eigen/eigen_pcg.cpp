@@ -306,39 +306,33 @@ struct CpuPcgOps {
     const double* cp = c.data();
     double* qp = q.data();
     double cq = 0;
+    // Row i of A c (float copy, upper triangle or full rows), then filtered and dotted with c.
+    auto row_product = [&](Index i, double* out) {
+      if (af)
+        block_row_multiply3(rp, col, af, cp, i, out);
+      else if (upper)
+        upper->row(A, cp, i, out);
+      else
+        block_row_multiply3(rp, col, val, cp, i, out);
+    };
+    auto filter_dot = [&](Index i, double* out) {
+      const int f = S.free_dofs(i);
+      if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), out);
+      return kernels::dot3(cp + 3 * static_cast<std::size_t>(i), out);
+    };
     if (extra) {  // q = A c + E c, then the filter
 #pragma omp parallel for schedule(static) if (par)
-      for (Index i = 0; i < n; ++i) {
-        const std::size_t o = 3 * static_cast<std::size_t>(i);
-        if (af)
-          block_row_multiply3(rp, col, af, cp, i, qp + o);
-        else if (upper)
-          upper->row(A, cp, i, qp + o);
-        else
-          block_row_multiply3(rp, col, val, cp, i, qp + o);
-      }
+      for (Index i = 0; i < n; ++i) row_product(i, qp + 3 * static_cast<std::size_t>(i));
       extra->apply_add(cp, qp, 1.0);
 #pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
-      for (Index i = 0; i < n; ++i) {
-        const std::size_t o = 3 * static_cast<std::size_t>(i);
-        const int f = S.free_dofs(i);
-        if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), qp + o);
-        cq += kernels::dot3(cp + o, qp + o);
-      }
+      for (Index i = 0; i < n; ++i) cq += filter_dot(i, qp + 3 * static_cast<std::size_t>(i));
       return cq;
     }
 #pragma omp parallel for schedule(static) reduction(+ : cq) if (par)
     for (Index i = 0; i < n; ++i) {
-      const std::size_t o = 3 * static_cast<std::size_t>(i);
-      if (af)
-        block_row_multiply3(rp, col, af, cp, i, qp + o);
-      else if (upper)
-        upper->row(A, cp, i, qp + o);
-      else
-        block_row_multiply3(rp, col, val, cp, i, qp + o);
-      const int f = S.free_dofs(i);
-      if (f != 3) kernels::filter_vec3(f, S.projector(i).data(), qp + o);
-      cq += kernels::dot3(cp + o, qp + o);
+      double* out = qp + 3 * static_cast<std::size_t>(i);
+      row_product(i, out);
+      cq += filter_dot(i, out);
     }
     return cq;
   }
