@@ -150,14 +150,26 @@ void set_counters(benchmark::State& st, const Row& r, int threads, double bytes)
   st.counters["paper_springs"] = r.springs;
 }
 
-void BM_HoStep_double(benchmark::State& st) {
+// The HO rows' start: the row and thread count from the arguments, the triad measured for that
+// count, the row's cloth at rest at its start positions.
+struct HoRun {
+  const Row& r;
+  int threads;
+  Cloth& c;
+};
+HoRun start_ho_run(benchmark::State& st, const std::string& stencil = "kang_cho_table1") {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
-  Cloth& c = cloth(r.n);
+  Cloth& c = cloth(r.n, stencil);
   omp_set_num_threads(threads);
   c.scene.state.x = c.x0;
   std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  return {r, threads, c};
+}
+
+void BM_HoStep_double(benchmark::State& st) {
+  auto [r, threads, c] = start_ho_run(st);
   for (auto _ : st) c.ho.step(c.scene, c.h);
   set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), c.ho.springs().table));
   st.counters["springs"] = c.springs();
@@ -167,26 +179,14 @@ void BM_HoStep_double(benchmark::State& st) {
 // The "every grid neighbour within radius sqrt(5)" stencil: 10n^2 - 22n + 10 springs, 0.25%
 // fewer than the paper's counts (printed beside them: springs vs paper_springs).
 void BM_HoStep_double_sqrt5(benchmark::State& st) {
-  const Row& r = rows()[st.range(0)];
-  const int threads = static_cast<int>(st.range(1));
-  triad_bandwidth(threads);
-  Cloth& c = cloth(r.n, "radius_sqrt5");
-  omp_set_num_threads(threads);
-  c.scene.state.x = c.x0;
-  std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  auto [r, threads, c] = start_ho_run(st, "radius_sqrt5");
   for (auto _ : st) c.ho.step(c.scene, c.h);
   set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), c.ho.springs().table));
   st.counters["springs"] = c.springs();
 }
 
 void BM_HoStep_double_direct(benchmark::State& st) {
-  const Row& r = rows()[st.range(0)];
-  const int threads = static_cast<int>(st.range(1));
-  triad_bandwidth(threads);
-  Cloth& c = cloth(r.n);
-  omp_set_num_threads(threads);
-  c.scene.state.x = c.x0;
-  std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  auto [r, threads, c] = start_ho_run(st);
   for (auto _ : st) c.ho_direct.step(c.scene, c.h);
   set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), false));
 }
@@ -194,13 +194,7 @@ void BM_HoStep_double_direct(benchmark::State& st) {
 // The parameter tables kept on the windowed sweep (HoIntegrator::set_tables_on_window): 2 bytes
 // per spring and a table gather per spring, the default before per-spring streams.
 void BM_HoStep_double_table(benchmark::State& st) {
-  const Row& r = rows()[st.range(0)];
-  const int threads = static_cast<int>(st.range(1));
-  triad_bandwidth(threads);
-  Cloth& c = cloth(r.n);
-  omp_set_num_threads(threads);
-  c.scene.state.x = c.x0;
-  std::fill(c.scene.state.v.begin(), c.scene.state.v.end(), 0.0);
+  auto [r, threads, c] = start_ho_run(st);
   for (auto _ : st) c.ho_table.step(c.scene, c.h);
   set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), c.ho_table.springs().table));
   st.counters["table"] = c.ho_table.springs().table ? static_cast<double>(c.ho_table.springs().t_l0.size()) : 0.0;
