@@ -161,19 +161,24 @@ struct HoVertexKernel {  // per vertex: gather the impulses, then update x and v
     const long long d = 3LL * i;
     const T wi = w[i];
     const T g[3] = {g0, g1, g2};
-    T dv[3] = {T(0), T(0), T(0)}, dx[3] = {T(0), T(0), T(0)};
+    // The same arithmetic as the CPU plugin: the vertex's spring impulses (per unit inverse
+    // mass) are summed unweighted, sv = sum of +-G_q, and scaled by w_i once, dv = w_i sv
+    // (not w_i G_1 + w_i G_2 + ...). Only the summation order differs from the CPU's.
+    T sv[3] = {T(0), T(0), T(0)}, sp[3] = {T(0), T(0), T(0)};
     for (Index k = ptr[i]; k < ptr[i + 1]; ++k) {
       const long long q = 3LL * spring[k];
       for (int e = 0; e < 3; ++e) {
         if (sign[k] > 0) {
-          dv[e] += wi * G[q + e];
-          if constexpr (kPos) dx[e] += wi * P[q + e];
+          sv[e] += G[q + e];
+          if constexpr (kPos) sp[e] += P[q + e];
         } else {
-          dv[e] -= wi * G[q + e];
-          if constexpr (kPos) dx[e] -= wi * P[q + e];
+          sv[e] -= G[q + e];
+          if constexpr (kPos) sp[e] -= P[q + e];
         }
       }
     }
+    const T dv[3] = {wi * sv[0], wi * sv[1], wi * sv[2]};
+    const T dx[3] = {wi * sp[0], wi * sp[1], wi * sp[2]};
     // The CPU plugin's finalisation, one source (loom/kernels/ho.hpp).
     const T hg[3] = {h * g[0], h * g[1], h * g[2]};
     const T gg[3] = {hh2 * g[0], hh2 * g[1], hh2 * g[2]};
