@@ -390,8 +390,9 @@ int main(int argc, char** argv) {
         char load[64] = "not measured (short set-up)";
         if (tc->start_load() >= 0) std::snprintf(load, sizeof load, "%.2f cores", tc->start_load());
         std::printf("loom: threads auto: ended on %d (started on %d, others' load at start %s; %d probes, "
-                    "%d held back by load, %d switches, probes cost %.3g s)\n", tc->chosen(), tc->initial(),
-                    load, tc->probes(), tc->gated_probes(), tc->switches(), tc->probe_loss());
+                    "%d held back by load, %d by short steps, %d switches, probes cost %.3g s)\n", tc->chosen(),
+                    tc->initial(), load, tc->probes(), tc->gated_probes(), tc->small_step_holds(), tc->switches(),
+                    tc->probe_loss());
       }
     }
     if (args.render && loom::is_output_rank()) {

@@ -73,6 +73,17 @@ void ThreadController::on_sample(double s, int steps) {
     need = std::max(cfg_.min_interval, next_loss_ / ((drifted ? 2.0 : 1.0) * cfg_.overhead));
   }
   if (since_decision_ < need) return;
+  // Small steps (see the top of loom/thread_controller.hpp): counts above the chosen one stay
+  // out while its step is below min_step_seconds; with nothing else to try, no probe and no
+  // /proc reading.
+  const bool small = m < cfg_.min_step_seconds;
+  bool other = false;
+  for (int k = 0; k < ncand_; ++k) other = other || (cand_[k] != chosen_ && !(small && cand_[k] > chosen_));
+  if (!other) {
+    ++small_held_;
+    since_decision_ = 0;
+    return;
+  }
   // The load gate: counts above the chosen one that exceed the cores free now stay out. A
   // reading costs a /proc read (about 30 us): at most one per min_interval of step time.
   if (free_cores_ && (gate_read_at_ < 0 || elapsed_ - gate_read_at_ >= cfg_.min_interval)) {
@@ -82,7 +93,7 @@ void ThreadController::on_sample(double s, int steps) {
   }
   bool any = false;
   for (int k = 0; k < ncand_; ++k) {
-    blocked_[k] = free_now_ > 0 && cand_[k] > chosen_ && cand_[k] > free_now_;
+    blocked_[k] = cand_[k] > chosen_ && (small || (free_now_ > 0 && cand_[k] > free_now_));
     any = any || (cand_[k] != chosen_ && !blocked_[k]);
   }
   if (!any) {

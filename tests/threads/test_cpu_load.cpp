@@ -260,3 +260,35 @@ TEST(AutoThreadStart, IdleSetUpStartsOnTheCoresAndNoProcFallsBack) {
   EXPECT_EQ(d.finish(1, 4 * kParallelMinVertices), nullptr);  // one core: nothing to adapt
   EXPECT_EQ(d.start().threads, 1);
 }
+
+// hanging_cloth under `threads: auto` (576 vertices, ~30 us steps, a set-up too short to
+// measure): the steps start on 1 thread and stay there with no probe and no /proc reading
+// after the set-up, even where 2 threads would measure faster (ThreadController's small-step
+// rule, min_step_seconds).
+TEST(AutoThreadStart, SmallSceneShortStepsNeverProbeNorReadProc) {
+  struct CountingProc : FakeProc {
+    mutable int reads = 0;
+    bool read(const char* path, std::string& text) const override {
+      ++reads;
+      return FakeProc::read(path, text);
+    }
+  } p;
+  p.push("/proc/stat", stat2(100, 100, 100, 100));  // the same ticks: a window too short to say
+  p.push("/proc/self/stat", self(10, 0));
+  p.push("/proc/loadavg", "1.00 1.00 1.00 2/100 999\n");
+  AutoThreadStart a(&p, {0, 1});
+  auto ctl = a.finish(2, 24 * 24);
+  ASSERT_NE(ctl, nullptr);
+  EXPECT_EQ(a.others_busy(), -1);
+  EXPECT_EQ(a.start().threads, 1);
+  ctl->set_run_steps(10020);
+  const int reads_at_start = p.reads;
+  for (int s = 0; s < 10020; ++s) {
+    ASSERT_EQ(ctl->threads(), 1) << s;
+    ctl->record(ctl->threads() == 1 ? 30e-6 : 20e-6);
+  }
+  EXPECT_EQ(ctl->probes(), 0);
+  EXPECT_GE(ctl->small_step_holds(), 1);
+  EXPECT_EQ(ctl->gate_reads(), 0);
+  EXPECT_EQ(p.reads, reads_at_start);
+}

@@ -412,8 +412,12 @@ TEST(ThreadController, GateReadingsAreRationedWhenProbesAreSkipped) {
   // threads is 120 steps and may cost 0.5 x 120 = 60 step times, while 10% of the at most
   // 685 - 120 steps left repays 56.5. Probes fall due every 10 step times and are skipped;
   // the gate is read at most once per min_interval (0.25 s) of step time: once in this 35 ms run.
+  // (The small-step rule, min_step_seconds, would hold back these 50 us steps before any
+  // reading: it is off here, the rationing is what this test is about.)
   int calls = 0;
-  ThreadController c(1, 2);
+  ThreadController::Config cfg;
+  cfg.min_step_seconds = 0;
+  ThreadController c(1, 2, cfg);
   c.set_run_steps(700);
   c.set_free_cores([&] {
     ++calls;
@@ -424,4 +428,77 @@ TEST(ThreadController, GateReadingsAreRationedWhenProbesAreSkipped) {
   EXPECT_GE(c.skipped_probes(), 10);
   EXPECT_EQ(calls, 1);
   EXPECT_EQ(c.gate_reads(), 1);
+}
+
+// Small steps (min_step_seconds, 100 us): a step that short has no loop long enough to split, so a
+// count above the chosen one is never tried, whatever the load, the run length or what it would
+// measure.
+TEST(ThreadController, SmallStepsOnOneThreadNeverTryMore) {
+  // hanging_cloth's shape: 576 vertices, 1 thread, about 30 us a step, 10,020 steps. Even in a
+  // world where 2 threads would be faster (20 us), with or without a known length and a gate
+  // that reads 2 free cores, every step runs on 1 thread, no probe starts and the gate is never read.
+  for (const long run : {0L, 10020L}) {
+    int calls = 0;
+    ThreadController c(1, 2);
+    c.set_run_steps(run);
+    c.set_free_cores([&] {
+      ++calls;
+      return 2;
+    });
+    for (long s = 0; s < 10020; ++s) {
+      ASSERT_EQ(c.threads(), 1) << run << " " << s;
+      c.record(c.threads() == 1 ? 30e-6 : 20e-6);
+    }
+    EXPECT_EQ(c.probes(), 0) << run;
+    EXPECT_EQ(c.switches(), 0) << run;
+    EXPECT_EQ(c.probe_loss(), 0.0) << run;
+    EXPECT_EQ(calls, 0) << run;
+    // Probes fell due (first after the skipped step, 3 samples of 67 steps and 10 step times)
+    // and were held back: at least one per 10 step times after that.
+    EXPECT_GE(c.small_step_holds(), (10020 - 1 - 3 * 67) / (10 * 67)) << run;
+    EXPECT_EQ(c.gated_probes(), 0) << run;
+  }
+}
+
+TEST(ThreadController, TheSmallStepBoundIsTheChosenCountsMedian) {
+  // Just above the bound (110 us on 1 thread, 60 us on 2) the probe runs and 2 threads are kept:
+  // the rule holds back only steps below min_step_seconds. Just below (90 us), none.
+  auto probe = [](double t1) {
+    ThreadController c(1, 2);
+    for (int s = 0; s < 2000; ++s) c.record(c.threads() == 1 ? t1 : 60e-6);
+    return c;
+  };
+  const ThreadController above = probe(110e-6), below = probe(90e-6);
+  EXPECT_GE(above.probes(), 1);
+  EXPECT_EQ(above.chosen(), 2);
+  EXPECT_EQ(above.small_step_holds(), 0);
+  EXPECT_EQ(below.probes(), 0);
+  EXPECT_EQ(below.chosen(), 1);
+  EXPECT_GE(below.small_step_holds(), 1);
+  // One spike (a descheduled step of 5 ms in a batch of 2 ms samples) does not lift the median
+  // of 3 samples over the bound.
+  ThreadController c(1, 2);
+  for (int s = 0; s < 5000; ++s) c.record(s % 1000 == 500 ? 5e-3 : 30e-6);
+  EXPECT_EQ(c.probes(), 0);
+}
+
+TEST(ThreadController, SmallStepsStillTryFewerThreadsAndResumeWhenTheStepGrows) {
+  // Started on 2 (a large mesh's guess) with 40 us steps where 1 thread takes 30 us: 1 is tried
+  // and kept, then 2 is not tried again while steps stay small. When the step grows to 2 ms on 1
+  // thread (1 ms on 2: contact began), probes of 2 resume and 2 threads are kept.
+  double t = 0;
+  auto world = [&](int n) { return t < 1.0 ? (n == 1 ? 30e-6 : 40e-6) : (n == 1 ? 2e-3 : 1e-3); };
+  ThreadController c(2, 2);
+  int probes_small = -1;
+  while (t < 3.0) {
+    const double s = world(c.threads());
+    t += s;
+    c.record(s);
+    if (t < 1.0 && c.chosen() == 1 && probes_small < 0) probes_small = c.probes();
+  }
+  EXPECT_EQ(probes_small, 1);  // the probe of 1 thread, from 2
+  EXPECT_GE(c.small_step_holds(), 1);
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_GE(c.probes(), 2);
+  EXPECT_EQ(c.switches(), 2);
 }

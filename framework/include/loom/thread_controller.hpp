@@ -43,6 +43,16 @@
 //   above the chosen one that the reading allows costs what any other count may cost (the
 //   `unmeasured_cost` bound is for an unknown reading). So next to a busy process a run never
 //   tries more threads, and it tries them again once the reading shows the cores free.
+// - Small steps: while the chosen count's step time is below `min_step_seconds` (100 us), a due
+//   probe leaves out every count above the chosen one, before any load reading, and is not
+//   started when no count is left (counted in small_step_holds()). Such a step has no loop long
+//   enough to be split: loops below kParallelMinVertices (4096) vertex updates run serially
+//   (loom/common.hpp), and 4096 vertex updates of the cheapest steps take 200-290 us on one
+//   thread (HO in table1, 71 ns per vertex; hanging_cloth's symplectic Euler, 61 ns).
+//   So more threads can only add barriers, and their probe (one 2 ms sample at least, a
+//   scheduler slice when a thread is descheduled) is pure risk: a small scene on 1 thread stays
+//   on 1 thread without trials. A count below the chosen one is still tried, and when the step
+//   grows (contact, a larger scene after a reset) probes of more threads resume.
 // The controller is pure logic on the step times it is given (no clock of its own), so tests
 // drive it with made-up times. Simulation::step feeds it and applies threads().
 #pragma once
@@ -62,6 +72,7 @@ struct ThreadControllerConfig {
   double drift = 1.5;             ///< the chosen count's time changed by this factor: probe twice as early
   double repay_gain = 0.10;       ///< with a known run length: a probe must be repaid by a count this much faster
   double unmeasured_cost = 10;    ///< ... and a never-measured count above the chosen one may cost this many step times
+  double min_step_seconds = 1e-4; ///< a chosen count's step shorter than this never tries more threads
 };
 
 class ThreadController {
@@ -86,6 +97,7 @@ class ThreadController {
   void set_free_cores(std::function<int()> free) { free_cores_ = std::move(free); }
   int initial() const { return cand_[0]; }           ///< the count the run started on
   int gated_probes() const { return gated_; }        ///< probes due but not started: no count fits the free cores
+  int small_step_holds() const { return small_held_; }  ///< probes due but not started: the step is below min_step_seconds
   int gate_reads() const { return gate_reads_; }     ///< readings taken by the load gate
   /// What the start-up rule saw (informational): cores other processes kept busy during the set-up, -1 unknown.
   void set_start_load(double cores) { start_load_ = cores; }
@@ -146,6 +158,7 @@ class ThreadController {
   int free_now_ = -1;                        // the gate's reading when the due probe was decided
   bool blocked_[kMaxCandidates] = {};        // left out of the due probe by the gate
   int gated_ = 0;
+  int small_held_ = 0;
   double start_load_ = -1;
   double gate_read_at_ = -1;                 // elapsed_ at the last gate reading
   int gate_reads_ = 0;
