@@ -25,6 +25,7 @@
 #include "mass_spring.hpp"
 #include "rk4_integrator.hpp"
 #include "symplectic_euler.hpp"
+#include "common/scene_state.hpp"
 
 using namespace loom;
 
@@ -45,14 +46,10 @@ std::unique_ptr<Scene> grid_scene(double k = kK, double damping = 0.0) {
   const Params p = Params::from_string(yaml, "<convergence grid>");
   sc->material = std::make_unique<mass_spring::MassSpringMaterial>(p, sc->mesh);
   p.check_unused();
-  const Index n = sc->mesh.num_vertices();
-  sc->state.resize(n);
-  sc->state.x = sc->mesh.positions;
-  sc->material->compute_masses(sc->state.mass);
+  loom_test::init_state(*sc);
   const GridInfo& g = *sc->mesh.grid;
   sc->state.pin(g.index(0, g.ny - 1));
   sc->state.pin(g.index(g.nx - 1, g.ny - 1));
-  sc->state.update_inverse_masses();
   sc->gravity = {0, -9.81, 0};
   return sc;
 }

@@ -62,15 +62,12 @@ std::unique_ptr<Scene> shipped_scene(double gap) {
   const double drop = y0 - (top + gap);
   EXPECT_GT(drop, 0.0);
   const double speed = std::sqrt(2.0 * -sc->gravity[1] * drop);
+  loom_test::init_state(*sc);
   State& st = sc->state;
-  st.resize(sc->mesh.num_vertices());
-  st.x = sc->mesh.positions;
   for (Index i = 0; i < st.size(); ++i) {
     st.x[3 * i + 1] -= drop;
     st.v[3 * i + 1] = -speed;
   }
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
   return sc;
 }
 

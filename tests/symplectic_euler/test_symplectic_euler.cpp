@@ -19,6 +19,7 @@
 #include "loom/state.hpp"
 #include "mass_spring.hpp"
 #include "symplectic_euler.hpp"
+#include "common/scene_state.hpp"
 
 using namespace loom;
 using loom::mass_spring::MassSpringMaterial;
@@ -34,12 +35,8 @@ std::unique_ptr<Scene> make_scene(const Mesh& mesh, const std::string& material_
   Params p = Params::from_string(material_yaml, "material.yaml");
   sc->material = std::make_unique<MassSpringMaterial>(p, sc->mesh);
   p.check_unused();
-  State& st = sc->state;
-  st.resize(mesh.num_vertices());
-  st.x = mesh.positions;
-  sc->material->compute_masses(st.mass);
-  st.update_inverse_masses();
-  for (Index i : pins) st.pin(i);
+  loom_test::init_state(*sc);
+  for (Index i : pins) sc->state.pin(i);
   sc->gravity = gravity;
   return sc;
 }
