@@ -120,29 +120,55 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   return *c;
 }
 
-// Modelled memory traffic of one step (T = scalar bytes, N vertices, S springs).
-double ho_bytes(double T, double N, double S, bool table) {
-  if (!table) return (8 + 3 * T) * S + N * (12 * T + T + 6 * T);
-  // springs: i, j (4 + 4) and l0, kx, kv (direct) or a 2-byte table id; vertices: x, v read
-  // and written, inverse mass, the velocity accumulator read and written (deferred flags and
-  // the small tables ignored)
-  return (8 + 2) * S + N * (12 * T + T + 6 * T);
+// Modelled memory traffic of one step (T = scalar bytes, N vertices).
+//
+// The spring sweeps' bytes are counted from the sweep's own structure (what the code reads and
+// writes, docs/plugins/integrators.md "table1's byte model"): per interior spring its streamed
+// constants (cst bytes: l0, kx, kv for HO, k, l0 (and c) for the force sweep, or HO's 2-byte
+// table id), plus its two endpoint indices (8 bytes) on the plain sweep only (the grouped sweep
+// reads segments instead: sizeof(SpringSegment) per segment, SpringBlock and block_need per
+// block); per cross spring its indices and constants; per vertex x and v read and written
+// (12 T), the inverse mass (T) and the deferred flag (1 byte), plus the 3n accumulator read and
+// written (6 T) when there is no window; with the window only the deferred vertices (those cross
+// springs touch) use the accumulator: written at hand-off, read and cleared at finalisation
+// (12 T). Not counted: the small parameter tables and the window itself (cache resident).
+template <class Sw>
+double sweep_spring_bytes(const Sw& s, Index cross, double cst) {
+  const double S = s.size(), C = cross;
+  double b = (S - C) * (cst + (s.grouped ? 0.0 : 8.0)) + C * (8.0 + cst);
+  if (s.grouped)
+    b += static_cast<double>(sizeof(SpringSegment)) * static_cast<double>(s.segs.size()) +
+         static_cast<double>(sizeof(SpringBlock) + sizeof(Index)) * static_cast<double>(s.blocks.size());
+  return b;
+}
+template <class Sw>
+double sweep_bytes(const Sw& s, Index cross, double T, double N, double cst) {
+  const bool win = s.grouped && s.win_cap > 0;
+  return sweep_spring_bytes(s, cross, cst) + N * (13.0 * T + 1.0 + (win ? 0.0 : 6.0 * T)) +
+         (win ? 12.0 * T * static_cast<double>(s.deferred.size()) : 0.0);
+}
+template <class T>
+double ho_bytes(const HoSprings<T>& s, const SpringLayout& layout, double N) {
+  const double t = sizeof(T);
+  return sweep_bytes(s, layout.num_cross(), t, N, s.table ? 2.0 : 3.0 * t);
+}
+template <class T>
+double se_bytes(const SpringSweep<T>& s) {
+  const double t = sizeof(T);
+  return sweep_bytes(s, s.layout.num_cross(), t, s.n, (s.damped() ? 3.0 : 2.0) * t);
 }
 double rk4_bytes(double T, double N, double S) {
   // 4 force passes (springs: i, j, k, l0; x, v read, f written) + 4 stage passes over x0, v0,
   // xs, vs, f, accumulators
   return 4 * ((8 + 2 * T) * S + N * 9 * T) + 4 * N * 3 * T * 7;
 }
-
-double se_bytes(double T, double N, double S) {
-  // springs: i, j (4 + 4), k, l0; vertices: x, v read and written, inverse mass, the force
-  // accumulator read and written
-  return (8 + 2 * T) * S + N * (12 * T + T + 6 * T);
-}
-double rk4_fused_bytes(double T, double N, double S) {
-  // 4 passes; each: springs (i, j, k, l0) and per vertex x0, v0 read, xs, vs and the two
-  // accumulators read and written, f read and written, inverse mass
-  return 4 * ((8 + 2 * T) * S + N * (6 * T + 12 * T + 12 * T + 6 * T + T));
+template <class T>
+double rk4_fused_bytes(const SpringSweep<T>& s) {
+  // 4 passes; each: the sweep's spring data (sweep_spring_bytes) and per vertex x0, v0 read, xs,
+  // vs and the two accumulators read and written, f read and written, inverse mass
+  const double t = sizeof(T), N = s.n;
+  const double springs = sweep_spring_bytes(s, s.layout.num_cross(), (s.damped() ? 3.0 : 2.0) * t);
+  return 4 * (springs + N * (6 * t + 12 * t + 12 * t + 6 * t + t));
 }
 
 void set_counters(benchmark::State& st, const Row& r, int threads, double bytes) {
@@ -171,7 +197,7 @@ HoRun start_ho_run(benchmark::State& st, const std::string& stencil = "kang_cho_
 void BM_HoStep_double(benchmark::State& st) {
   auto [r, threads, c] = start_ho_run(st);
   for (auto _ : st) c.ho.step(c.scene, c.h);
-  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), c.ho.springs().table));
+  set_counters(st, r, threads, ho_bytes(c.ho.springs(), c.ho.layout(), c.scene.state.size()));
   st.counters["springs"] = c.springs();
   st.counters["table"] = c.ho.springs().table ? static_cast<double>(c.ho.springs().t_l0.size()) : 0.0;
 }
@@ -181,14 +207,14 @@ void BM_HoStep_double(benchmark::State& st) {
 void BM_HoStep_double_sqrt5(benchmark::State& st) {
   auto [r, threads, c] = start_ho_run(st, "radius_sqrt5");
   for (auto _ : st) c.ho.step(c.scene, c.h);
-  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), c.ho.springs().table));
+  set_counters(st, r, threads, ho_bytes(c.ho.springs(), c.ho.layout(), c.scene.state.size()));
   st.counters["springs"] = c.springs();
 }
 
 void BM_HoStep_double_direct(benchmark::State& st) {
   auto [r, threads, c] = start_ho_run(st);
   for (auto _ : st) c.ho_direct.step(c.scene, c.h);
-  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), false));
+  set_counters(st, r, threads, ho_bytes(c.ho_direct.springs(), c.ho_direct.layout(), c.scene.state.size()));
 }
 
 // The parameter tables kept on the windowed sweep (HoIntegrator::set_tables_on_window): 2 bytes
@@ -196,7 +222,7 @@ void BM_HoStep_double_direct(benchmark::State& st) {
 void BM_HoStep_double_table(benchmark::State& st) {
   auto [r, threads, c] = start_ho_run(st);
   for (auto _ : st) c.ho_table.step(c.scene, c.h);
-  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), c.ho_table.springs().table));
+  set_counters(st, r, threads, ho_bytes(c.ho_table.springs(), c.ho_table.layout(), c.scene.state.size()));
   st.counters["table"] = c.ho_table.springs().table ? static_cast<double>(c.ho_table.springs().t_l0.size()) : 0.0;
 }
 
@@ -248,7 +274,7 @@ void ho_window_bench(benchmark::State& st, bool window) {
   for (auto _ : st)
     ho_step_arrays<double, HoVariant::Velocity>(c.ho.layout(), s, x.data(), v.data(), dv.data(), nullptr,
                                                 c.scene.state.inv_mass.data(), c.h, g);
-  set_counters(st, r, threads, ho_bytes(8, c.scene.state.size(), c.springs(), s.table));
+  set_counters(st, r, threads, ho_bytes(s, c.ho.layout(), c.scene.state.size()));
 }
 void BM_HoStep_double_window(benchmark::State& st) { ho_window_bench(st, true); }
 void BM_HoStep_double_nowindow(benchmark::State& st) { ho_window_bench(st, false); }
@@ -265,7 +291,7 @@ void BM_HoStep_float(benchmark::State& st) {
   for (auto _ : st)
     ho_step_arrays<float, HoVariant::Velocity>(c.ho.layout(), c.fs, c.fx.data(), c.fv.data(), c.fdv.data(),
                                                nullptr, c.fw.data(), static_cast<float>(c.h), g);
-  set_counters(st, r, threads, ho_bytes(4, c.scene.state.size(), c.springs(), c.fs.table));
+  set_counters(st, r, threads, ho_bytes(c.fs, c.ho.layout(), c.scene.state.size()));
 }
 
 void BM_Rk4Step_double(benchmark::State& st) {
@@ -279,7 +305,7 @@ void BM_Rk4Step_double(benchmark::State& st) {
   Rk4Integrator rk;
   rk.prepare(c.scene, c.h);
   for (auto _ : st) rk.step(c.scene, c.h);   // the plugin: the fused spring path
-  set_counters(st, r, threads, rk4_fused_bytes(8, c.scene.state.size(), c.springs()));
+  set_counters(st, r, threads, rk4_fused_bytes(c.sweep));
 }
 
 // RK4 in float through rk4_step_arrays (a force pass, then a stage loop: two regions per stage).
@@ -319,7 +345,7 @@ void BM_Rk4Step_float(benchmark::State& st) {
 // kind 0: the default sweep (grouped and windowed, loom/spring_groups.hpp), 1: plain (one spring
 // at a time, what the step ran before), 2: blocked (plain order, forces of 128 springs by one loop).
 template <class T>
-void se_bench(benchmark::State& st, bool is_float, int kind = 0) {
+void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -337,7 +363,7 @@ void se_bench(benchmark::State& st, bool is_float, int kind = 0) {
   for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
   sw->blocked = false;
   benchmark::DoNotOptimize(x.data());
-  set_counters(st, r, threads, se_bytes(is_float ? 4 : 8, c.scene.state.size(), c.springs()));
+  set_counters(st, r, threads, se_bytes(*sw));
 }
 void BM_SeStep_double(benchmark::State& st) { se_bench<double>(st, false); }
 void BM_SeStep_float(benchmark::State& st) { se_bench<float>(st, true); }
@@ -348,7 +374,7 @@ void BM_SeStep_double_blocked(benchmark::State& st) { se_bench<double>(st, false
 void BM_SeStep_float_blocked(benchmark::State& st) { se_bench<float>(st, true, 2); }
 
 template <class T>
-void rk4_fused_bench(benchmark::State& st, bool is_float, bool plain = false) {
+void rk4_fused_bench(benchmark::State& st, bool /*is_float*/, bool plain = false) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -365,7 +391,7 @@ void rk4_fused_bench(benchmark::State& st, bool is_float, bool plain = false) {
     rk4_step_springs<T>(*sw, x.data(), v.data(), w.data(), g, static_cast<T>(c.h), xs.data(), vs.data(), f.data(),
                         ax.data(), av.data(), [](int) {});
   benchmark::DoNotOptimize(x.data());
-  set_counters(st, r, threads, rk4_fused_bytes(is_float ? 4 : 8, c.scene.state.size(), c.springs()));
+  set_counters(st, r, threads, rk4_fused_bytes(*sw));
 }
 void BM_Rk4Fused_double(benchmark::State& st) { rk4_fused_bench<double>(st, false); }
 void BM_Rk4Fused_float(benchmark::State& st) { rk4_fused_bench<float>(st, true); }
@@ -440,7 +466,7 @@ void ho_shuffled(benchmark::State& st, HoReorder mode) {
   for (auto _ : st) ho.step(c.scene, h);
   const double N = c.scene.state.size();
   // reorder: 2 x (read 48 + write 48) bytes per vertex for the copies in and out
-  set_counters(st, r, threads, ho_bytes(8, N, ho.springs().size(), ho.springs().table) + (ho.reordered() ? 192 * N : 0));
+  set_counters(st, r, threads, ho_bytes(ho.springs(), ho.layout(), N) + (ho.reordered() ? 192 * N : 0));
   st.counters["reordered"] = ho.reordered() ? 1 : 0;
   st.counters["span"] = mean_spring_span(ho.springs().i, ho.springs().j);
 }
