@@ -621,3 +621,82 @@ TEST(SaAmg, SweepCountsPerLevelStaySpdMonotoneAndExact) {
   }
   omp_set_num_threads(threads);
 }
+
+namespace {
+// Dense copy of a block matrix of the hierarchy (br x bc blocks, row-major).
+Eigen::MatrixXd dense_blocks(const loom::amg::BlockMatrix& M) {
+  Eigen::MatrixXd D = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(M.rows) * M.br,
+                                            static_cast<Eigen::Index>(M.cols) * M.bc);
+  for (Index i = 0; i < M.rows; ++i)
+    for (Index k = M.rp[i]; k < M.rp[i + 1]; ++k)
+      for (int a = 0; a < M.br; ++a)
+        for (int c = 0; c < M.bc; ++c)
+          D(static_cast<Eigen::Index>(i) * M.br + a, static_cast<Eigen::Index>(M.ci[k]) * M.bc + c) =
+              M.block(k)[a * M.bc + c];
+  return D;
+}
+
+// Every coarse matrix against its definition, recomputed densely from the stored P: level 0
+// is A~ = S A S + (I - S) of the test system, level l + 1 is P_l^T A_l P_l plus 1 on the
+// diagonal of each coarse DOF whose column of P_l is zero (NUMERICS.md 3.6), to rounding.
+void expect_galerkin_levels(const SaAmg& M, const ts::System& s, const char* what) {
+  const Eigen::MatrixXd At = ts::projected_matrix(s);
+  Eigen::MatrixXd Al = dense_blocks(M.level_matrix(0));
+  EXPECT_LT((Al - At).cwiseAbs().maxCoeff(), 1e-13 * At.cwiseAbs().maxCoeff()) << what << ": level 0";
+  for (std::size_t l = 0; l + 1 < M.levels().size(); ++l) {
+    const Eigen::MatrixXd P = dense_blocks(M.prolongator(l));
+    Eigen::MatrixXd expect = P.transpose() * Al * P;
+    for (Eigen::Index c = 0; c < P.cols(); ++c)
+      if (P.col(c).cwiseAbs().maxCoeff() == 0.0) expect(c, c) += 1.0;
+    const Eigen::MatrixXd got = dense_blocks(M.level_matrix(l + 1));
+    ASSERT_EQ(got.rows(), expect.rows()) << what << ": level " << l + 1;
+    EXPECT_LT((got - expect).cwiseAbs().maxCoeff(), 1e-12 * expect.cwiseAbs().maxCoeff())
+        << what << ": level " << l + 1;
+    // Blocks below the diagonal are the exact transposes of their mirrors; a diagonal block
+    // is summed in full, so it is symmetric to rounding only.
+    const loom::amg::BlockMatrix& C = M.level_matrix(l + 1);
+    const int m = C.br;
+    for (Index I = 0; I < C.rows; ++I)
+      for (Index k = C.rp[I]; k < C.rp[I + 1]; ++k) {
+        const Eigen::MatrixXd blk = got.block(m * I, m * C.ci[k], m, m);
+        const Eigen::MatrixXd mir = got.block(m * C.ci[k], m * I, m, m);
+        if (C.ci[k] != I)
+          ASSERT_EQ((blk - mir.transpose()).cwiseAbs().maxCoeff(), 0.0) << what << ": level " << l + 1;
+        else
+          EXPECT_LT((blk - blk.transpose()).cwiseAbs().maxCoeff(), 1e-14 * expect.cwiseAbs().maxCoeff());
+      }
+    Al = got;
+  }
+}
+}  // namespace
+
+// The Galerkin products (ÃP, then Pᵀ(ÃP) on and above the diagonal, mirrored) equal the
+// dense P^T A P on every level: on the preconditioner systems (pins, contacts, 6 and 3
+// modes, so 3x6, 6x6 and 3x3 block products), and after a numeric refresh that keeps the
+// stale P (prolongator_refresh_steps: 3) and after one that rebuilds it.
+TEST(SaAmg, GalerkinProductsEqualDenseTripleProduct) {
+  for (int modes : {6, 3})
+    for (ts::System& s : systems()) {
+      SaAmg M(small_coarse(modes));
+      std::string msg;
+      ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
+      ASSERT_GE(M.levels().size(), 3u) << "the test needs a real hierarchy";
+      expect_galerkin_levels(M, s, modes == 6 ? "rigid modes" : "translations");
+    }
+  ts::System s = ts::cloth(14, 1e-3, 1e3, 4);
+  SaAmgOptions o = small_coarse();
+  o.prolongator_refresh_steps = 3;
+  SaAmg M(o);
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> g(0.0, 2e-3);
+  for (int step = 0; step < 4; ++step) {
+    if (step > 0) {
+      for (double& c : s.x) c += g(rng);
+      ts::assemble(s, true);
+    }
+    std::string msg;
+    ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
+    expect_galerkin_levels(M, s, step == 1 || step == 2 ? "stale P" : "new P");
+  }
+  EXPECT_EQ(M.prolongator_builds(), 2);  // steps 0 and 3
+}

@@ -53,14 +53,22 @@ inline void gemv_sub(const T* M, const double* x, double* y) {
     y[a] -= s;
   }
 }
-// Cm += A B, A is R x K, B is K x C.
+// Cm += A B, A is R x K, B is K x C (row-major; Cm must not overlap A or B). Each row of Cm
+// is summed in a local accumulator over k in increasing order: the same operations in the
+// same order as the plain triple loop (so the same bits), but with the row in registers and
+// B loaded once per row instead of being reloaded after every store to Cm, which the
+// compiler had to assume might alias it (the Galerkin products are built from these).
 template <int R, int K, int C>
-inline void gemm_add(const double* A, const double* B, double* Cm) {
-  for (int a = 0; a < R; ++a)
+inline void gemm_add(const double* __restrict A, const double* __restrict B, double* __restrict Cm) {
+  for (int a = 0; a < R; ++a) {
+    double acc[C];
+    for (int c = 0; c < C; ++c) acc[c] = Cm[a * C + c];
     for (int k = 0; k < K; ++k) {
       const double s = A[a * K + k];
-      for (int c = 0; c < C; ++c) Cm[a * C + c] += s * B[k * C + c];
+      for (int c = 0; c < C; ++c) acc[c] += s * B[k * C + c];
     }
+    for (int c = 0; c < C; ++c) Cm[a * C + c] = acc[c];
+  }
 }
 
 

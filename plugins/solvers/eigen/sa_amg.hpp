@@ -132,6 +132,10 @@ class SaAmg {
   int hierarchy_builds() const { return hierarchy_builds_; }
   const SaAmgOptions& options() const { return o_; }
   const SaAmgTimings& timings() const { return t_; }
+  /// Level l's matrix (level 0: A~) and its prolongator to level l + 1 (empty on the coarsest),
+  /// in double, as built by the last setup(): for tests that recompute the Galerkin product.
+  const BlockMatrix& level_matrix(std::size_t l) const { return L_[l].A; }
+  const BlockMatrix& prolongator(std::size_t l) const { return L_[l].P; }
 
  private:
   struct Level {
