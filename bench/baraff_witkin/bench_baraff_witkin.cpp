@@ -357,6 +357,7 @@ void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, cons
   const auto mallocs = reinterpret_cast<Count>(dlsym(RTLD_DEFAULT, "loom_probe_mallocs"));
   const unsigned long long m_start = mallocs ? mallocs() : 0;
   const loom::amg::SaAmgTimings t_start = pcg && pcg->amg() ? pcg->amg()->timings() : loom::amg::SaAmgTimings{};
+  const int builds_start = pcg && pcg->amg() ? pcg->amg()->prolongator_builds() : 0;
   double step_s = 0, assemble = 0;
   long steps = 0;
   for (auto _ : st) {
@@ -386,6 +387,18 @@ void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, cons
     st.counters["amg_setup_ms"] = per * (e.setup - t_start.setup);
     st.counters["amg_galerkin_ms"] = per * (e.setup_galerkin - t_start.setup_galerkin);
     st.counters["amg_prolong_ms"] = per * (e.setup_prolongator - t_start.setup_prolongator);
+    // The prolongator is rebuilt every k-th step (prolongator_refresh_steps), and at 128^2 and
+    // up the few timed steps may hold none of those rebuilds. `amg_prolong_build_ms` is the
+    // mean time of one rebuild over every rebuild of the run (the set-up's and the warm-up's
+    // included), and `step_ms_amortized` replaces the timed steps' own rebuild time by the
+    // long-run share, one rebuild per k steps: the step time of a long run on this scene.
+    const int builds = pcg->amg()->prolongator_builds();
+    const int k = std::max(1, pcg->amg()->options().prolongator_refresh_steps);
+    const double per_build = builds > 0 ? 1e3 * e.setup_prolongator / builds : 0;
+    st.counters["amg_prolong_build_ms"] = per_build;
+    st.counters["amg_prolong_builds_timed"] = builds - builds_start;
+    st.counters["step_ms_amortized"] = 1e3 * step_s / steps - per * (e.setup_prolongator - t_start.setup_prolongator) +
+                                       per_build / k;
     st.counters["vcycle_ms"] = per * (e.apply - t_start.apply);
     st.counters["l0_smooth_ms"] = per * (e.apply_fine_smooth - t_start.apply_fine_smooth);
     st.counters["l0_transfer_ms"] = per * (e.apply_fine_transfer - t_start.apply_fine_transfer);
