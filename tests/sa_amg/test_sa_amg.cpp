@@ -645,6 +645,14 @@ void expect_galerkin_levels(const SaAmg& M, const ts::System& s, const char* wha
   EXPECT_LT((Al - At).cwiseAbs().maxCoeff(), 1e-13 * At.cwiseAbs().maxCoeff()) << what << ": level 0";
   for (std::size_t l = 0; l + 1 < M.levels().size(); ++l) {
     const Eigen::MatrixXd P = dense_blocks(M.prolongator(l));
+    // The V-cycle's float copies (float storage, the default) are the rounded current values:
+    // P's is rewritten only when P is rebuilt, the level matrices' at every refresh.
+    for (const loom::amg::BlockMatrix* B : {&M.prolongator(l), &M.level_matrix(l)}) {
+      ASSERT_EQ(B->f.size(), B->v.size()) << what << ": level " << l;
+      std::size_t bad = 0;
+      for (std::size_t k = 0; k < B->v.size(); ++k) bad += B->f[k] != static_cast<float>(B->v[k]);
+      EXPECT_EQ(bad, 0u) << what << ": level " << l;
+    }
     Eigen::MatrixXd expect = P.transpose() * Al * P;
     for (Eigen::Index c = 0; c < P.cols(); ++c)
       if (P.col(c).cwiseAbs().maxCoeff() == 0.0) expect(c, c) += 1.0;
@@ -673,7 +681,8 @@ void expect_galerkin_levels(const SaAmg& M, const ts::System& s, const char* wha
 // The Galerkin products (ÃP, then Pᵀ(ÃP) on and above the diagonal, mirrored) equal the
 // dense P^T A P on every level: on the preconditioner systems (pins, contacts, 6 and 3
 // modes, so 3x6, 6x6 and 3x3 block products), and after a numeric refresh that keeps the
-// stale P (prolongator_refresh_steps: 3) and after one that rebuilds it.
+// stale P (prolongator_refresh_steps: 3) and after one that rebuilds it; the float copies
+// the V-cycle reads are the rounded current values in both cases.
 TEST(SaAmg, GalerkinProductsEqualDenseTripleProduct) {
   for (int modes : {6, 3})
     for (ts::System& s : systems()) {

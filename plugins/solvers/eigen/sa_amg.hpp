@@ -172,7 +172,7 @@ class SaAmg {
   void build_patterns(std::size_t l);
   template <class T, class D>
   void cycle(std::size_t l, const double* b, double* x);
-  void sync_float(bool level0_only);
+  void sync_float(bool level0_only, bool transfers);
   bool filter_changed(const Filter& S) const;
   void remember_filter(const Filter& S);
   bool parallel(const Level& L) const { return static_cast<Index>(L.A.rows) * L.A.br >= o_.parallel_min_dofs; }
