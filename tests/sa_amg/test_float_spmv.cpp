@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -210,4 +211,91 @@ TEST(FloatSpmv, ParsesTheKey) {
   EXPECT_TRUE(loom::parse_pcg_options(loom::Params::from_string("spmv_storage: float\n", "<t>")).float_spmv);
   EXPECT_FALSE(loom::parse_pcg_options(loom::Params::from_string("spmv_storage: double\n", "<t>")).float_spmv);
   EXPECT_THROW(loom::parse_pcg_options(loom::Params::from_string("spmv_storage: half\n", "<t>")), loom::InputError);
+}
+
+// The level-0 transfer kernels of sa_amg (block_row.hpp: R r over 6x3 blocks, x += P x_c over
+// 3x6 blocks) against the plain sums of their definitions, for float and double blocks, block
+// rows of any length (including empty), the last block ending the array; the float instance
+// on float values gives bit for bit what the double one gives on the same values, and
+// restricting with R = Pᵀ equals the transpose of prolongating with P: y.(R r) = (P y).r.
+TEST(FloatSpmv, TransferKernelsMatchTheirDefinition) {
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::uniform_int_distribution<int> len(0, 7);
+  const Index nf = 50, nc = 12;  // fine rows (3 DOFs), coarse rows (6 DOFs)
+  // P: nf block rows of 3x6 blocks, sorted columns.
+  std::vector<Index> prp{0}, pcol;
+  for (Index i = 0; i < nf; ++i) {
+    const int l = len(rng) % 4;
+    for (int k = 0; k < l; ++k) pcol.push_back(static_cast<Index>((i / 5 + 2 * k) % nc));
+    std::sort(pcol.begin() + prp.back(), pcol.end());
+    pcol.erase(std::unique(pcol.begin() + prp.back(), pcol.end()), pcol.end());
+    prp.push_back(static_cast<Index>(pcol.size()));
+  }
+  std::vector<float> pf(pcol.size() * 18);
+  for (float& v : pf) v = static_cast<float>(u(rng));
+  // R = Pᵀ: nc block rows of 6x3 blocks (each the transpose of a block of P).
+  std::vector<Index> rrp(nc + 1, 0), rcol(pcol.size());
+  std::vector<float> rf(pcol.size() * 18);
+  for (Index c : pcol) ++rrp[c + 1];
+  for (Index I = 0; I < nc; ++I) rrp[I + 1] += rrp[I];
+  {
+    std::vector<Index> fill(rrp.begin(), rrp.end() - 1);
+    for (Index i = 0; i < nf; ++i)
+      for (Index k = prp[i]; k < prp[i + 1]; ++k) {
+        const Index q = fill[pcol[k]]++;
+        rcol[q] = i;
+        for (int a = 0; a < 3; ++a)
+          for (int c = 0; c < 6; ++c) rf[18 * q + 3 * c + a] = pf[18 * k + 6 * a + c];
+      }
+  }
+  const std::vector<double> pd(pf.begin(), pf.end()), rd(rf.begin(), rf.end());
+  std::vector<double> r(3 * nf), xc(6 * nc);
+  for (double& v : r) v = u(rng);
+  for (double& v : xc) v = u(rng);
+  // Restriction.
+  std::vector<double> b(6 * nc), bd(6 * nc);
+  for (Index I = 0; I < nc; ++I) {
+    loom::block_row_restrict63(rrp.data(), rcol.data(), rf.data(), r.data(), I, b.data() + 6 * I);
+    loom::block_row_restrict63(rrp.data(), rcol.data(), rd.data(), r.data(), I, bd.data() + 6 * I);
+    for (int c = 0; c < 6; ++c) {
+      double ref = 0, mag = 0;
+      for (Index k = rrp[I]; k < rrp[I + 1]; ++k)
+        for (int a = 0; a < 3; ++a) {
+          const double t = rd[18 * k + 3 * c + a] * r[3 * rcol[k] + a];
+          ref += t;
+          mag += std::abs(t);
+        }
+      EXPECT_EQ(b[6 * I + c], bd[6 * I + c]) << "coarse row " << I;
+      EXPECT_LE(std::abs(b[6 * I + c] - ref), 1e-14 * mag) << "coarse row " << I;
+    }
+  }
+  // Prolongation (adds to x).
+  std::vector<double> x(3 * nf), xd(3 * nf);
+  for (std::size_t k = 0; k < x.size(); ++k) x[k] = xd[k] = u(rng);
+  const std::vector<double> x0 = x;
+  for (Index i = 0; i < nf; ++i) {
+    loom::block_row_prolong36_add(prp.data(), pcol.data(), pf.data(), xc.data(), i, x.data() + 3 * i);
+    loom::block_row_prolong36_add(prp.data(), pcol.data(), pd.data(), xc.data(), i, xd.data() + 3 * i);
+    for (int a = 0; a < 3; ++a) {
+      double ref = x0[3 * i + a], mag = std::abs(ref);
+      for (Index k = prp[i]; k < prp[i + 1]; ++k)
+        for (int c = 0; c < 6; ++c) {
+          const double t = pd[18 * k + 6 * a + c] * xc[6 * pcol[k] + c];
+          ref += t;
+          mag += std::abs(t);
+        }
+      EXPECT_EQ(x[3 * i + a], xd[3 * i + a]) << "fine row " << i;
+      EXPECT_LE(std::abs(x[3 * i + a] - ref), 1e-14 * mag) << "fine row " << i;
+    }
+  }
+  // Adjoint: xc.(R r) = (P xc).r, with P xc = x - x0.
+  double lhs = 0, rhs = 0, mag = 0;
+  for (std::size_t k = 0; k < xc.size(); ++k) lhs += xc[k] * b[k];
+  for (std::size_t k = 0; k < r.size(); ++k) {
+    rhs += (x[k] - x0[k]) * r[k];
+    mag += std::abs(x[k] - x0[k]) * std::abs(r[k]);
+  }
+  EXPECT_LE(std::abs(lhs - rhs), 1e-13 * mag);
+  EXPECT_GT(mag, 0.0);
 }

@@ -1042,19 +1042,29 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
 #pragma omp for schedule(static)
       for (Index I = 0; I < nc; ++I) {
         double* bi = C.b.data() + static_cast<std::size_t>(M) * I;
-        std::fill(bi, bi + M, 0.0);
-        for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k)
-          gemv_add<M, B>(values<T>(L.R) + PB * k, r + static_cast<std::size_t>(B) * L.R.ci[k], bi);
+        if constexpr (B == 3 && M == 6) {  // level 0 of the rigid-body hierarchy (block_row.hpp)
+          block_row_restrict63(L.R.rp.data(), L.R.ci.data(), values<T>(L.R), r, I, bi);
+        } else {
+          std::fill(bi, bi + M, 0.0);
+          for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k)
+            gemv_add<M, B>(values<T>(L.R) + PB * k, r + static_cast<std::size_t>(B) * L.R.ci[k], bi);
+        }
       }
     }
     lap(t_.apply_fine_transfer);
     cycle<T, D>(l + 1, C.b.data(), C.x.data());
     lap(t_.apply_coarse);
 #pragma omp parallel for schedule(static) if (par)
-    for (Index i = 0; i < n; ++i)
-      for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k)
-        gemv_add<B, M>(values<T>(L.P) + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
-                       x + static_cast<std::size_t>(B) * i);
+    for (Index i = 0; i < n; ++i) {
+      if constexpr (B == 3 && M == 6) {
+        block_row_prolong36_add(L.P.rp.data(), L.P.ci.data(), values<T>(L.P), C.x.data(), i,
+                                x + static_cast<std::size_t>(B) * i);
+      } else {
+        for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k)
+          gemv_add<B, M>(values<T>(L.P) + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],
+                         x + static_cast<std::size_t>(B) * i);
+      }
+    }
     lap(t_.apply_fine_transfer);
     for (int s = 0; s < sweeps; ++s) gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
     lap(t_.apply_fine_smooth);
