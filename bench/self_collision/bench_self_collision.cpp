@@ -152,7 +152,9 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
 // Counters: ms per step of each kind of step and their share of the steps, ms of the step
 // without self-collision on the same state (`without_ms`, same process), and the work counts
 // per step (pairs in the lists, near pairs, impulses, broad-phase exact distance tests, CCD
-// cubics solved).
+// cubics solved), and the motion that renews the lists (fast_vertices: vertices that moved
+// more than a quarter of the thickness in the step; largest_step_th: the largest displacement
+// in the step, in thicknesses), per step.
 double thread_cpu_seconds() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
@@ -175,15 +177,29 @@ void BM_StepSplit(benchmark::State& st) {
   }
   double t_full = 0, t_refresh = 0, t_other = 0;
   double n_full = 0, n_refresh = 0, n_other = 0;
-  double candidates = 0, near = 0, impulses = 0, exact = 0, refreshed = 0, full = 0, ccd = 0;
+  double candidates = 0, near = 0, impulses = 0, exact = 0, refreshed = 0, full = 0, ccd = 0, fast = 0, largest = 0;
+  const double quarter = 0.25 * 0.25 / (n - 1);  // a quarter of the scene's thickness, m
+  std::vector<double> before;
   for (auto _ : st) {
     auto sim = loom::Simulation::from_string(scene(n, "symplectic_euler", true), "bench.yaml", ".", {}, loader());
     sim->scene().state = draped(n);
     for (int k = 0; k < 3; ++k) sim->step();
     for (int k = 0; k < steps; ++k) {
+      before = sim->scene().state.x;  // outside the timed part
       const double t0 = thread_cpu_seconds();
       sim->step();
       const double dt = thread_cpu_seconds() - t0;
+      {
+        const std::vector<double>& x = sim->scene().state.x;
+        double big = 0;
+        for (std::size_t i = 0; i < x.size() / 3; ++i) {
+          double d2 = 0;
+          for (int c = 0; c < 3; ++c) d2 += (x[3 * i + c] - before[3 * i + c]) * (x[3 * i + c] - before[3 * i + c]);
+          fast += d2 > quarter * quarter ? 1 : 0;
+          big = std::max(big, d2);
+        }
+        largest += std::sqrt(big) / (4 * quarter);
+      }
       const auto& s = sim->scene().self_collision->last_stats();
       if (s.rebuilds > 0) {
         t_full += dt, ++n_full;
@@ -217,6 +233,11 @@ void BM_StepSplit(benchmark::State& st) {
   st.counters["impulses"] = impulses / total;
   st.counters["exact_tests"] = exact / total;
   st.counters["ccd_tests"] = ccd / total;
+  // Why the lists churn: vertices that moved more than a quarter of the thickness in a step (a
+  // vertex leaves its reach, at least half the thickness, within two such steps), and the
+  // largest displacement of a step in thicknesses, both per step.
+  st.counters["fast_vertices"] = fast / total;
+  st.counters["largest_step_th"] = largest / total;
 }
 BENCHMARK(BM_StepSplit)->Args({64, 2000})->Args({128, 500})->Iterations(1)->Unit(benchmark::kMillisecond);
 
