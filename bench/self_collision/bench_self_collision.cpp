@@ -271,6 +271,7 @@ void BM_BwStepSplit(benchmark::State& st) {
   }
   double with = 0, bw_t = 0, resolve = 0, find = 0, pattern = 0, spring_solve = 0, broad = 0, narrow = 0, response = 0;
   double pairs_t = 0, pairs = 0, material_blocks = 0, pattern_blocks = 0;
+  double released = 0;
   double contacts = 0, solves = 0, spring_its = 0, all_its = 0, growths = 0, candidates = 0, impulses = 0;
   double find_lists = 0, resolve_lists = 0, near = 0, ccd_passes = 0, ccd_tests = 0, frozen = 0, refreshed = 0;
   for (auto _ : st) {
@@ -301,6 +302,7 @@ void BM_BwStepSplit(benchmark::State& st) {
       pattern += c.pattern_seconds;
       spring_solve += c.solve_seconds;
       contacts += c.contacts;
+      released += c.released;
       solves += c.solves;
       spring_its += c.iterations;
       all_its += bw.last_step().linear_iterations;
@@ -338,6 +340,7 @@ void BM_BwStepSplit(benchmark::State& st) {
   st.counters["narrow_ms"] = 1e3 * narrow / total;
   st.counters["response_ms"] = 1e3 * response / total;
   st.counters["contacts"] = contacts / total;
+  st.counters["released"] = released / total;
   st.counters["solves"] = solves / total;
   st.counters["spring_its"] = spring_its / total;
   st.counters["first_its"] = (all_its - spring_its) / total;
