@@ -176,7 +176,8 @@ TEST(BwContactOperator, MatrixFreeTermEqualsTheAssembledBlocksOnAFoldedCloth) {
 }
 
 // One step from the same folded state, solved matrix-free by filtered_pcg (tolerance 1e-12) and
-// with the terms assembled into A by eigen_ldlt (a direct solve): the same springs and releases,
+// with the terms assembled into A by eigen_ldlt (a direct solve): the same springs and releases
+// (the PCG's release solves at a looser tolerance, 1e-9, then one more at 1e-12),
 // and the same end positions and velocities to 1e-9 relative. The contact-free solve that picks
 // the springs differs between the two solvers only by the PCG's tolerance.
 TEST(BwContactOperator, AStepSolvedMatrixFreeEqualsTheAssembledDirectSolve) {
@@ -198,7 +199,9 @@ TEST(BwContactOperator, AStepSolvedMatrixFreeEqualsTheAssembledDirectSolve) {
   EXPECT_GT(sa.contacts, 0);
   EXPECT_EQ(sa.contacts, sb.contacts);
   EXPECT_EQ(sa.released, sb.released);
-  EXPECT_EQ(sa.solves, sb.solves);
+  // The PCG decides the releases at ImplicitSelfContact::kReleaseToleranceScale times its
+  // tolerance and ends with one solve at its own: one solve more than the direct solver.
+  EXPECT_EQ(sa.solves, sb.solves + 1);
   EXPECT_GE(bw_b.pattern_rebuilds(), 1);  // the assembled path had to extend its pattern
   EXPECT_EQ(bw_a.pattern_rebuilds(), 0);
   double dx = 0, xs = 0, dv = 0, vs = 0;

@@ -275,6 +275,32 @@ TEST(EigenSolvers, PcgToleranceIsRelativeResidual) {
   }
 }
 
+// set_tolerance_scale (Baraff-Witkin's release solves): a PCG at 1e-10 scaled by 1e4 solves
+// as a PCG built at 1e-6 (the same iterations, residual <= 1e-6), and scale 1 restores 1e-10;
+// the direct solver does not honour it.
+TEST(EigenSolvers, ToleranceScaleLoosensTheNextSolvesAndOneRestoresIt) {
+  System sys;
+  SystemSpec sp;
+  sp.seed = 7;
+  make_system(sys, sp);
+  loom::EigenPcg scaled(pcg(loom::PcgPreconditioner::BlockJacobi, 1e-10));
+  loom::EigenPcg tight(pcg(loom::PcgPreconditioner::BlockJacobi, 1e-10));
+  loom::EigenPcg loose(pcg(loom::PcgPreconditioner::BlockJacobi, 1e-6));
+  EXPECT_TRUE(scaled.set_tolerance_scale(1e4));
+  const Solved a = run(scaled, sys), l = run(loose, sys);
+  ASSERT_TRUE(a.rep.converged);
+  EXPECT_LE(a.rep.residual, 1e-6);
+  EXPECT_GT(a.rep.residual, 1e-10);  // it did stop early
+  EXPECT_EQ(a.rep.iterations, l.rep.iterations);
+  EXPECT_TRUE(scaled.set_tolerance_scale(1.0));
+  const Solved b = run(scaled, sys), t = run(tight, sys);
+  EXPECT_LE(b.rep.residual, 1e-10);
+  EXPECT_EQ(b.rep.iterations, t.rep.iterations);
+  EXPECT_GT(b.rep.iterations, a.rep.iterations);
+  loom::EigenLdlt direct;
+  EXPECT_FALSE(direct.set_tolerance_scale(1e4));
+}
+
 TEST(EigenSolvers, WarmStartFromSolutionNeedsNoIterations) {
   System sys;
   SystemSpec sp;

@@ -56,6 +56,13 @@ class LinearSolver {
   /// From the next factorize() on, solve with A + E (E's diagonal blocks join the
   /// preconditioner's); null removes it. E must stay alive and unchanged until then.
   virtual void set_extra_operator(const ExtraOperator* E) { (void)E; }
+  /// Iterative solvers: multiply the relative tolerance of the next solves by s (> 0; 1
+  /// restores the scene's), e.g. for intermediate solves whose answer only decides which
+  /// constraints stay. Returns whether the solver honours it (direct solvers: false).
+  virtual bool set_tolerance_scale(double s) {
+    (void)s;
+    return false;
+  }
 };
 
 }  // namespace loom

@@ -388,6 +388,10 @@ struct BaraffWitkin::StepOps {
       bw.self_contact_->add_terms(bw.A_, bw.b_, s.v, h);
       const bool mf = bw.self_contact_->matrix_free();
       if (mf) scene.solver->set_extra_operator(bw.self_contact_.get());  // the springs' matrix term
+      // The solves before the last only decide which springs are released: an iterative
+      // solver runs them at a looser tolerance (ImplicitSelfContact::kReleaseToleranceScale),
+      // and one solve at the scene's tolerance, warm-started from them, ends the step.
+      const bool loose = scene.solver->set_tolerance_scale(ImplicitSelfContact::kReleaseToleranceScale);
       ok = solve_once();
       ++sst.solves;
       for (int r = 0; ok && r < ImplicitSelfContact::kMaxReleaseSolves &&
@@ -395,6 +399,13 @@ struct BaraffWitkin::StepOps {
            ++r) {
         ok = solve_once();
         ++sst.solves;
+      }
+      if (loose) {
+        scene.solver->set_tolerance_scale(1.0);
+        if (ok) {
+          ok = solve_once();
+          ++sst.solves;
+        }
       }
       if (mf) scene.solver->set_extra_operator(nullptr);
       sst.solve_seconds = thread_seconds() - ts;

@@ -402,7 +402,7 @@ SolveReport EigenPcg::solve(const BsrMatrix& A, const Filter& S, std::span<const
   CpuPcgOps ops{A, S, b, z, pinv_.data(), use_amg ? amg_.get() : nullptr, use_upper_ ? &upper_ : nullptr,
                 use_float ? af_.data() : nullptr, extra_, n_ >= options_.parallel_min_rows, n_};
   pcg::Settings set;
-  set.tolerance = options_.tolerance;
+  set.tolerance = std::min(0.5, options_.tolerance * tolerance_scale_);
   set.max_iterations = options_.max_iterations;
   set.name = name_.c_str();
   std::span<double> r(r_), c(c_), q(q_), s(s_);

@@ -65,6 +65,10 @@ class EigenPcg final : public LinearSolver {
   /// built from A's blocks alone.
   bool supports_extra_operator() const override { return options_.preconditioner != PcgPreconditioner::SaAmg; }
   void set_extra_operator(const ExtraOperator* E) override;
+  bool set_tolerance_scale(double s) override {
+    tolerance_scale_ = s;
+    return true;
+  }
   const PcgOptions& options() const { return options_; }
   /// The multigrid hierarchy (preconditioner: sa_amg), null before the first factorize().
   amg::SaAmg* amg() { return amg_.get(); }
@@ -76,6 +80,7 @@ class EigenPcg final : public LinearSolver {
   Index n_ = 0;
   std::vector<double> pinv_;  // 9 per vertex: S_i P_i^{-1} S_i
   const ExtraOperator* extra_ = nullptr;  // E of set_extra_operator (null: none)
+  double tolerance_scale_ = 1.0;          // set_tolerance_scale
   std::vector<double> diag_;  // 9 per vertex: A_ii + E_ii (with extra_)
   std::vector<double> r_, c_, q_, s_;
   std::string name_;
