@@ -1,4 +1,5 @@
 #include "loom/self_collision.hpp"
+#include "loom/intersection_check.hpp"
 
 #include "loom/collider.hpp"
 #include "loom/kernels/contact.hpp"
@@ -515,12 +516,22 @@ std::unique_ptr<SelfCollision> SelfCollision::parse(const Params& p, const Mesh&
               "). Fix: give a Coulomb coefficient, e.g. 0.3 (0 = frictionless).");
   }
   p.check_unused();
+  // A cloth that starts intersecting itself cannot be untangled by the response (it keeps each
+  // pair on the side it starts on), which would then fight the crossing at every step.
+  std::vector<std::array<Index, 2>> crossing;
+  const std::size_t ncross = count_intersecting_pairs(mesh, x, &crossing);
+  if (ncross > 0)
+    p.fail("the cloth as built intersects itself (" + std::to_string(ncross) +
+           " pairs of non-adjacent triangles, e.g. triangles " + std::to_string(crossing[0][0]) + " and " +
+           std::to_string(crossing[0][1]) +
+           "); self-collision keeps layers on the side they start on, so it cannot undo a crossing. Fix: give a "
+           "mesh without self-intersections (separate the layers by more than the thickness), or remove self_collision.");
   auto sc = std::make_unique<SelfCollision>(o, mesh);
   const double dmin = sc->min_distance(x, o.thickness);
   if (dmin < o.thickness)
     th.fail("thickness " + fmt(o.thickness) + " m exceeds the smallest distance between non-adjacent elements of the cloth as built (" +
-            fmt(dmin) + " m): neighbours in the sheet would repel each other. Fix: use a thickness below " +
-            fmt(dmin) + " m (about half of it is a good choice), or refine the mesh.");
+            fmt(dmin) + " m): neighbours in the sheet, or layers of the mesh that start that close, would repel each other. Fix: use a thickness below " +
+            fmt(dmin) + " m (about half of it is a good choice), refine the mesh, or separate its layers.");
   return sc;
 }
 
