@@ -15,9 +15,15 @@
 //   scripts/self_collision_cost.py sc_se.json sc_bw.json
 // Thickness: a quarter of the edge length, 0.25 / (N - 1) m. The material has the shipped
 // draped-ball scenes' damping (0.0005 N s/m). The cloth is first draped with symplectic_euler
-// without self_collision for 0.35 s (it has landed and folds start; 7 000 steps at 128^2); every
-// run of both integrators starts from that state. An earlier version draped with baraff_witkin
-// (175 steps of 2 ms): at 128^2 that state was crumpled (1 % of the edges below 77 % of their
+// WITH self_collision (the same thickness) for 0.35 s from the flat start (it has landed and
+// folds start; 7 000 steps at 128^2), cached as draped_sesc_N.bin; every run of both
+// integrators starts from that state, which draped() checks has no intersecting triangle pair.
+// Until 2026-11-29 the cloth was draped WITHOUT self_collision (draped_se_N.bin): that state
+// was tangled (BM_StartState: 46 intersecting triangle pairs at 64^2, 1 420 at 128^2, layers
+// 0.0002 thickness apart), so with self_collision switched on the response fought the
+// crossings it cannot undo at every step (1 311 vertices moved per step at 128^2, all of them
+// in or next to the tangle), which is what the figures of that time measured. Earlier still
+// the bench draped with baraff_witkin (175 steps of 2 ms): at 128^2 that state was crumpled (1 % of the edges below 77 % of their
 // length, the shortest at 16 %, against 95-105 % at 64^2): symplectic Euler with self_collision
 // then held 320 000 pairs in its lists and made ~22 000 contact impulses per step, and with
 // self_collision it also left vertices up to 3 mm inside the ball, which symplectic Euler's
@@ -29,6 +35,10 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <set>
+#include <utility>
+#include <vector>
 #include <cstdlib>
 #include <ctime>
 #include <fstream>
@@ -38,6 +48,7 @@
 #include <string>
 
 #include "baraff_witkin.hpp"
+#include "loom/intersection_check.hpp"
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
 #include "common/plugin_loader.hpp"
@@ -83,13 +94,19 @@ bool read_cache(const std::string& path, loom::State& s) {
   return true;
 }
 
-const loom::State& draped(int n) {
-  static std::map<int, std::unique_ptr<loom::Simulation>> sims;
-  auto& sim = sims[n];
+// The start state of every run: the flat cloth draped for kDrapeTime with symplectic_euler,
+// WITH self_collision (the state a user's run would reach), cached as draped_sesc_N.bin. It is
+// checked with the exact intersection count (loom/intersection_check.hpp), and refused if it has
+// an intersecting pair. with_self = false gives the former start state (draped without
+// self_collision, cached as draped_se_N.bin), which BM_StartState examines: it is tangled.
+const loom::State& draped(int n, bool with_self = true) {
+  static std::map<std::pair<int, bool>, std::unique_ptr<loom::Simulation>> sims;
+  auto& sim = sims[{n, with_self}];
   if (!sim) {
-    sim = loom::Simulation::from_string(scene(n, "symplectic_euler", false), "bench.yaml", ".", {}, loader());
+    sim = loom::Simulation::from_string(scene(n, "symplectic_euler", with_self), "bench.yaml", ".", {}, loader());
     const char* dir = std::getenv("LOOM_BENCH_DRAPE_CACHE");
-    const std::string path = dir ? std::string(dir) + "/draped_se_" + std::to_string(n) + ".bin" : "";
+    const std::string name = (with_self ? "/draped_sesc_" : "/draped_se_") + std::to_string(n) + ".bin";
+    const std::string path = dir ? std::string(dir) + name : "";
     auto& s = sim->scene().state;
     if (path.empty() || !read_cache(path, s)) {
       const int steps = static_cast<int>(std::lround(kDrapeTime / se_dt(n)));
@@ -99,6 +116,14 @@ const loom::State& draped(int n) {
         out.write(reinterpret_cast<const char*>(s.x.data()), static_cast<std::streamsize>(s.x.size() * sizeof(double)));
         out.write(reinterpret_cast<const char*>(s.v.data()), static_cast<std::streamsize>(s.v.size() * sizeof(double)));
         out.write(reinterpret_cast<const char*>(&s.time), sizeof s.time);
+      }
+    }
+    if (with_self) {
+      const std::size_t bad = loom::count_intersecting_pairs(sim->scene().mesh, s.x);
+      if (bad > 0) {
+        std::fprintf(stderr, "bench_self_collision: the draped start state at %d^2 (%s) has %zu intersecting triangle pairs; delete the cache file and rerun\n",
+                     n, path.empty() ? "not cached" : path.c_str(), bad);
+        std::exit(2);
       }
     }
   }
@@ -240,6 +265,98 @@ void BM_StepSplit(benchmark::State& st) {
   st.counters["largest_step_th"] = largest / total;
 }
 BENCHMARK(BM_StepSplit)->Args({64, 2000})->Args({128, 500})->Iterations(1)->Unit(benchmark::kMillisecond);
+
+// What the start state is like, and whether the self-collision response fights it (no timing:
+// counters only). Second argument: 0 = the former start state (draped WITHOUT self_collision,
+// draped_se_N.bin), 1 = the current one (draped with it, draped_sesc_N.bin). Counters:
+// `intersecting` triangle pairs (exact, loom/intersection_check.hpp, independent of the
+// collision code) and the vertices of those triangles (`tangle_vertices`); vertex-triangle and
+// edge-edge pairs closer than the thickness (`close_vt`, `close_ee`, through
+// SelfCollision::proximity_pairs) and the smallest such distance over the thickness
+// (`min_dist_over_th`); then `steps` symplectic_euler steps with self_collision, each compared
+// with the step without self_collision from the same state (same process, one thread), so a
+// vertex whose end of step differs is one the response moved: `moved_per_step`, `fighting`
+// (moved in at least half the steps), `fighting_in_tangle` (of those, how many belong to an
+// intersecting triangle pair or to a pair closer than half the thickness, at the start, or are
+// an edge neighbour of such a vertex), and the largest start speed of a fighting vertex.
+//   LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_StartState
+void BM_StartState(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const bool with_self = st.range(1) != 0;
+  const int steps = static_cast<int>(st.range(2));
+  omp_set_num_threads(1);
+  loom::Simulation::set_notes(false);
+  const loom::State s0 = draped(n, with_self);
+  omp_set_num_threads(1);
+  auto with = loom::Simulation::from_string(scene(n, "symplectic_euler", true), "bench.yaml", ".", {"threads=1"}, loader());
+  auto without = loom::Simulation::from_string(scene(n, "symplectic_euler", false), "bench.yaml", ".", {"threads=1"}, loader());
+  omp_set_num_threads(1);
+  const loom::Mesh& mesh = with->scene().mesh;
+  const auto nv = static_cast<std::size_t>(mesh.num_vertices());
+  const double th = with->scene().self_collision->options().thickness;
+  // The start state's tangle.
+  std::vector<std::array<loom::Index, 2>> pairs;
+  const std::size_t intersecting = loom::count_intersecting_pairs(mesh, s0.x, &pairs);
+  std::vector<char> tangle(nv, 0);
+  for (const auto& p : pairs)
+    for (const loom::Index t : p)
+      for (int j = 0; j < 3; ++j) tangle[mesh.triangles[3 * t + j]] = 1;
+  const double tangle_vertices = static_cast<double>(std::count(tangle.begin(), tangle.end(), 1));
+  loom::SelfCollision probe(with->scene().self_collision->options(), mesh);
+  std::vector<loom::SelfCollision::Proximity> vt, ee;
+  probe.proximity_pairs(s0.x.data(), th, vt, ee);
+  double min_dist = th;
+  for (const auto& p : vt) {
+    min_dist = std::min(min_dist, p.distance);
+    if (p.distance < 0.5 * th) {
+      tangle[p.a] = 1;
+      for (int j = 0; j < 3; ++j) tangle[mesh.triangles[3 * p.b + j]] = 1;
+    }
+  }
+  for (const auto& p : ee) min_dist = std::min(min_dist, p.distance);
+  std::vector<char> near_tangle = tangle;  // and their edge neighbours
+  for (std::size_t t = 0; t < mesh.triangles.size() / 3; ++t)
+    for (int j = 0; j < 3; ++j)
+      if (tangle[mesh.triangles[3 * t + j]])
+        for (int k = 0; k < 3; ++k) near_tangle[mesh.triangles[3 * t + k]] = 1;
+  // Which vertices the response moves, step after step.
+  std::vector<int> moved(nv, 0);
+  double moved_total = 0;
+  with->scene().state = s0;
+  for (auto _ : st) {
+    for (int k = 0; k < steps; ++k) {
+      without->scene().state = with->scene().state;
+      with->step();
+      without->step();
+      const auto& a = with->scene().state.x;
+      const auto& b = without->scene().state.x;
+      for (std::size_t i = 0; i < nv; ++i)
+        if (a[3 * i] != b[3 * i] || a[3 * i + 1] != b[3 * i + 1] || a[3 * i + 2] != b[3 * i + 2]) {
+          ++moved[i];
+          ++moved_total;
+        }
+    }
+  }
+  const int total = static_cast<int>(st.iterations()) * steps;
+  double fighting = 0, in_tangle = 0, vmax = 0;
+  for (std::size_t i = 0; i < nv; ++i) {
+    if (2 * moved[i] < total) continue;
+    ++fighting;
+    in_tangle += near_tangle[i] ? 1 : 0;
+    const double* v = &s0.v[3 * i];
+    vmax = std::max(vmax, std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
+  }
+  st.counters["intersecting"] = static_cast<double>(intersecting);
+  st.counters["tangle_vertices"] = tangle_vertices;
+  st.counters["close_vt"] = static_cast<double>(vt.size());
+  st.counters["close_ee"] = static_cast<double>(ee.size());
+  st.counters["min_dist_over_th"] = min_dist / th;
+  st.counters["moved_per_step"] = moved_total / total;
+  st.counters["fighting"] = fighting;
+  st.counters["fighting_in_tangle"] = in_tangle;
+  st.counters["fighting_vmax"] = vmax;
+}
+BENCHMARK(BM_StartState)->ArgsProduct({{64, 128}, {0, 1}, {40}})->Iterations(1)->Unit(benchmark::kMillisecond);
 
 // Where a baraff_witkin step with self-collision spends its time (one thread, the thread's CPU
 // clock per step; the phases inside the step are the integrator's and the self-collision
