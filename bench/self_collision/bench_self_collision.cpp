@@ -16,7 +16,7 @@
 // Thickness: a quarter of the edge length, 0.25 / (N - 1) m. The material has the shipped
 // draped-ball scenes' damping (0.0005 N s/m). The cloth is first draped with symplectic_euler
 // WITH self_collision (the same thickness) for 0.35 s from the flat start (it has landed and
-// folds start; 7 000 steps at 128^2), cached as draped_sesc_N.bin; every run of both
+// folds start; 7 000 steps at 128^2, 126 s on one thread; 924 s at 256^2), cached as draped_sesc_N.bin; every run of both
 // integrators starts from that state, which draped() checks has no intersecting triangle pair.
 // Until 2026-11-29 the cloth was draped WITHOUT self_collision (draped_se_N.bin): that state
 // was tangled (BM_StartState: 46 intersecting triangle pairs at 64^2, 1 420 at 128^2, layers
