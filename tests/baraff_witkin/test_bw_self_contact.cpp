@@ -385,6 +385,23 @@ PairKey ee_key(Index a, Index b, Index c, Index d) {
   if (f < e) std::swap(e, f);
   return {1, e[0], e[1], f[0], f[1]};
 }
+// Calls vt(idx) for every vertex idx[0] against every triangle idx[1..3] it is not a corner of,
+// and ee(idx) for every pair of edges (idx[0], idx[1]), (idx[2], idx[3]) sharing no vertex.
+template <class VT, class EE>
+void for_each_nonadjacent_pair(const loom::Mesh& mesh, VT&& vt, EE&& ee) {
+  const auto& tris = mesh.triangles;
+  for (Index v = 0; v < mesh.num_vertices(); ++v)
+    for (Index t = 0; t < mesh.num_triangles(); ++t) {
+      const Index idx[4] = {v, tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]};
+      if (v != idx[1] && v != idx[2] && v != idx[3]) vt(idx);
+    }
+  const auto edges = mesh.edges();
+  for (std::size_t e = 0; e < edges.size(); ++e)
+    for (std::size_t f = e + 1; f < edges.size(); ++f) {
+      const Index idx[4] = {edges[e][0], edges[e][1], edges[f][0], edges[f][1]};
+      if (idx[0] != idx[2] && idx[0] != idx[3] && idx[1] != idx[2] && idx[1] != idx[3]) ee(idx);
+    }
+}
 }  // namespace
 
 // SelfCollision::proximity_pairs(x, d), the pairs find() turns into contacts, against every pair
@@ -398,9 +415,6 @@ TEST(BwSelfContact, ProximityPairsAreEveryPairEndingWithinTheThicknessUnderARela
   Scene sc;
   two_layers(sc, 1.6 * kThick, 0.0, 11, 0.5 * kThick);
   const Index n = sc.state.size();
-  const auto& tris = sc.mesh.triangles;
-  const Index nt = sc.mesh.num_triangles();
-  const auto edges = sc.mesh.edges();
   std::mt19937 rng(5);
   std::normal_distribution<double> N(0.0, 1.0);
   std::uniform_real_distribution<double> U(-1.0, 1.0);
@@ -448,28 +462,25 @@ TEST(BwSelfContact, ProximityPairsAreEveryPairEndingWithinTheThicknessUnderARela
         EXPECT_FALSE(got.count(key)) << "trial " << trial << ": a pair outside the relative bound is returned";
       }
     };
-    for (Index v = 0; v < n; ++v)
-      for (Index t = 0; t < nt; ++t) {
-        const Index idx[4] = {v, tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]};
-        if (v == idx[1] || v == idx[2] || v == idx[3]) continue;
-        double b[3], by[3];
-        const double dist = loom::selfcol::point_triangle_distance(&x[3 * v], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], b);
-        const double dy = loom::selfcol::point_triangle_distance(&y[3 * v], &y[3 * idx[1]], &y[3 * idx[2]], &y[3 * idx[3]], by);
-        const double w[4] = {1, -b[0], -b[1], -b[2]};
-        if (dist > 0) check(vt_key(idx[0], idx[1], idx[2], idx[3]), idx, true, dist, w, dy);
-      }
-    for (std::size_t e = 0; e < edges.size(); ++e)
-      for (std::size_t f = e + 1; f < edges.size(); ++f) {
-        const Index idx[4] = {edges[e][0], edges[e][1], edges[f][0], edges[f][1]};
-        if (idx[0] == idx[2] || idx[0] == idx[3] || idx[1] == idx[2] || idx[1] == idx[3]) continue;
-        double s, t;
-        const double dist = loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s, t);
-        const double dy = loom::selfcol::segment_segment_distance(&y[3 * idx[0]], &y[3 * idx[1]], &y[3 * idx[2]], &y[3 * idx[3]], s, t);
-        double s0, t0;
-        loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s0, t0);
-        const double w[4] = {-(1 - s0), -s0, 1 - t0, t0};
-        if (dist > 0) check(ee_key(idx[0], idx[1], idx[2], idx[3]), idx, false, dist, w, dy);
-      }
+    for_each_nonadjacent_pair(
+        sc.mesh,
+        [&](const Index idx[4]) {
+          double b[3], by[3];
+          const Index v = idx[0];
+          const double dist = loom::selfcol::point_triangle_distance(&x[3 * v], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], b);
+          const double dy = loom::selfcol::point_triangle_distance(&y[3 * v], &y[3 * idx[1]], &y[3 * idx[2]], &y[3 * idx[3]], by);
+          const double w[4] = {1, -b[0], -b[1], -b[2]};
+          if (dist > 0) check(vt_key(idx[0], idx[1], idx[2], idx[3]), idx, true, dist, w, dy);
+        },
+        [&](const Index idx[4]) {
+          double s, t;
+          const double dist = loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s, t);
+          const double dy = loom::selfcol::segment_segment_distance(&y[3 * idx[0]], &y[3 * idx[1]], &y[3 * idx[2]], &y[3 * idx[3]], s, t);
+          double s0, t0;
+          loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s0, t0);
+          const double w[4] = {-(1 - s0), -s0, 1 - t0, t0};
+          if (dist > 0) check(ee_key(idx[0], idx[1], idx[2], idx[3]), idx, false, dist, w, dy);
+        });
     if (verbose())
       std::printf("trial %d: %zu pairs returned, %zu required, %zu within the relative bound\n", trial, out.size(), required,
                   bounded);
@@ -500,9 +511,6 @@ TEST(BwSelfContact, EveryPairWithinTheThicknessAtAStepEndKeepsHalfOfIt) {
       sc.state.v[3 * i + k] = k == 1 ? -kThick / h * (0.5 + 0.25 * U(rng)) : 0.5 * kThick / h * U(rng);
   BaraffWitkin bw;
   bw.prepare(sc, h);
-  const auto& tris = sc.mesh.triangles;
-  const Index nt = sc.mesh.num_triangles();
-  const auto edges = sc.mesh.edges();
   std::size_t within_total = 0;
   long long springs = 0;
   for (int step = 1; step <= 40; ++step) {
@@ -511,24 +519,20 @@ TEST(BwSelfContact, EveryPairWithinTheThicknessAtAStepEndKeepsHalfOfIt) {
     const auto& x = sc.state.x;
     double dmin = 1e300;
     std::size_t within = 0;
-    for (Index v = 0; v < n; ++v)
-      for (Index t = 0; t < nt; ++t) {
-        const Index* tv = &tris[3 * t];
-        if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
-        double b[3];
-        const double d = loom::selfcol::point_triangle_distance(&x[3 * v], &x[3 * tv[0]], &x[3 * tv[1]], &x[3 * tv[2]], b);
-        dmin = std::min(dmin, d);
-        within += d < kThick;
-      }
-    for (std::size_t e = 0; e < edges.size(); ++e)
-      for (std::size_t f = e + 1; f < edges.size(); ++f) {
-        const auto &E = edges[e], &F = edges[f];
-        if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
-        double s, t;
-        const double d = loom::selfcol::segment_segment_distance(&x[3 * E[0]], &x[3 * E[1]], &x[3 * F[0]], &x[3 * F[1]], s, t);
-        dmin = std::min(dmin, d);
-        within += d < kThick;
-      }
+    auto count = [&](double d) {
+      dmin = std::min(dmin, d);
+      within += d < kThick;
+    };
+    for_each_nonadjacent_pair(
+        sc.mesh,
+        [&](const Index idx[4]) {
+          double b[3];
+          count(loom::selfcol::point_triangle_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], b));
+        },
+        [&](const Index idx[4]) {
+          double s, t;
+          count(loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s, t));
+        });
     within_total += within;
     if (verbose())
       std::printf("step %d: min distance / thickness %.3f, pairs within the thickness %zu, springs %d, released %d\n", step,
@@ -683,26 +687,20 @@ TEST(BwSelfContact, FindEntersExactlyThePairsWithinOrLinearisedWithinTheThicknes
     separating_within += dist < kThick && dn > 0;
     entering_beyond += dist >= kThick && dist + dn < kThick;
   };
-  const auto& tris = sc.mesh.triangles;
-  for (Index v = 0; v < n; ++v)
-    for (Index t = 0; t < sc.mesh.num_triangles(); ++t) {
-      const Index idx[4] = {v, tris[3 * t], tris[3 * t + 1], tris[3 * t + 2]};
-      if (v == idx[1] || v == idx[2] || v == idx[3]) continue;
-      double b[3];
-      const double dist = loom::selfcol::point_triangle_distance(&x[3 * v], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], b);
-      const double w[4] = {1, -b[0], -b[1], -b[2]};
-      judge(vt_key(idx[0], idx[1], idx[2], idx[3]), idx, w, dist);
-    }
-  const auto edges = sc.mesh.edges();
-  for (std::size_t e = 0; e < edges.size(); ++e)
-    for (std::size_t f = e + 1; f < edges.size(); ++f) {
-      const Index idx[4] = {edges[e][0], edges[e][1], edges[f][0], edges[f][1]};
-      if (idx[0] == idx[2] || idx[0] == idx[3] || idx[1] == idx[2] || idx[1] == idx[3]) continue;
-      double s, t;
-      const double dist = loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s, t);
-      const double w[4] = {-(1 - s), -s, 1 - t, t};
-      judge(ee_key(idx[0], idx[1], idx[2], idx[3]), idx, w, dist);
-    }
+  for_each_nonadjacent_pair(
+      sc.mesh,
+      [&](const Index idx[4]) {
+        double b[3];
+        const double dist = loom::selfcol::point_triangle_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], b);
+        const double w[4] = {1, -b[0], -b[1], -b[2]};
+        judge(vt_key(idx[0], idx[1], idx[2], idx[3]), idx, w, dist);
+      },
+      [&](const Index idx[4]) {
+        double s, t;
+        const double dist = loom::selfcol::segment_segment_distance(&x[3 * idx[0]], &x[3 * idx[1]], &x[3 * idx[2]], &x[3 * idx[3]], s, t);
+        const double w[4] = {-(1 - s), -s, 1 - t, t};
+        judge(ee_key(idx[0], idx[1], idx[2], idx[3]), idx, w, dist);
+      });
   if (verbose())
     std::printf("entered %zu, expected %zu; within the thickness and separating %zu, beyond it and entering %zu\n",
                 got.size(), want.size(), separating_within, entering_beyond);
