@@ -45,6 +45,16 @@ inline __m128d load2(const T* p) {
     return _mm_loadu_pd(p);
 }
 
+// The 5 accumulators of the 18-value block kernels (4 runs of 4 lanes, one of 2) into t[0..17],
+// in block order, for the per-row reduction.
+inline void store_runs18(double* t, __m256d a0, __m256d a1, __m256d a2, __m256d a3, __m128d a4) {
+  _mm256_store_pd(t, a0);
+  _mm256_store_pd(t + 4, a1);
+  _mm256_store_pd(t + 8, a2);
+  _mm256_store_pd(t + 12, a3);
+  _mm_store_pd(t + 16, a4);
+}
+
 }  // namespace block_row_detail
 #endif
 
@@ -174,11 +184,7 @@ inline void block_row_restrict63(const Index* rp, const Index* col, const T* val
     a4 = _mm_fmadd_pd(load2(B + 16), _mm256_castpd256_pd128(p1), a4);
   }
   alignas(32) double t[20];
-  _mm256_store_pd(t, a0);
-  _mm256_store_pd(t + 4, a1);
-  _mm256_store_pd(t + 8, a2);
-  _mm256_store_pd(t + 12, a3);
-  _mm_store_pd(t + 16, a4);
+  store_runs18(t, a0, a1, a2, a3, a4);
   for (int c = 0; c < 6; ++c) yI[c] = t[3 * c] + t[3 * c + 1] + t[3 * c + 2];
 #else
   for (int c = 0; c < 6; ++c) yI[c] = 0;
@@ -213,11 +219,7 @@ inline void block_row_prolong36_add(const Index* rp, const Index* col, const T* 
     a4 = _mm_fmadd_pd(load2(B + 16), _mm256_castpd256_pd128(x1), a4);  // row 2, columns 4-5
   }
   alignas(32) double t[20];
-  _mm256_store_pd(t, a0);
-  _mm256_store_pd(t + 4, a1);
-  _mm256_store_pd(t + 8, a2);
-  _mm256_store_pd(t + 12, a3);
-  _mm_store_pd(t + 16, a4);
+  store_runs18(t, a0, a1, a2, a3, a4);
   xi[0] += (t[0] + t[1]) + (t[2] + t[3]) + (t[4] + t[5]);
   xi[1] += (t[6] + t[7]) + (t[8] + t[9]) + (t[10] + t[11]);
   xi[2] += (t[12] + t[13]) + (t[14] + t[15]) + (t[16] + t[17]);
