@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+
+#include "dense_matrix.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -76,14 +78,7 @@ void fold_until_contacts(Scene& sc, BaraffWitkin& bw, Index want, Index material
   FAIL() << "the fold never held " << want << " springs";
 }
 
-Eigen::MatrixXd dense(const loom::BsrMatrix& A) {
-  const Index N = 3 * A.rows();
-  const std::vector<double> d = A.to_dense();
-  Eigen::MatrixXd M(N, N);
-  for (Index r = 0; r < N; ++r)
-    for (Index c = 0; c < N; ++c) M(r, c) = d[static_cast<std::size_t>(r) * N + c];
-  return M;
-}
+using loom_test::dense;
 
 // The matrix-free operator E as a dense matrix, column by column (E e_j).
 Eigen::MatrixXd dense(const loom::ImplicitSelfContact& ic, Index n) {

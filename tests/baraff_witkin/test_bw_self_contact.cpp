@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+
+#include "dense_matrix.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -105,14 +107,7 @@ void full_step(Scene& sc, BaraffWitkin& bw, double h) {
   sc.self_collision->resolve(sc.state, h);
 }
 
-Eigen::MatrixXd dense(const loom::BsrMatrix& A) {
-  const Index N = 3 * A.rows();
-  const std::vector<double> d = A.to_dense();
-  Eigen::MatrixXd M(N, N);
-  for (Index r = 0; r < N; ++r)
-    for (Index c = 0; c < N; ++c) M(r, c) = d[static_cast<std::size_t>(r) * N + c];
-  return M;
-}
+using loom_test::dense;
 
 }  // namespace
 
