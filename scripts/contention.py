@@ -217,16 +217,18 @@ def overhead(plans, a, tmp, env, cond):
         first = run_once(a.loom, p["path"], out("auto"), p["frames"], p["substeps"], "auto", env)
         fixed = str(first[2] or 1)
         pairs = {"auto": [], fixed: []}
-        ends = []
+        ends, lines = [], []
         for r in range(reps):
             res = {}
             for th in (("auto", fixed) if r % 2 == 0 else (fixed, "auto")):
                 res[th] = run_once(a.loom, p["path"], out(th), p["frames"], p["substeps"], th, env)
             ends.append(res["auto"][2])
+            lines.append(res["auto"][3])
             if str(res["auto"][2]) == fixed:
                 for th in pairs:
                     pairs[th].append(res[th])
-        row = {"scene": p["scene"], "condition": cond, "fixed": fixed, "auto_ends_on": ends, "pairs": len(pairs[fixed])}
+        row = {"scene": p["scene"], "condition": cond, "fixed": fixed, "auto_ends_on": ends,
+               "auto_summaries": lines, "pairs": len(pairs[fixed])}
         if pairs[fixed]:
             for name, k in (("wall", 0), ("cpu", 4)):
                 av, fv = [x[k] for x in pairs["auto"]], [x[k] for x in pairs[fixed]]
