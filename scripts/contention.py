@@ -54,6 +54,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import statistics
 import subprocess
 import sys
@@ -271,6 +272,9 @@ def main():
         sys.exit("taskset not found (util-linux): needed to pin the competing process")
     env = dict(os.environ)
     env.pop("OMP_NUM_THREADS", None)
+    # A SIGTERM (timeout, kill) unwinds through the finally below, which stops the competing
+    # process; Python's default would exit at once and leave it spinning on core 0.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     tmp = tempfile.mkdtemp(prefix="loom_contention_")
     cells = []
     hog = None
