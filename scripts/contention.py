@@ -257,7 +257,7 @@ def main():
     ap.add_argument("--max-repeat", type=int, default=9,
                     help="repetitions per cell at most, extra ones included (x3 for runs under 0.5 s)")
     ap.add_argument("--minutes", type=float, default=7.5,
-                    help="extra repetitions stop when they would end the script after this")
+                    help="extra repetitions start only when they end before this (the base repetitions always run)")
     ap.add_argument("--scenes", nargs="+", default=[os.path.join(ROOT, "scenes", "*.yaml")],
                     help="scene files or globs (default: every shipped scene)")
     ap.add_argument("--json", default="")
