@@ -96,3 +96,44 @@ def median_difference(a, b, level=0.90, draws=2000, seed=1):
     lo_q = (1.0 - level) / 2.0
     return (statistics.median(d), vals[max(0, int(lo_q * draws))],
             vals[min(draws - 1, int((1.0 - lo_q) * draws))])
+
+
+def simulate(cv, t2_over_t1, true_ratio, base, max_reps=None, trials=400, seed=1, draws=400):
+    """What the method does with run times of known spread: each run is its setting's true time
+    times a lognormal factor with coefficient of variation about cv (1 thread 1.0, 2 threads
+    t2_over_t1, auto true_ratio x the better). A cell starts with `base` repetitions; with
+    max_reps, unclear cells get one more at a time up to max_reps (contention.py without its time
+    limit). Returns (fraction of cells that read a miss, mean repetitions per cell)."""
+    rng = random.Random(seed)
+    best = min(1.0, t2_over_t1)
+    misses = reps = 0
+    for _ in range(trials):
+        t1, t2, ta = [], [], []
+        top, want = max_reps or base, base
+        while True:
+            while len(ta) < want:
+                t1.append(rng.lognormvariate(0.0, cv))
+                t2.append(t2_over_t1 * rng.lognormvariate(0.0, cv))
+                ta.append(true_ratio * best * rng.lognormvariate(0.0, cv))
+            s = cell_stats(t1, t2, ta, draws=draws, seed=rng.randrange(1 << 30))
+            if s["clear"] or s["n"] >= top or max_reps is None:
+                break
+            want += 1
+        misses += not s["ok"]
+        reps += s["n"]
+    return misses / trials, reps / trials
+
+
+if __name__ == "__main__":
+    # python3 scripts/contention_stats.py: the table of docs/BENCHMARKS.md ("Contention
+    # benchmark: method"): how often a cell reads a miss when auto is as fast as the better count
+    # (true ratio 1.00) or 5% slower, for fixed repetitions and for the extra-repetition rule.
+    print("| run-to-run spread (cv) | 1 vs 2 threads | true auto / best | 3 runs | 5 runs | 9 runs | 3 + extra up to 9 (mean runs) |")
+    print("|---|---|---|---|---|---|---|")
+    for cv in (0.05, 0.07, 0.10):
+        for far, label in ((1.6, "2 is 1.6x slower"), (1.0, "equal")):
+            for true in (1.00, 1.05):
+                fixed = [simulate(cv, far, true, n)[0] for n in (3, 5, 9)]
+                m, r = simulate(cv, far, true, 3, 9)
+                print(f"| {cv:.2f} | {label} | {true:.2f} | " + " | ".join(f"{f:.3f}" for f in fixed)
+                      + f" | {m:.3f} ({r:.1f}) |", flush=True)

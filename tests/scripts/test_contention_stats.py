@@ -114,6 +114,20 @@ class Paired(unittest.TestCase):
             cs.median_difference([1.0], [])
 
 
+class Simulation(unittest.TestCase):
+    def test_without_spread_the_verdict_is_the_true_ratio(self):
+        # cv 0: every run is its true time, so the cell reads exactly the true ratio; it is
+        # clear at once (the interval is a point), so the extra-repetition rule adds nothing.
+        self.assertEqual(cs.simulate(0.0, 1.6, 1.05, 3, trials=20), (0.0, 3.0))
+        self.assertEqual(cs.simulate(0.0, 1.0, 1.2, 3, trials=20), (1.0, 3.0))
+        self.assertEqual(cs.simulate(0.0, 0.6, 1.2, 3, max_reps=9, trials=20), (1.0, 3.0))
+
+    def test_extra_repetitions_stay_within_the_bounds(self):
+        m, r = cs.simulate(0.07, 1.0, 1.0, 3, max_reps=6, trials=60, seed=2)
+        self.assertTrue(0.0 <= m <= 1.0)
+        self.assertTrue(3.0 <= r <= 6.0)
+
+
 class Order(unittest.TestCase):
     def test_latin_squares_and_pairs(self):
         orders = [cs.run_order(r) for r in range(6)]
