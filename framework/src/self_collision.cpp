@@ -316,6 +316,19 @@ bool point_triangle_farther_than(const double* p, const double* a, const double*
   return num > 0 && num >= r * std::sqrt(dot(u, u));
 }
 
+bool triangles_farther_than(const double* a0, const double* a1, const double* a2, const double* b0, const double* b1,
+                            const double* b2, double r) {
+  // On u = (centroid of b) - (centroid of a): every point of a projects at most pa, every point
+  // of b at least pb (a point of a triangle is a convex combination of its vertices), so two
+  // points are at least (pb - pa) / |u| apart.
+  double u[3];
+  for (int k = 0; k < 3; ++k) u[k] = ((b0[k] + b1[k] + b2[k]) - (a0[k] + a1[k] + a2[k])) * (1.0 / 3.0);
+  const double pa = std::max({dot(u, a0), dot(u, a1), dot(u, a2)});
+  const double pb = std::min({dot(u, b0), dot(u, b1), dot(u, b2)});
+  const double num = pb - pa;
+  return num > 0 && num >= r * std::sqrt(dot(u, u));
+}
+
 void TriangleBvh::build(const std::vector<double>& centroids) {
   const Index nt = static_cast<Index>(centroids.size() / 3);
   nodes_.clear();
@@ -353,6 +366,22 @@ void TriangleBvh::build(const std::vector<double>& centroids) {
     }
   } b{nodes_, centroids};
   b.make(ids.data(), ids.data() + nt);
+  // Leaves in depth-first order, and each node's range of them (pre-order: children after
+  // their parent, so a backward pass sums the counts).
+  leaf_nodes_.clear();
+  for (std::size_t i = 0; i < nodes_.size(); ++i)
+    if (nodes_[i].tri >= 0) leaf_nodes_.push_back(static_cast<Index>(i));
+  for (std::size_t i = nodes_.size(); i-- > 0;) {
+    Node& n = nodes_[i];
+    if (n.tri >= 0) {
+      n.count = 1;
+    } else {
+      n.count = nodes_[n.left].count + nodes_[n.right].count;
+    }
+  }
+  for (std::size_t k = 0; k < leaf_nodes_.size(); ++k) nodes_[leaf_nodes_[k]].first = static_cast<Index>(k);
+  for (std::size_t i = nodes_.size(); i-- > 0;)
+    if (nodes_[i].tri < 0) nodes_[i].first = nodes_[nodes_[i].left].first;
   parent_.assign(nodes_.size(), -1);
   leaf_.assign(nt, -1);
   marked_.assign(nodes_.size(), 0);
@@ -574,8 +603,6 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
   inv_mass_.assign(nv_, 0.0);
   touched_.reserve(nv_);
   touched_flag_.assign(nv_, 0);
-  vlo_.assign(n3, 0.0);
-  vhi_.assign(n3, 0.0);
   tlo_.assign(3 * static_cast<std::size_t>(nt_), 0.0);
   thi_.assign(3 * static_cast<std::size_t>(nt_), 0.0);
   ref_x_.assign(n3, 0.0);
@@ -607,10 +634,19 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
   refresh_e_.reserve(edges_.size());
   qstack_.reserve(256);
   reach_.assign(nv_, 0.0);
-  treach_.assign(nt_, 0.0);
-  ereach_.assign(edges_.size(), 0.0);
-  elo_.assign(3 * edges_.size(), 0.0);
-  ehi_.assign(3 * edges_.size(), 0.0);
+  trec_.assign(nt_, TriRecord{});
+  for (Index t = 0; t < nt_; ++t) {
+    TriRecord& R = trec_[t];
+    R.own = 0;
+    for (int k = 0; k < 3; ++k) {
+      R.v[k] = tris_[3 * t + k];
+      R.e[k] = tri_edges_[3 * t + k];
+      for (int j = 0; j < 3; ++j) {
+        if (own_verts_[t][j] >= 0 && own_verts_[t][j] == R.v[k]) R.own |= 1u << k;
+        if (own_edges_[t][j] >= 0 && own_edges_[t][j] == R.e[k]) R.own |= 8u << k;
+      }
+    }
+  }
   vt_.reserve(static_cast<std::size_t>(nv_));
   ee_.reserve(static_cast<std::size_t>(nv_));
   stack_.reserve(256);
@@ -728,33 +764,18 @@ bool SelfCollision::respond(const Index idx[4], const double w[4], const double 
   return changed;
 }
 
-void SelfCollision::vertex_box(Index i, double gap) {
-  const double r = reach_[i] + 0.5 * gap;
-  for (int k = 0; k < 3; ++k) {
-    vlo_[3 * i + k] = ref_x_[3 * i + k] - r;
-    vhi_[3 * i + k] = ref_x_[3 * i + k] + r;
-  }
-}
-
 void SelfCollision::triangle_box(Index t, double gap) {
-  const Index* v = &tris_[3 * t];
+  TriRecord& R = trec_[t];
   const double* X = ref_x_.data();
-  const double r = std::max({reach_[v[0]], reach_[v[1]], reach_[v[2]]});
-  treach_[t] = r;
   for (int k = 0; k < 3; ++k) {
-    tlo_[3 * t + k] = std::min({X[3 * v[0] + k], X[3 * v[1] + k], X[3 * v[2] + k]}) - (r + 0.5 * gap);
-    thi_[3 * t + k] = std::max({X[3 * v[0] + k], X[3 * v[1] + k], X[3 * v[2] + k]}) + (r + 0.5 * gap);
+    R.r[k] = reach_[R.v[k]];
+    for (int q = 0; q < 3; ++q) R.x[3 * k + q] = X[3 * R.v[k] + q];
   }
-}
-
-void SelfCollision::edge_box(Index e, double gap) {
-  const Index a = edges_[e][0], b = edges_[e][1];
-  const double* X = ref_x_.data();
-  const double r = std::max(reach_[a], reach_[b]);
-  ereach_[e] = r;
-  for (int k = 0; k < 3; ++k) {
-    elo_[3 * e + k] = std::min(X[3 * a + k], X[3 * b + k]) - (r + 0.5 * gap);
-    ehi_[3 * e + k] = std::max(X[3 * a + k], X[3 * b + k]) + (r + 0.5 * gap);
+  for (int k = 0; k < 3; ++k) R.er[k] = std::max(R.r[k], R.r[(k + 1) % 3]);
+  R.tr = std::max({R.r[0], R.r[1], R.r[2]});
+  for (int q = 0; q < 3; ++q) {
+    R.lo[q] = tlo_[3 * t + q] = std::min({R.x[q], R.x[3 + q], R.x[6 + q]}) - (R.tr + 0.5 * gap);
+    R.hi[q] = thi_[3 * t + q] = std::max({R.x[q], R.x[3 + q], R.x[6 + q]}) + (R.tr + 0.5 * gap);
   }
 }
 
@@ -764,7 +785,6 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
   // then joined in task order. The tasks do not depend on the thread count, so neither does
   // the order in which the response visits the pairs, and no sort is needed.
   const bool par = nv_ >= kParallelMinVertices;
-  const double* x0 = ref_x_.data();
   const int nth = par ? std::max(1, omp_get_max_threads()) : 1;
   bvh_.split(par ? kTraversalTasks : 1, tasks_);
   const std::size_t ntasks = tasks_.size();
@@ -787,17 +807,21 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
       std::vector<Pair>& ee = task_ee_[q];
       vt.clear();
       ee.clear();
-      auto vert_tri = [&](Index v, Index t) {
-        const Index* tv = &tris_[3 * t];
-        if (v == tv[0] || v == tv[1] || v == tv[2]) return;
-        if (!overlap(&vlo_[3 * v], &vhi_[3 * v], &tlo_[3 * t], &thi_[3 * t])) return;
+      // Vertex k of record P against triangle t (record T).
+      auto vert_tri = [&](const TriRecord& P, int k, Index t, const TriRecord& T) {
+        const Index v = P.v[k];
+        if (v == T.v[0] || v == T.v[1] || v == T.v[2]) return;
+        const double* p = &P.x[3 * k];
+        const double pad = P.r[k] + 0.5 * gap;
+        const double plo[3] = {p[0] - pad, p[1] - pad, p[2] - pad}, phi[3] = {p[0] + pad, p[1] + pad, p[2] + pad};
+        if (!overlap(plo, phi, T.lo, T.hi)) return;
         double dist = 0;
         if (exact) {
-          const double r = gap + reach_[v] + treach_[t];
-          if (selfcol::point_triangle_farther_than(&x0[3 * v], &x0[3 * tv[0]], &x0[3 * tv[1]], &x0[3 * tv[2]], r)) return;
+          const double r = gap + P.r[k] + T.tr;
+          if (selfcol::point_triangle_farther_than(p, &T.x[0], &T.x[3], &T.x[6], r)) return;
           ++exact_count;
           double w[3];
-          dist = selfcol::point_triangle_distance(&x0[3 * v], &x0[3 * tv[0]], &x0[3 * tv[1]], &x0[3 * tv[2]], w);
+          dist = selfcol::point_triangle_distance(p, &T.x[0], &T.x[3], &T.x[6], w);
           if (!(dist < r)) return;
         }
         vt.push_back({v, t, dist});
@@ -806,28 +830,58 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
       // only the element pairs that the refresh dropped are looked at: those with a refreshed
       // vertex, triangle or edge (flags set by refresh()).
       auto emit = [&](Index A, Index B) {
+        const TriRecord& RA = trec_[A];
+        const TriRecord& RB = trec_[B];
+        // (Triangles that share a vertex touch: the bound would not reject them.)
+        const bool adjacent = RA.v[0] == RB.v[0] || RA.v[0] == RB.v[1] || RA.v[0] == RB.v[2] || RA.v[1] == RB.v[0] ||
+                              RA.v[1] == RB.v[1] || RA.v[1] == RB.v[2] || RA.v[2] == RB.v[0] || RA.v[2] == RB.v[1] ||
+                              RA.v[2] == RB.v[2];
+        if (exact && !adjacent && selfcol::triangles_farther_than(&RA.x[0], &RA.x[3], &RA.x[6], &RB.x[0], &RB.x[3], &RB.x[6],
+                                                     gap + RA.tr + RB.tr))
+          return;  // every element pair is listed below gap + its reaches <= gap + RA.tr + RB.tr
         const bool all_a = !marked_only || tflag_[A], all_b = !marked_only || tflag_[B];
-        for (Index v : own_verts_[A])
-          if (v >= 0 && (all_b || vflag_[v])) vert_tri(v, B);
-        for (Index v : own_verts_[B])
-          if (v >= 0 && (all_a || vflag_[v])) vert_tri(v, A);
-        for (Index e : own_edges_[A]) {
+        for (int k = 0; k < 3; ++k)
+          if ((RA.own >> k & 1u) && (all_b || vflag_[RA.v[k]])) vert_tri(RA, k, B, RB);
+        for (int k = 0; k < 3; ++k)
+          if ((RB.own >> k & 1u) && (all_a || vflag_[RB.v[k]])) vert_tri(RB, k, A, RA);
+        for (int ka = 0; ka < 3; ++ka) {
+          if (!(RA.own >> (3 + ka) & 1u)) continue;
+          const Index e = RA.e[ka];
+          // Endpoints in edges_' order (lower vertex index first), as the lists always had them.
+          int a0 = ka, a1 = (ka + 1) % 3;
+          if (RA.v[a1] < RA.v[a0]) std::swap(a0, a1);
+          const double *p0 = &RA.x[3 * a0], *p1 = &RA.x[3 * a1];
+          const double epad = RA.er[ka] + 0.5 * gap;
+          double elo[3], ehi[3];
+          for (int c = 0; c < 3; ++c) {
+            elo[c] = std::min(p0[c], p1[c]) - epad;
+            ehi[c] = std::max(p0[c], p1[c]) + epad;
+          }
           // B's box holds its edges' boxes: an edge of A clear of it meets none of them.
-          if (e < 0 || !overlap(&elo_[3 * e], &ehi_[3 * e], &tlo_[3 * B], &thi_[3 * B])) continue;
+          if (!overlap(elo, ehi, RB.lo, RB.hi)) continue;
           const bool all_f = !marked_only || eflag_[e];
-          const auto& E = edges_[e];
-          for (Index f : own_edges_[B]) {
-            if (f < 0 || !(all_f || eflag_[f])) continue;
-            const auto& F = edges_[f];
-            if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
-            if (!overlap(&elo_[3 * e], &ehi_[3 * e], &elo_[3 * f], &ehi_[3 * f])) continue;
+          for (int kb = 0; kb < 3; ++kb) {
+            if (!(RB.own >> (3 + kb) & 1u)) continue;
+            const Index f = RB.e[kb];
+            if (!(all_f || eflag_[f])) continue;
+            int b0 = kb, b1 = (kb + 1) % 3;
+            if (RB.v[b1] < RB.v[b0]) std::swap(b0, b1);
+            if (RA.v[a0] == RB.v[b0] || RA.v[a0] == RB.v[b1] || RA.v[a1] == RB.v[b0] || RA.v[a1] == RB.v[b1]) continue;
+            const double *q0 = &RB.x[3 * b0], *q1 = &RB.x[3 * b1];
+            const double fpad = RB.er[kb] + 0.5 * gap;
+            double flo[3], fhi[3];
+            for (int c = 0; c < 3; ++c) {
+              flo[c] = std::min(q0[c], q1[c]) - fpad;
+              fhi[c] = std::max(q0[c], q1[c]) + fpad;
+            }
+            if (!overlap(elo, ehi, flo, fhi)) continue;
             double dist = 0;
             if (exact) {
-              const double r = gap + ereach_[e] + ereach_[f];
-              if (selfcol::segments_farther_than(&x0[3 * E[0]], &x0[3 * E[1]], &x0[3 * F[0]], &x0[3 * F[1]], r)) continue;
+              const double r = gap + RA.er[ka] + RB.er[kb];
+              if (selfcol::segments_farther_than(p0, p1, q0, q1, r)) continue;
               ++exact_count;
               double ss, tt;
-              dist = selfcol::segment_segment_distance(&x0[3 * E[0]], &x0[3 * E[1]], &x0[3 * F[0]], &x0[3 * F[1]], ss, tt);
+              dist = selfcol::segment_segment_distance(p0, p1, q0, q1, ss, tt);
               if (!(dist < r)) continue;
             }
             ee.push_back({std::min(e, f), std::max(e, f), dist});
@@ -846,17 +900,9 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
 
 void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
   const bool par = nv_ >= kParallelMinVertices;
-  const Index ne = static_cast<Index>(edges_.size());
   if (x0_in != ref_x_.data()) std::memcpy(ref_x_.data(), x0_in, ref_x_.size() * sizeof(double));
-#pragma omp parallel if (par)
-  {
-#pragma omp for schedule(static) nowait
-    for (Index i = 0; i < nv_; ++i) vertex_box(i, gap);
-#pragma omp for schedule(static) nowait
-    for (Index t = 0; t < nt_; ++t) triangle_box(t, gap);
-#pragma omp for schedule(static)
-    for (Index e = 0; e < ne; ++e) edge_box(e, gap);
-  }
+#pragma omp parallel for schedule(static) if (par)
+  for (Index t = 0; t < nt_; ++t) triangle_box(t, gap);
   bvh_.refit(tlo_.data(), thi_.data(), 0.0);
 
   vt_.clear();
@@ -914,7 +960,6 @@ void SelfCollision::refresh(const double* x0) {
     for (int k = 0; k < 3; ++k) ref_x_[3 * v + k] = x0[3 * v + k];
     reach_[v] = reach_for(v);
     moved_[v] = 0;
-    vertex_box(v, th);
     for (Index j = vt_off_[v]; j < vt_off_[v + 1]; ++j)
       if (!tflag_[vt_adj_[j]]) tflag_[vt_adj_[j]] = 1, refresh_t_.push_back(vt_adj_[j]);
     for (Index j = ve_off_[v]; j < ve_off_[v + 1]; ++j)
@@ -924,7 +969,6 @@ void SelfCollision::refresh(const double* x0) {
     triangle_box(t, th);
     bvh_.update_leaf(t, &tlo_[3 * t], &thi_[3 * t]);
   }
-  for (const Index e : refresh_e_) edge_box(e, th);
   // Drop the pairs that involve a refreshed vertex ...
   vt_.erase(std::remove_if(vt_.begin(), vt_.end(), [&](const Pair& p) { return vflag_[p.a] || tflag_[p.b]; }),
             vt_.end());

@@ -507,6 +507,44 @@ TEST(SelfCollisionDistance, SeparatingAxisRejectionsNeverExceedTheDistance) {
   EXPECT_EQ(kept, 0) << "of " << pairs << " non-adjacent pairs of the flat sheet";
 }
 
+TEST(SelfCollisionDistance, TriangleRejectionNeverExceedsAnElementPairDistance) {
+  // triangles_farther_than(A, B, r) lets a rebuild skip every vertex-triangle and edge-edge
+  // pair of A's and B's elements, so it may only answer "at least r" when each of those 15
+  // distances (vertex of one against the other triangle, edge against edge; brute-force
+  // minimisation, independent of the code) is at least r. Random triangles at several
+  // separations, with r below, at and above the smallest; triangles sharing a vertex never.
+  std::mt19937 rng(43);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  int rejected = 0, cases = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const double shift = trial % 4 == 0 ? 0.0 : (trial % 4 == 1 ? 1.0 : (trial % 4 == 2 ? 2.5 : 5.0));
+    double a[3][3], b[3][3];
+    for (int i = 0; i < 3; ++i)
+      for (int k = 0; k < 3; ++k) {
+        a[i][k] = U(rng);
+        b[i][k] = U(rng) + (k == 0 ? shift : 0.0);
+      }
+    if (trial % 25 == 0)
+      for (int k = 0; k < 3; ++k) b[0][k] = a[2][k];  // sharing a vertex: touching
+    double m = 1e300;
+    for (int i = 0; i < 3; ++i) {
+      m = std::min(m, brute_point_triangle(a[i], b[0], b[1], b[2]));
+      m = std::min(m, brute_point_triangle(b[i], a[0], a[1], a[2]));
+      for (int j = 0; j < 3; ++j) m = std::min(m, brute_segment_segment(a[i], a[(i + 1) % 3], b[j], b[(j + 1) % 3]));
+    }
+    for (const double f : {0.0, 0.5, 0.9, 0.999, 1.001, 1.1, 2.0}) {
+      ++cases;
+      if (trial % 25 == 0 && triangles_farther_than(a[0], a[1], a[2], b[0], b[1], b[2], 1e-3 * (1 + f)))
+        ADD_FAILURE() << "triangles sharing a vertex rejected, trial " << trial;
+      if (triangles_farther_than(a[0], a[1], a[2], b[0], b[1], b[2], f * m)) {
+        ++rejected;
+        EXPECT_GE(m, f * m - 1e-9) << "triangle pair rejected above an element pair's distance, trial " << trial;
+      }
+    }
+  }
+  EXPECT_GT(rejected, cases / 10);  // it does reject
+}
+
 TEST(SelfCollisionBvh, ListsHoldExactlyThePairsWithinThicknessPlusReachesAfterRefreshesAndRebuilds) {
   // The same shaken sheet as above. After every step the lists must equal, pair for pair and
   // without duplicates, the non-adjacent pairs whose distance at the lists' reference positions

@@ -41,6 +41,13 @@ double segment_segment_distance(const double* p0, const double* p1, const double
 /// bound close to their distance; stacked layers do not (their exact distance decides).
 bool segments_farther_than(const double* p0, const double* p1, const double* q0, const double* q1, double r);
 bool point_triangle_farther_than(const double* p, const double* a, const double* b, const double* c, double r);
+/// The same for two triangles (a0, a1, a2) and (b0, b1, b2), on the axis between their
+/// centroids: true only when every point of one is at least r from every point of the other, so
+/// every vertex-triangle and edge-edge pair of their elements is too. A rebuild rejects a whole
+/// pair of overlapping leaf boxes with it before testing their element pairs (most such pairs are
+/// sheet neighbours beside each other). Triangles that share a vertex are never rejected.
+bool triangles_farther_than(const double* a0, const double* a1, const double* a2, const double* b0, const double* b1,
+                            const double* b2, double r);
 
 /// Continuous collision detection for linear motion x(t) = x0 + t (x1 - x0), t in [0, 1].
 /// Vertex-triangle: points are {p, a, b, c}; edge-edge: {p0, p1, q0, q1}. A collision is the
@@ -62,6 +69,7 @@ class TriangleBvh {
     double lo[3], hi[3];
     Index left = -1, right = -1;  ///< children (-1 for a leaf)
     Index tri = -1;               ///< triangle of a leaf
+    Index first = 0, count = 0;   ///< the leaves below: leaf_nodes()[first, first + count)
   };
   /// Build the topology from triangle centroids (3 * num_triangles doubles).
   void build(const std::vector<double>& centroids);
@@ -90,9 +98,13 @@ class TriangleBvh {
   template <class F>
   void query(const double* lo, const double* hi, F&& emit, std::vector<Index>& stack) const;
   const std::vector<Node>& nodes() const { return nodes_; }
+  /// Subtrees of at most this many leaves are paired leaf by leaf in one loop rather than by
+  /// descending node pairs (fewer stack operations; the leaves of a subtree are contiguous).
+  static constexpr Index kSmallSubtree = 4;
 
  private:
   std::vector<Node> nodes_;
+  std::vector<Index> leaf_nodes_;  ///< leaf node indices in depth-first order (Node::first indexes it)
   std::vector<Index> parent_;  ///< per node (-1 for the root)
   std::vector<Index> leaf_;    ///< per triangle: its leaf node
   std::vector<std::uint8_t> marked_;  ///< per node: a marked leaf lies below (mark())
@@ -141,6 +153,19 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
     const Node& A = nodes_[a];
     if (a == b) {
       if (A.tri >= 0) continue;
+      if (A.count <= kSmallSubtree) {
+        // Inside a small subtree: every overlapping pair of its leaves, in the order the descent would find them.
+        for (Index i = A.first; i < A.first + A.count; ++i) {
+          const Node& LA = nodes_[leaf_nodes_[i]];
+          const bool ma = marked_only && marked_[leaf_nodes_[i]];
+          for (Index j = i + 1; j < A.first + A.count; ++j) {
+            const Node& LB = nodes_[leaf_nodes_[j]];
+            if (marked_only && !ma && !marked_[leaf_nodes_[j]]) continue;
+            if (overlap(LA, LB)) emit(LA.tri, LB.tri);
+          }
+        }
+        continue;
+      }
       stack.push_back({A.left, A.left});
       stack.push_back({A.right, A.right});
       stack.push_back({A.left, A.right});
@@ -150,6 +175,17 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
     if (!overlap(A, B)) continue;
     if (A.tri >= 0 && B.tri >= 0) {
       emit(A.tri, B.tri);
+    } else if (A.count <= kSmallSubtree && B.count <= kSmallSubtree) {
+      // Two small subtrees: every overlapping pair of their leaves (the same pairs the descent finds).
+      for (Index i = A.first; i < A.first + A.count; ++i) {
+        const Node& LA = nodes_[leaf_nodes_[i]];
+        const bool ma = marked_only && marked_[leaf_nodes_[i]];
+        for (Index j = B.first; j < B.first + B.count; ++j) {
+          const Node& LB = nodes_[leaf_nodes_[j]];
+          if (marked_only && !ma && !marked_[leaf_nodes_[j]]) continue;
+          if (overlap(LA, LB)) emit(LA.tri, LB.tri);
+        }
+      }
     } else if (B.tri >= 0 || (A.tri < 0 && extent(A) >= extent(B))) {
       stack.push_back({A.left, b});
       stack.push_back({A.right, b});
@@ -281,9 +317,9 @@ class SelfCollision {
   // every pair that involves one of them.
   void refresh(const double* x0);
   double reach_for(Index i) const;
-  void vertex_box(Index i, double gap);
+  // Triangle t's box (tlo_, thi_: its vertices' reference box grown by their largest reach +
+  // gap / 2) and its record trec_[t] for the traversal.
   void triangle_box(Index t, double gap);
-  void edge_box(Index e, double gap);
   // Whether every vertex stays within its reach of the positions of the last rebuild
   // (moved_ + step_len_ <= reach_): then no pair outside the lists comes within the thickness.
   bool candidates_valid() const;
@@ -313,7 +349,20 @@ class SelfCollision {
   std::vector<double> x0_, d_, inv_mass_;
   std::vector<Index> touched_;            ///< vertices the response moved in this resolve()
   std::vector<std::uint8_t> touched_flag_;
-  std::vector<double> vlo_, vhi_, tlo_, thi_;    ///< swept boxes of vertices / triangles
+  std::vector<double> tlo_, thi_;                ///< boxes of the triangles (refit into the hierarchy)
+  /// What a leaf pair of the traversal reads of a triangle, in one place (a leaf pair then
+  /// touches two records instead of a dozen arrays): its vertices' reference positions and
+  /// reaches, its box, its edges' reaches, and which of its vertices and edges it owns.
+  struct TriRecord {
+    double x[9];          ///< reference positions of vertices 0, 1, 2
+    double lo[3], hi[3];  ///< = tlo_, thi_
+    double r[3];          ///< reach_ of each vertex
+    double er[3];         ///< edge k (vertices k, k + 1): the larger reach of its two vertices
+    double tr;            ///< the largest reach of the three
+    Index v[3], e[3];     ///< vertex indices; edge k's index into edges_
+    std::uint32_t own;    ///< bit k: owns vertex k; bit 3 + k: owns edge k
+  };
+  std::vector<TriRecord> trec_;
   std::vector<double> ref_x_;                    ///< start positions at the last broad phase
   std::vector<double> moved_;                    ///< per vertex |x0 - ref_x| this step
   std::vector<double> step_len_;                 ///< per vertex |d| this step
@@ -330,8 +379,6 @@ class SelfCollision {
   bool responded_ = false;                       ///< d or v changed this step
   std::vector<std::array<Index, 2>> stack_;
   std::vector<double> reach_;                    ///< per vertex: motion allowed before the lists are rebuilt
-  std::vector<double> treach_, ereach_;          ///< per triangle / edge: the largest reach_ of its vertices
-  std::vector<double> elo_, ehi_;                ///< edge boxes
   std::vector<std::array<Index, 2>> tasks_;      ///< parallel traversal tasks (TriangleBvh::split)
   std::vector<std::vector<Pair>> task_vt_, task_ee_;  ///< per-task pairs found by the traversal
   std::vector<std::vector<std::array<Index, 2>>> tstack_;  ///< per-thread traversal stacks
