@@ -225,13 +225,19 @@ std::vector<SolverVariant> variants() {
   // 8 ranges on every threaded level, double diagonal inverses; and each change alone.
   amg.amg.min_part_dofs = 0;
   amg.amg.float_diagonal = false;
+  amg.amg.half_transfers = false;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_before", false, amg});
+  amg.amg.half_transfers = true;
   amg.amg.float_diagonal = true;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_ranges8", false, amg});
   amg.amg.min_part_dofs = loom::amg::SaAmgOptions{}.min_part_dofs;
   amg.amg.float_diagonal = false;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_doublediag", false, amg});
   amg.amg.float_diagonal = true;
+  // Level 0's P and R in float instead of half (A/B of half_transfers, issue 15).
+  amg.amg.half_transfers = false;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_floattransfers", false, amg});
+  amg.amg.half_transfers = true;
   amg.amg.float_storage = false;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_double", false, amg});
   amg.amg.float_storage = true;
@@ -343,7 +349,8 @@ double model_bytes_per_iteration(const loom::EigenPcg& pcg) {
     bytes += row_bytes * rows;                                     // backward sweep
     bytes += 2 * rows * b * b * db;                                // diagonal inverses, both sweeps
     const double m = lv[l + 1].block;
-    bytes += 2 * (static_cast<double>(L.p_nnz_blocks) * (b * m * vb + 4) + 4 * rows);  // R, P
+    const double tb = l == 0 && amg->options().float_storage && amg->options().half_transfers && b == 3 && m == 6 ? 2.0 : vb;
+    bytes += 2 * (static_cast<double>(L.p_nnz_blocks) * (b * m * tb + 4) + 4 * rows);  // R, P
     bytes += 10 * dofs * 8;  // b, x, r in the sweeps, r in R r, x in x += P xc
   }
   return bytes;
@@ -409,6 +416,7 @@ void time_steps(benchmark::State& st, int n, Timed* t, loom::EigenPcg* pcg, cons
     st.counters["l0_boundary_frac"] = static_cast<double>(lv[0].boundary_rows) / lv[0].rows;
     st.counters["l0_clean_frac"] = static_cast<double>(lv[0].clean_rows) / lv[0].rows;
     st.counters["mb_per_iter"] = 1e-6 * model_bytes_per_iteration(*pcg);
+    st.counters["half_p_rel_err"] = pcg->amg()->half_transfer_error();
     if (lv.size() > 1) {
       st.counters["l1_rows"] = static_cast<double>(lv[1].rows);
       st.counters["l1_blocks_per_row"] = static_cast<double>(lv[1].nnz_blocks) / lv[1].rows;

@@ -13,6 +13,7 @@
 
 #include "eigen_pcg.hpp"
 #include "float_spmv.hpp"
+#include "half.hpp"
 #include "loom/params.hpp"
 #include "loom/solver_common.hpp"
 #include "solver_systems.hpp"
@@ -298,4 +299,120 @@ TEST(FloatSpmv, TransferKernelsMatchTheirDefinition) {
   }
   EXPECT_LE(std::abs(lhs - rhs), 1e-13 * mag);
   EXPECT_GT(mag, 0.0);
+}
+
+// IEEE half (half.hpp, sa_amg's level-0 transfers): every half widens to the float its bits
+// define (checked against the formula sign * 2^(e-15) * (1 + m/1024), or m * 2^-24 for
+// subnormals), and float_to_half rounds to the nearest half with ties to even, checked against
+// a brute-force search over the sorted finite halves; the hardware conversions (F16C) and the
+// portable code give the same bits.
+TEST(FloatSpmv, HalfConversionsRoundToNearestEven) {
+  std::vector<float> pos;  // the finite non-negative halves, increasing with their bits
+  for (std::uint32_t b = 0; b < 0x10000u; ++b) {
+    const loom::Half h{static_cast<std::uint16_t>(b)};
+    const std::uint32_t e = (b >> 10) & 0x1fu, m = b & 0x3ffu;
+    if (e == 0x1f) {
+      EXPECT_TRUE(m ? std::isnan(loom::half_to_float_portable(h)) : std::isinf(loom::half_to_float_portable(h)));
+      continue;
+    }
+    const double mag = e ? std::ldexp(1.0 + m / 1024.0, static_cast<int>(e) - 15) : std::ldexp(static_cast<double>(m), -24);
+    const double ref = (b & 0x8000u) ? -mag : mag;
+    ASSERT_EQ(static_cast<double>(loom::half_to_float_portable(h)), ref) << "bits " << b;
+    ASSERT_EQ(static_cast<double>(loom::half_to_float(h)), ref) << "bits " << b;
+    if (!(b & 0x8000u)) pos.push_back(static_cast<float>(mag));
+  }
+  ASSERT_EQ(pos.size(), 0x7c00u);
+  auto nearest = [&](float x) -> std::uint16_t {  // brute force: the closest half, ties to even bits
+    const double a = std::abs(static_cast<double>(x));
+    const std::uint16_t sign = std::signbit(x) ? 0x8000 : 0;
+    const double top = 65504.0 + 16.0;  // halfway to the next binade's first value: rounds to inf
+    if (a >= top) return sign | 0x7c00;
+    const auto it = std::lower_bound(pos.begin(), pos.end(), static_cast<float>(a));
+    std::size_t hi = static_cast<std::size_t>(it - pos.begin());
+    if (hi == pos.size()) return static_cast<std::uint16_t>(sign | (pos.size() - 1));
+    if (hi == 0) return sign;
+    const std::size_t lo = hi - 1;
+    const double dl = a - pos[lo], dh = pos[hi] - a;
+    const std::size_t pick = dl < dh ? lo : dh < dl ? hi : (lo % 2 == 0 ? lo : hi);
+    return static_cast<std::uint16_t>(sign | pick);
+  };
+  std::mt19937_64 rng(5);
+  std::vector<float> xs;
+  std::uniform_real_distribution<double> expo(-27.0, 17.0), unit(0.0, 1.0);
+  for (int t = 0; t < 200000; ++t) {
+    const double v = std::exp2(expo(rng));
+    xs.push_back(static_cast<float>(unit(rng) < 0.5 ? -v : v));
+  }
+  for (float h : pos) {  // each half, the midpoints to its neighbours and the floats beside them
+    xs.push_back(h);
+    xs.push_back(-h);
+    xs.push_back(std::nextafter(h, 0.0f));
+    xs.push_back(std::nextafter(h, 1e9f));
+  }
+  for (std::size_t k = 0; k + 1 < pos.size(); ++k) {
+    const float mid = static_cast<float>(0.5 * (static_cast<double>(pos[k]) + pos[k + 1]));  // exact in float
+    xs.push_back(mid);
+    xs.push_back(std::nextafter(mid, 0.0f));
+    xs.push_back(std::nextafter(mid, 1e9f));
+  }
+  xs.push_back(65519.0f);
+  xs.push_back(65520.0f);
+  xs.push_back(1e30f);
+  for (float x : xs) {
+    const std::uint16_t want = nearest(x);
+    ASSERT_EQ(loom::float_to_half_portable(x).bits, want) << "x " << x;
+    ASSERT_EQ(loom::float_to_half(x).bits, want) << "x " << x;
+  }
+}
+
+// The transfer kernels on half values: the same bits as on their values widened to double
+// (every half is a double), so the half path is the same kernel reading 2 bytes per value.
+TEST(FloatSpmv, HalfTransferKernelsEqualTheWidenedDoubleKernels) {
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(-2.0, 2.0);
+  const Index nf = 40, nc = 9;
+  std::vector<Index> prp{0}, pcol;
+  for (Index i = 0; i < nf; ++i) {
+    for (int k = 0; k < 1 + static_cast<int>(i % 4); ++k) pcol.push_back(static_cast<Index>((i / 5 + 2 * k) % nc));
+    std::sort(pcol.begin() + prp.back(), pcol.end());
+    pcol.erase(std::unique(pcol.begin() + prp.back(), pcol.end()), pcol.end());
+    prp.push_back(static_cast<Index>(pcol.size()));
+  }
+  std::vector<loom::Half> ph(pcol.size() * 18);
+  for (loom::Half& v : ph) v = loom::float_to_half(static_cast<float>(u(rng)));
+  std::vector<double> pd(ph.size());
+  for (std::size_t k = 0; k < ph.size(); ++k) pd[k] = loom::widen(ph[k]);
+  // R as 6x3 blocks per coarse row, from the same values (here one block row per coarse
+  // row holding P's blocks of that column, transposed).
+  std::vector<Index> rrp(nc + 1, 0), rcol(pcol.size());
+  std::vector<loom::Half> rh(ph.size());
+  for (Index c : pcol) ++rrp[c + 1];
+  for (Index I = 0; I < nc; ++I) rrp[I + 1] += rrp[I];
+  {
+    std::vector<Index> fill(rrp.begin(), rrp.end() - 1);
+    for (Index i = 0; i < nf; ++i)
+      for (Index k = prp[i]; k < prp[i + 1]; ++k) {
+        const Index q = fill[pcol[k]]++;
+        rcol[q] = i;
+        for (int a = 0; a < 3; ++a)
+          for (int c = 0; c < 6; ++c) rh[18 * q + 3 * c + a] = ph[18 * k + 6 * a + c];
+      }
+  }
+  std::vector<double> rd(rh.size());
+  for (std::size_t k = 0; k < rh.size(); ++k) rd[k] = loom::widen(rh[k]);
+  std::vector<double> r(3 * nf), xc(6 * nc);
+  for (double& v : r) v = u(rng);
+  for (double& v : xc) v = u(rng);
+  for (Index I = 0; I < nc; ++I) {
+    double bh[6], bd[6];
+    loom::block_row_restrict63(rrp.data(), rcol.data(), rh.data(), r.data(), I, bh);
+    loom::block_row_restrict63(rrp.data(), rcol.data(), rd.data(), r.data(), I, bd);
+    for (int c = 0; c < 6; ++c) EXPECT_EQ(bh[c], bd[c]) << "coarse row " << I;
+  }
+  for (Index i = 0; i < nf; ++i) {
+    double xh[3] = {1, 2, 3}, xd[3] = {1, 2, 3};
+    loom::block_row_prolong36_add(prp.data(), pcol.data(), ph.data(), xc.data(), i, xh);
+    loom::block_row_prolong36_add(prp.data(), pcol.data(), pd.data(), xc.data(), i, xd);
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(xh[a], xd[a]) << "fine row " << i;
+  }
 }

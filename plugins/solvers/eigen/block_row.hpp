@@ -10,10 +10,13 @@
 #endif
 
 #include <cstddef>
+#include <cstdint>
+#include <cstring>
 #include <type_traits>
 
 #include "loom/common.hpp"
 #include "loom/kernels/bsr_ops.hpp"
+#include "half.hpp"
 
 namespace loom {
 
@@ -23,7 +26,14 @@ namespace block_row_detail {
 // 4 entries from p as doubles.
 template <class T>
 inline __m256d load4(const T* p) {
-  if constexpr (std::is_same_v<T, float>)
+  if constexpr (std::is_same_v<T, Half>) {
+#if defined(__F16C__)
+    return _mm256_cvtps_pd(_mm_cvtph_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
+#else
+    return _mm256_setr_pd(widen(p[0]), widen(p[1]), widen(p[2]), widen(p[3]));
+#endif
+  }
+  else if constexpr (std::is_same_v<T, float>)
     return _mm256_cvtps_pd(_mm_loadu_ps(p));
   else
     return _mm256_loadu_pd(p);
@@ -39,7 +49,15 @@ inline __m256d load3(const T* p) {
 // 2 entries from p as doubles.
 template <class T>
 inline __m128d load2(const T* p) {
-  if constexpr (std::is_same_v<T, float>)
+  if constexpr (std::is_same_v<T, Half>) {
+#if defined(__F16C__)
+    std::int32_t two;
+    std::memcpy(&two, p, 4);
+    return _mm_cvtps_pd(_mm_cvtph_ps(_mm_cvtsi32_si128(two)));
+#else
+    return _mm_setr_pd(widen(p[0]), widen(p[1]));
+#endif
+  } else if constexpr (std::is_same_v<T, float>)
     return _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
   else
     return _mm_loadu_pd(p);
@@ -159,13 +177,14 @@ inline void block_row_multiply6(const Index* rp, const Index* col, const T* val,
 // repeats every 3 entries for R and every 6 for P), into 5 accumulators reduced once per block
 // row, as block_row_multiply6 does: 5 loads and 5 FMAs per block instead of 18 scalar
 // products in 3- or 6-term dot products. The sums are the same products added in another
-// order (rounding-level differences from the scalar loops).
+// order (rounding-level differences from the scalar loops). Their values may also be IEEE
+// half (half.hpp, sa_amg's `half_transfers`), widened to double on load like float.
 
 // y_I = sum_k R_Ik r_col(k) over block row I of R (6x3 blocks): the restriction b_c = R r.
 template <class T>
 inline void block_row_restrict63(const Index* rp, const Index* col, const T* val, const double* r, Index I,
                                  double* yI) {
-  static_assert(std::is_same_v<T, double> || std::is_same_v<T, float>);
+  static_assert(std::is_same_v<T, double> || std::is_same_v<T, float> || std::is_same_v<T, Half>);
 #if defined(__AVX2__) && defined(__FMA__)
   using namespace block_row_detail;
   const __m256i m3 = _mm256_setr_epi64x(-1, -1, -1, 0);
@@ -192,7 +211,7 @@ inline void block_row_restrict63(const Index* rp, const Index* col, const T* val
     const T* B = val + 18 * static_cast<std::size_t>(k);
     const double* rk = r + 3 * static_cast<std::size_t>(col[k]);
     for (int c = 0; c < 6; ++c)
-      yI[c] += double(B[3 * c]) * rk[0] + double(B[3 * c + 1]) * rk[1] + double(B[3 * c + 2]) * rk[2];
+      yI[c] += widen(B[3 * c]) * rk[0] + widen(B[3 * c + 1]) * rk[1] + widen(B[3 * c + 2]) * rk[2];
   }
 #endif
 }
@@ -201,7 +220,7 @@ inline void block_row_restrict63(const Index* rp, const Index* col, const T* val
 template <class T>
 inline void block_row_prolong36_add(const Index* rp, const Index* col, const T* val, const double* xc, Index i,
                                     double* xi) {
-  static_assert(std::is_same_v<T, double> || std::is_same_v<T, float>);
+  static_assert(std::is_same_v<T, double> || std::is_same_v<T, float> || std::is_same_v<T, Half>);
 #if defined(__AVX2__) && defined(__FMA__)
   using namespace block_row_detail;
   __m256d a0 = _mm256_setzero_pd(), a1 = _mm256_setzero_pd(), a2 = _mm256_setzero_pd(), a3 = _mm256_setzero_pd();
@@ -229,7 +248,7 @@ inline void block_row_prolong36_add(const Index* rp, const Index* col, const T* 
     const double* xk = xc + 6 * static_cast<std::size_t>(col[k]);
     for (int a = 0; a < 3; ++a) {
       double s = 0;
-      for (int c = 0; c < 6; ++c) s += double(B[6 * a + c]) * xk[c];
+      for (int c = 0; c < 6; ++c) s += widen(B[6 * a + c]) * xk[c];
       xi[a] += s;
     }
   }

@@ -739,8 +739,38 @@ void SaAmg::sync_float(bool level0_only, bool transfers) {
     if (transfers && l + 1 < L_.size()) {
       copy(L.P, parallel(L));
       copy(L.R, parallel(L));
+      // Level 0's rigid-body transfers in half: R's values are the rounded values of P's
+      // (r_from_p), so R stays the exact transpose of the rounded P.
+      const bool half = l == 0 && o_.half_transfers && L.A.br == 3 && L.P.bc == 6;
+      L.P.h.resize(half ? L.P.v.size() : 0);
+      L.R.h.resize(half ? L.R.v.size() : 0);
+      if (half) {
+        const std::ptrdiff_t N = static_cast<std::ptrdiff_t>(L.P.v.size());
+#pragma omp parallel for schedule(static) if (parallel(L))
+        for (std::ptrdiff_t k = 0; k < N; ++k) L.P.h[k] = float_to_half(L.P.f[k]);
+        const Index nr = L.R.nnz();
+#pragma omp parallel for schedule(static) if (parallel(L))
+        for (Index k = 0; k < nr; ++k) {
+          const Half* src = L.P.h.data() + 18 * static_cast<std::size_t>(L.r_from_p[k]);
+          Half* dst = L.R.h.data() + 18 * static_cast<std::size_t>(k);
+          for (int a = 0; a < 3; ++a)
+            for (int c = 0; c < 6; ++c) dst[3 * c + a] = src[6 * a + c];  // R block (6x3) = P block (3x6) transposed
+        }
+      }
     }
   }
+}
+
+double SaAmg::half_transfer_error() const {
+  if (L_.empty() || L_[0].P.h.empty()) return 0;
+  const BlockMatrix& P = L_[0].P;
+  double d = 0, n = 0;
+  for (std::size_t k = 0; k < P.v.size(); ++k) {
+    const double e = widen(P.h[k]) - P.v[k];
+    d += e * e;
+    n += P.v[k] * P.v[k];
+  }
+  return n > 0 ? std::sqrt(d / n) : 0;
 }
 
 bool SaAmg::filter_changed(const Filter& S) const {
@@ -1043,7 +1073,10 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       for (Index I = 0; I < nc; ++I) {
         double* bi = C.b.data() + static_cast<std::size_t>(M) * I;
         if constexpr (B == 3 && M == 6) {  // level 0 of the rigid-body hierarchy (block_row.hpp)
-          block_row_restrict63(L.R.rp.data(), L.R.ci.data(), values<T>(L.R), r, I, bi);
+          if (!L.R.h.empty())
+            block_row_restrict63(L.R.rp.data(), L.R.ci.data(), L.R.h.data(), r, I, bi);
+          else
+            block_row_restrict63(L.R.rp.data(), L.R.ci.data(), values<T>(L.R), r, I, bi);
         } else {
           std::fill(bi, bi + M, 0.0);
           for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k)
@@ -1057,8 +1090,12 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
 #pragma omp parallel for schedule(static) if (par)
     for (Index i = 0; i < n; ++i) {
       if constexpr (B == 3 && M == 6) {
-        block_row_prolong36_add(L.P.rp.data(), L.P.ci.data(), values<T>(L.P), C.x.data(), i,
-                                x + static_cast<std::size_t>(B) * i);
+        if (!L.P.h.empty())
+          block_row_prolong36_add(L.P.rp.data(), L.P.ci.data(), L.P.h.data(), C.x.data(), i,
+                                  x + static_cast<std::size_t>(B) * i);
+        else
+          block_row_prolong36_add(L.P.rp.data(), L.P.ci.data(), values<T>(L.P), C.x.data(), i,
+                                  x + static_cast<std::size_t>(B) * i);
       } else {
         for (Index k = L.P.rp[i]; k < L.P.rp[i + 1]; ++k)
           gemv_add<B, M>(values<T>(L.P) + PB * k, C.x.data() + static_cast<std::size_t>(M) * L.P.ci[k],

@@ -26,6 +26,7 @@
 
 #include "loom/bsr.hpp"
 #include "loom/common.hpp"
+#include "half.hpp"
 
 namespace loom::amg {
 
@@ -61,6 +62,14 @@ struct SaAmgOptions {
   /// rounded; 2 of the ~12 MB that level 0 streams per V-cycle at 256^2). false: double, the
   /// previous default (the benchmark's `_before` variant).
   bool float_diagonal = true;
+  /// With float_storage: level 0's transfer operators P and R (3x6 and 6x3 blocks, the
+  /// rigid-body hierarchy) read as IEEE half (binary16) values, written when the prolongator
+  /// is rebuilt: 36 instead of 72 bytes per block. P's entries are dimensionless (T has
+  /// orthonormal columns, P = (I - w D^-1 A~) T), so half's range needs no scaling. R stays
+  /// the exact transpose of the rounded P, so the V-cycle stays symmetric and positive
+  /// definite (the coarse term is semidefinite for any P); the coarse matrix is still the
+  /// Galerkin product of the double P (NUMERICS.md 3.6: what the rounding costs).
+  bool half_transfers = true;
   Index parallel_min_dofs = 6144;  ///< loops run on all OpenMP threads from this many DOFs on
   /// The Gauss-Seidel row ranges of a threaded level hold at least this many DOFs (2 to 8
   /// ranges; 0: always 8). Rows coupled to another range are swept by colour and read their
@@ -78,6 +87,7 @@ struct BlockMatrix {
   std::vector<Index> rp, ci;
   std::vector<double> v;
   std::vector<float> f;  ///< float copy of v read by the V-cycle (SaAmgOptions::float_storage)
+  std::vector<Half> h;   ///< half copy of v (level 0's P and R with SaAmgOptions::half_transfers)
   std::size_t bsize() const { return static_cast<std::size_t>(br) * bc; }
   Index nnz() const { return static_cast<Index>(ci.size()); }
   double* block(Index k) { return v.data() + bsize() * static_cast<std::size_t>(k); }
@@ -136,6 +146,9 @@ class SaAmg {
   /// in double, as built by the last setup(): for tests that recompute the Galerkin product.
   const BlockMatrix& level_matrix(std::size_t l) const { return L_[l].A; }
   const BlockMatrix& prolongator(std::size_t l) const { return L_[l].P; }
+  const BlockMatrix& restriction(std::size_t l) const { return L_[l].R; }
+  /// |P_h - P|_F / |P|_F of level 0's half prolongator against the double one (0 without halves).
+  double half_transfer_error() const;
 
  private:
   struct Level {
