@@ -22,10 +22,15 @@
 #include <cstddef>
 #include <cstring>
 #include <numeric>
+#include <type_traits>
 #include <vector>
 
 #include "loom/common.hpp"
 #include "loom/spring_layout.hpp"
+
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
 
 namespace loom {
 
@@ -185,19 +190,81 @@ inline void window_fill(const T* __restrict x, const T* __restrict v, Index from
 
 /// A segment's per-spring vectors F (3 x Bk, structure of arrays) added at window vertices
 /// a + Step r and subtracted at a + off + Step r, r < len (two passes: the ranges may overlap).
+///
+/// Step 2 in double with AVX2 (window_scatter_step2_avx2): four springs' values go to slots
+/// s, s + 2, s + 4, s + 6 as one load-add-store of the eight slots s..s+7 with +0 added to the odd
+/// ones. That is the scalar loop's result bit for bit: x - (+0) = x for every x, x + (+0) = x for
+/// every x but -0, and a window sum is never -0 (it starts at +0, and under round-to-nearest
+/// x + y or x - y is -0 only when x already is). The vector loop stops while slot s + 7 still lies inside the
+/// segment's own range, so it touches only slots of this window (no other thread's data).
 template <class T, int Step, Index Bk>
 inline void window_segment_scatter(Index len, Index a, Index off, T* __restrict FX, T* __restrict FY,
-                                   T* __restrict FZ, const T* __restrict F) {
-  for (Index r = 0; r < len; ++r) {
+                                   T* __restrict FZ, const T* __restrict F);
+
+/// The portable loop of window_segment_scatter for r in [r0, len).
+template <class T, int Step, Index Bk>
+inline void window_segment_scatter_from(Index r0, Index len, Index a, Index off, T* __restrict FX,
+                                        T* __restrict FY, T* __restrict FZ, const T* __restrict F) {
+  for (Index r = r0; r < len; ++r) {
     FX[a + Step * r] += F[r];
     FY[a + Step * r] += F[Bk + r];
     FZ[a + Step * r] += F[2 * Bk + r];
   }
-  for (Index r = 0; r < len; ++r) {
+  for (Index r = r0; r < len; ++r) {
     FX[a + off + Step * r] -= F[r];
     FY[a + off + Step * r] -= F[Bk + r];
     FZ[a + off + Step * r] -= F[2 * Bk + r];
   }
+}
+
+#if defined(__AVX2__)
+/// Stride-2 scatter of one component, all len springs: sign +1 adds G[r] at A[2 r], -1
+/// subtracts. Vector part r < r1 (r1 a multiple of 4 with r1 + 1 <= len, so that the highest slot
+/// a vector touches, 2 r1 - 1, is at most 2 (len - 1), a slot of the segment), then the tail.
+template <int Sign>
+inline void window_scatter_step2_avx2(Index len, double* __restrict A, const double* __restrict G) {
+  const Index r1 = len >= 1 ? ((len - 1) / 4) * 4 : 0;
+  const __m256d zero = _mm256_setzero_pd();
+  for (Index r = 0; r < r1; r += 4) {
+    const __m256d g = _mm256_permute4x64_pd(_mm256_loadu_pd(G + r), 0xD8);   // g0 g2 g1 g3
+    const __m256d lo = _mm256_unpacklo_pd(g, zero);                            // g0 0 g1 0
+    const __m256d hi = _mm256_unpackhi_pd(g, zero);                            // g2 0 g3 0
+    double* s = A + 2 * r;
+    const __m256d s0 = _mm256_loadu_pd(s), s1 = _mm256_loadu_pd(s + 4);
+    if constexpr (Sign > 0) {
+      _mm256_storeu_pd(s, _mm256_add_pd(s0, lo));
+      _mm256_storeu_pd(s + 4, _mm256_add_pd(s1, hi));
+    } else {
+      _mm256_storeu_pd(s, _mm256_sub_pd(s0, lo));
+      _mm256_storeu_pd(s + 4, _mm256_sub_pd(s1, hi));
+    }
+  }
+  for (Index r = r1; r < len; ++r) {
+    if constexpr (Sign > 0)
+      A[2 * r] += G[r];
+    else
+      A[2 * r] -= G[r];
+  }
+}
+#endif
+
+template <class T, int Step, Index Bk>
+inline void window_segment_scatter(Index len, Index a, Index off, T* __restrict FX, T* __restrict FY,
+                                   T* __restrict FZ, const T* __restrict F) {
+#if defined(__AVX2__)
+  if constexpr (Step == 2 && std::is_same_v<T, double>) {
+    // the lower pass whole, then the upper one (the two ranges may share slots: same order of
+    // additions into a slot as the portable loop)
+    window_scatter_step2_avx2<+1>(len, FX + a, F);
+    window_scatter_step2_avx2<+1>(len, FY + a, F + Bk);
+    window_scatter_step2_avx2<+1>(len, FZ + a, F + 2 * Bk);
+    window_scatter_step2_avx2<-1>(len, FX + a + off, F);
+    window_scatter_step2_avx2<-1>(len, FY + a + off, F + Bk);
+    window_scatter_step2_avx2<-1>(len, FZ + a + off, F + 2 * Bk);
+    return;
+  }
+#endif
+  window_segment_scatter_from<T, Step, Bk>(0, len, a, off, FX, FY, FZ, F);
 }
 
 /// Before a block that reads vertices up to need - 1: when need lies beyond the window

@@ -254,13 +254,19 @@ LOOM_HD inline void kang_cho_spring_velocity(const T* x, const T* v, I a, I b, T
 /// analytic_position, dx their summed displacement. Free vertices (w > 0) also get gravity:
 /// hg = h g and gg = h^2 g / 2. velocity: v += dv + h g, then x += h v (the new v);
 /// analytic_position: x += h v_old + h^2 g / 2 + dx, then v += dv + h g.
+///
+/// The multiply-adds are written as fma calls, so that no compiler contracts them differently in
+/// different copies: the CPU plugin's vectorised finalisation (ho_finalise_block_avx2 in
+/// plugins/integrators/harmonic_oscillation/ho_window.hpp) performs exactly these operations
+/// and gives the same bits (tests/harmonic_oscillation, HoStorage.WindowedSweepIsBitIdentical).
 template <class T, bool AnalyticPosition>
 LOOM_HD inline void ho_finalise_vertex(T* x, T* v, const T* dv, const T* dx, T w, T h, const T hg[3], const T gg[3]) {
+  using std::fma;
   const T f = w > T(0) ? T(1) : T(0);
   for (int e = 0; e < 3; ++e) {
-    if constexpr (AnalyticPosition) x[e] += h * v[e] + f * gg[e] + dx[e];
-    v[e] += dv[e] + f * hg[e];
-    if constexpr (!AnalyticPosition) x[e] += h * v[e];
+    if constexpr (AnalyticPosition) x[e] = x[e] + fma(h, v[e], fma(f, gg[e], dx[e]));
+    v[e] = v[e] + fma(f, hg[e], dv[e]);
+    if constexpr (!AnalyticPosition) x[e] = fma(h, v[e], x[e]);
   }
 }
 

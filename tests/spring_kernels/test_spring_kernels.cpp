@@ -1,0 +1,129 @@
+// The explicit steps' vector kernels (issue 16) against their portable loops.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "loom/spring_groups.hpp"
+
+namespace {
+
+using loom::Index;
+
+bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+
+// window_segment_scatter (AVX2 for stride 2 in double) against its
+// portable loop, window_segment_scatter_from(0, ...), bit for bit: the vector kernel adds +0 to
+// the odd slots, which leaves every value that is not -0 unchanged, and window sums are never -0
+// (they start at +0; see spring_groups.hpp). Every length 0..41 (the vector part and every tail),
+// lower and upper ranges overlapping (off 1, 2, 3) or not (off 64, 129), odd and even starts;
+// the slots around the two ranges hold a sentinel and must keep it bit for bit (the kernel
+// touches only the segment's own slots).
+template <int Step>
+void check_scatter() {
+  constexpr Index Bk = 64;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  int cases = 0;
+  for (Index len = 0; len <= 41; ++len)
+    for (Index off : {1, 2, 3, 64, 129})
+      for (Index a : {0, 1, 5}) {
+        const Index slots = a + off + Step * (len > 0 ? len - 1 : 0) + 1;
+        const Index n = slots + 16;   // a guard band after the last slot
+        std::vector<double> F(3 * Bk);
+        for (double& f : F) f = U(rng);
+        if (len > 2) F[1] = -0.0;       // a -0 value and a +0 value among the springs' vectors
+        if (len > 3) F[Bk + 2] = 0.0;
+        std::vector<double> A(3 * n);
+        const double sentinel = -0.0;   // -0 plus +0 would read +0: a touched guard slot shows
+        for (Index q = 0; q < 3 * n; ++q) A[q] = (q % 5 == 0) ? 0.0 : U(rng);   // some +0 sums
+        for (int e = 0; e < 3; ++e) {
+          for (Index q = 0; q < a; ++q) A[e * n + q] = sentinel;
+          for (Index q = slots; q < n; ++q) A[e * n + q] = sentinel;
+        }
+        std::vector<double> B = A;
+        loom::window_segment_scatter<double, Step, Bk>(len, a, off, A.data(), A.data() + n, A.data() + 2 * n, F.data());
+        loom::window_segment_scatter_from<double, Step, Bk>(0, len, a, off, B.data(), B.data() + n, B.data() + 2 * n,
+                                                              F.data());
+        for (Index q = 0; q < 3 * n; ++q)
+          ASSERT_TRUE(same_bits(A[q], B[q])) << "step " << Step << " len " << len << " off " << off << " a " << a
+                                             << " slot " << q << ": " << A[q] << " vs " << B[q];
+        ++cases;
+      }
+  EXPECT_EQ(cases, 42 * 5 * 3);
+}
+
+TEST(SpringKernels, WindowScatterStride2EqualsPortableLoopBitwise) {
+#if defined(__AVX2__)
+  check_scatter<2>();
+#else
+  GTEST_SKIP() << "this build has no AVX2: window_segment_scatter is the portable loop itself";
+#endif
+}
+
+}  // namespace
+
+#include "ho_window.hpp"
+#include "loom/kernels/ho.hpp"
+
+namespace {
+
+#if defined(LOOM_HO_FINALISE_AVX2)
+// ho_finalise_block_avx2 against kernels::ho_finalise_vertex (velocity variant) on the same
+// window sums, bit for bit: both perform v = v + fma(f, h g, w s), x = fma(h, v, x) with the
+// same operands. Random states and sums, pinned vertices (w = 0) and deferred vertices (left
+// unchanged) mixed in, every start offset within a group of 4 and every tail length.
+TEST(SpringKernels, HoBlockFinalisationEqualsScalarBitwise) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  const Index n = 80, ws = 3;
+  int vectorised = 0;
+  for (Index from = ws; from < ws + 4; ++from)
+    for (Index to = from; to <= n; to += 5) {
+      std::vector<double> x(3 * n), v(3 * n), w(n), win(9 * n);
+      std::vector<std::uint8_t> deferred(n + 4, 0);
+      for (double& e : x) e = U(rng);
+      for (double& e : v) e = U(rng);
+      for (double& e : win) e = 1e3 * U(rng);
+      for (Index q = 0; q < n; ++q) {
+        w[q] = (q % 7 == 3) ? 0.0 : 500.0 * (1.5 + U(rng));   // some pins
+        deferred[q] = (q % 11 == 5) ? 1 : 0;
+      }
+      double* A[9];
+      for (int e = 0; e < 9; ++e) A[e] = win.data() + e * n;
+      for (Index q = 0; q < n; ++q) {   // the window holds the current x and v at slot q - ws
+        if (q < ws) continue;
+        for (int e = 0; e < 3; ++e) {
+          A[e][q - ws] = x[3 * q + e];
+          A[3 + e][q - ws] = v[3 * q + e];
+        }
+      }
+      const double h = 1.3e-3, hg[3] = {0.1 * h, -9.81 * h, 0.02 * h}, gg[3] = {0, 0, 0};
+      std::vector<double> xr = x, vr = v;
+      for (Index q = from; q < to; ++q) {
+        if (deferred[q]) continue;
+        const Index l = q - ws;
+        const double dq[3] = {w[q] * A[6][l], w[q] * A[7][l], w[q] * A[8][l]};
+        const double pq[3] = {0, 0, 0};
+        loom::kernels::ho_finalise_vertex<double, false>(xr.data() + 3 * q, vr.data() + 3 * q, dq, pq, w[q], h, hg, gg);
+      }
+      const Index end = loom::ho_finalise_block_avx2(from, to, ws, A[0], A[1], A[2], A[3], A[4], A[5], A[6], A[7],
+                                                     A[8], w.data(), deferred.data(), x.data(), v.data(), h, hg);
+      ASSERT_EQ(end, from + ((to - from) / 4) * 4);
+      vectorised += static_cast<int>(end - from);
+      for (Index q = end; q < to; ++q) {   // the tail is the caller's: the kernel leaves it untouched
+        xr[3 * q] = x[3 * q], xr[3 * q + 1] = x[3 * q + 1], xr[3 * q + 2] = x[3 * q + 2];
+        vr[3 * q] = v[3 * q], vr[3 * q + 1] = v[3 * q + 1], vr[3 * q + 2] = v[3 * q + 2];
+      }
+      for (Index q = 0; q < 3 * n; ++q) {
+        ASSERT_TRUE(same_bits(x[q], xr[q])) << "from " << from << " to " << to << " x entry " << q;
+        ASSERT_TRUE(same_bits(v[q], vr[q])) << "from " << from << " to " << to << " v entry " << q;
+      }
+    }
+  EXPECT_GT(vectorised, 1000);
+}
+#endif
+
+}  // namespace
