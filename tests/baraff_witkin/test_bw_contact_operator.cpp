@@ -9,6 +9,7 @@
 #include <Eigen/Dense>
 
 #include "dense_matrix.hpp"
+#include "fold_scene.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -31,52 +32,13 @@ using loom::BaraffWitkin;
 using loom::Index;
 using loom::Scene;
 
-bool verbose() { return std::getenv("LOOM_TEST_VERBOSE") != nullptr; }
+using loom_test::Fold;
+using loom_test::fold_until_contacts;
+using loom_test::full_step;
+using loom_test::verbose;
 
-// The folding cloth of tests/self_collision (a 0.4 m square standing on its edge collapses in
-// folds onto a plane), built through the plugin loader with the given solver, stepped by a
-// linked BaraffWitkin so that its contacts can be read.
-struct Fold {
-  loom::Registry registry;
-  loom::PluginLoader loader{registry};
-  std::unique_ptr<loom::Simulation> sim;
-  explicit Fold(const std::string& solver) {
-    loom::Simulation::set_notes(false);
-    sim = loom::Simulation::from_string(R"(
-mesh: {grid: {nx: 14, ny: 14, width: 0.4, height: 0.4, plane: xy}}
-material: {type: mass_spring, stencil: structural_shear_bend, stiffness: {structural: 300, shear: 300, bend: 0.2}, damping: 0.01, density: 0.2}
-integrator: {type: baraff_witkin, dt: 2.0e-3}
-solver: )" + solver + R"(
-threads: 1
-gravity: [0, -9.81, 1.5]
-colliders: [{type: plane, point: [0, -0.01, 0], normal: [0, 1, 0], friction: 0.8}]
-self_collision: {thickness: 0.004, friction: 0.3}
-)",
-                                        "fold.yaml", std::string(LOOM_SOURCE_DIR) + "/scenes", {}, loader);
-  }
-  Scene& scene() { return sim->scene(); }
-};
-
-constexpr double kH = 2.0e-3;
+constexpr double kH = loom_test::kFoldH;
 const std::string kPcg = "{type: filtered_pcg, filtered_pcg: {tolerance: 1.0e-12, max_iterations: 5000}}";
-
-void full_step(Scene& sc, BaraffWitkin& bw) {
-  sc.self_collision->begin_step(sc.state);
-  bw.step(sc, kH);
-  sc.self_collision->resolve(sc.state, kH, &sc.colliders);
-}
-
-// Steps the folding cloth matrix-free until a step's solve holds at least `want` springs (the
-// cloth lies in folds), checking after every step that the pattern is still the material's.
-void fold_until_contacts(Scene& sc, BaraffWitkin& bw, Index want, Index material_blocks) {
-  for (int step = 0; step < 400; ++step) {
-    full_step(sc, bw);
-    ASSERT_EQ(bw.pattern_rebuilds(), 0) << "step " << step;
-    ASSERT_EQ(bw.pattern().nnz_blocks(), material_blocks) << "step " << step;
-    if (bw.self_contact()->stats().contacts >= want) return;
-  }
-  FAIL() << "the fold never held " << want << " springs";
-}
 
 using loom_test::dense;
 
@@ -216,34 +178,5 @@ TEST(BwContactOperator, AStepSolvedMatrixFreeEqualsTheAssembledDirectSolve) {
 // The folding cloth for 0.5 s (250 steps) under baraff_witkin with filtered_pcg (the springs
 // matrix-free): no intersecting triangle pair at any step (the exact count of loom check), the
 // layers at least half the thickness apart, no vertex under the ground plane, and the pattern
-// never extended.
-TEST(BwContactOperator, FoldingClothMatrixFreeNeverIntersects) {
-  Fold f("{type: filtered_pcg}");
-  Scene& sc = f.scene();
-  BaraffWitkin bw;
-  bw.prepare(sc, kH);
-  ASSERT_TRUE(bw.self_contact_matrix_free());
-  const Index blocks = bw.pattern().nnz_blocks();
-  const double th = sc.self_collision->options().thickness;
-  long long springs = 0;
-  int worst = 0;
-  double dmin = 1e9, ymin = 1e9;
-  for (int step = 0; step < 250; ++step) {
-    full_step(sc, bw);
-    springs += bw.self_contact()->stats().contacts;
-    if (step % 5 == 4) {
-      worst = std::max(worst, static_cast<int>(loom::count_intersecting_pairs(sc.mesh, sc.state.x)));
-      dmin = std::min(dmin, sc.self_collision->min_distance(sc.state.x, th));
-    }
-    for (std::size_t i = 1; i < sc.state.x.size(); i += 3) ymin = std::min(ymin, sc.state.x[i]);
-  }
-  if (verbose())
-    std::printf("springs %lld, worst intersections %d, min distance / thickness %.3f, lowest %.6f\n", springs, worst,
-                dmin / th, ymin);
-  EXPECT_GT(springs, 0);
-  EXPECT_EQ(worst, 0);
-  EXPECT_GE(dmin, 0.5 * th);
-  EXPECT_GE(ymin, -0.01 - 1e-9);
-  EXPECT_EQ(bw.pattern_rebuilds(), 0);
-  EXPECT_EQ(bw.pattern().nnz_blocks(), blocks);
-}
+// never extended (fold_scene.hpp).
+TEST(BwContactOperator, FoldingClothMatrixFreeNeverIntersects) { loom_test::fold_run_never_intersects("{type: filtered_pcg}"); }

@@ -50,8 +50,9 @@ class LinearSolver {
   /// that use geometry read them (the rigid-body near-null space of eigen_pcg's sa_amg and of
   /// petsc's gamg / boomeramg); the others ignore them.
   virtual void set_coordinates(std::span<const double> x) { (void)x; }
-  /// Whether set_extra_operator() is honoured (filtered_pcg with preconditioner none, jacobi
-  /// or block_jacobi); an integrator assembles the terms into A for the others.
+  /// Whether set_extra_operator() is honoured (the CPU filtered_pcg, every preconditioner);
+  /// an integrator assembles the terms into A for the others (docs/CONTACT.md says why the
+  /// direct solvers keep that path).
   virtual bool supports_extra_operator() const { return false; }
   /// From the next factorize() on, solve with A + E (E's diagonal blocks join the
   /// preconditioner's); null removes it. E must stay alive and unchanged until then.

@@ -73,7 +73,7 @@ class BaraffWitkin final : public Integrator {
   const ImplicitSelfContact* self_contact() const { return self_contact_.get(); }
   int pattern_rebuilds() const { return pattern_rebuilds_; }
   /// Whether the self-contact springs are applied matrix-free by the solver (it supports an
-  /// ExtraOperator: filtered_pcg without sa_amg); else they are assembled into A.
+  /// ExtraOperator: filtered_pcg on the CPU, every preconditioner); else they are assembled into A.
   bool self_contact_matrix_free() const { return self_contact_ && self_contact_->matrix_free(); }
 
  private:

@@ -41,7 +41,7 @@ namespace loom {
 double thread_seconds();
 
 /// As an ExtraOperator (matrix-free, when the scene's solver supports it: filtered_pcg with
-/// block_jacobi, jacobi or none), the springs' term E = h^2 sum_c k_c (w w^T) (x) (n n^T) is
+/// any preconditioner, sa_amg included), the springs' term E = h^2 sum_c k_c (w w^T) (x) (n n^T) is
 /// applied inside the solver's product and its diagonal blocks join the preconditioner's, so
 /// the integrator's pattern stays the material's and nothing allocates while contacts come
 /// and go; only b carries the springs' right-hand side. Otherwise the blocks are assembled

@@ -134,11 +134,7 @@ EigenPcg::EigenPcg(PcgOptions options, std::string name) : options_(options), na
 
 void EigenPcg::set_coordinates(std::span<const double> x) { coords_.assign(x.begin(), x.end()); }
 
-void EigenPcg::set_extra_operator(const ExtraOperator* E) {
-  if (E && !supports_extra_operator())
-    throw std::logic_error(name_ + ": a matrix-free operator needs preconditioner none, jacobi or block_jacobi");
-  extra_ = E;
-}
+void EigenPcg::set_extra_operator(const ExtraOperator* E) { extra_ = E; }
 
 void EigenPcg::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   (void)S;
@@ -174,8 +170,15 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
     if (!amg_) amg_ = std::make_unique<amg::SaAmg>(options_.amg);
     std::span<const double> x;
     if (coords_.size() == 3 * static_cast<std::size_t>(n)) x = coords_;
+    // With a matrix-free term E, its diagonal blocks join the hierarchy's level 0.
+    std::span<const double> ed;
+    if (extra_) {
+      diag_.assign(9 * static_cast<std::size_t>(n), 0.0);
+      extra_->add_diagonal(diag_.data());
+      ed = diag_;
+    }
     std::string msg;
-    const bool ok = amg_->setup(A, S, x, msg);
+    const bool ok = amg_->setup(A, S, x, msg, ed);
     report.factorize_seconds = seconds_since(t0);
     if (!ok) {
       report.converged = false;

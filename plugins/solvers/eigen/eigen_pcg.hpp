@@ -61,9 +61,10 @@ class EigenPcg final : public LinearSolver {
                     std::span<const double> z, std::span<double> dv) override;
   void set_coordinates(std::span<const double> x) override;
   /// The matrix-free term E (linear_solver.hpp) joins the SpMV and the residuals, and its
-  /// diagonal blocks the (block) Jacobi preconditioner; not with sa_amg, whose hierarchy is
-  /// built from A's blocks alone.
-  bool supports_extra_operator() const override { return options_.preconditioner != PcgPreconditioner::SaAmg; }
+  /// diagonal blocks the preconditioner: the (block) Jacobi blocks, or with sa_amg level 0's
+  /// diagonal blocks (and through the Galerkin products the coarse levels; the hierarchy's
+  /// pattern stays A's). Every preconditioner.
+  bool supports_extra_operator() const override { return true; }
   void set_extra_operator(const ExtraOperator* E) override;
   bool set_tolerance_scale(double s) override {
     tolerance_scale_ = s;

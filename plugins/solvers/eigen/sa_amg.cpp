@@ -170,6 +170,27 @@ void SaAmg::fill_level0(const BsrMatrix& A, const Filter& S) {
     for (Index k = P.row_ptr[i]; k < P.row_ptr[i + 1]; ++k) solver::projected_block(S, i, P.col[k], A.block(k), L.A.block(k));
 }
 
+// Level 0's diagonal blocks += S_i E_ii S_i (E_ii positive semidefinite, so the blocks stay
+// positive definite and A~ + blockdiag(S E S) symmetric positive definite).
+void SaAmg::add_extra_diagonal(const Filter& S, std::span<const double> E) {
+  Level& L = L_[0];
+  const Index n = L.A.rows;
+#pragma omp parallel for schedule(static) if (parallel(L))
+  for (Index i = 0; i < n; ++i) {
+    const int f = S.free_dofs(i);
+    if (f == 0) continue;
+    const double* Ei = E.data() + 9 * static_cast<std::size_t>(i);
+    double* D = L.A.block(L.diag[i]);
+    if (f == 3) {
+      for (int e = 0; e < 9; ++e) D[e] += Ei[e];
+    } else {
+      double t[9];
+      kernels::mat3_project(S.projector(i).data(), Ei, S.projector(i).data(), t);
+      for (int e = 0; e < 9; ++e) D[e] += t[e];
+    }
+  }
+}
+
 bool SaAmg::invert_diagonal(std::size_t l, std::string& message) {
   Level& L = L_[l];
   const Index n = L.A.rows;
@@ -796,7 +817,10 @@ void SaAmg::remember_filter(const Filter& S) {
   }
 }
 
-bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x, std::string& message) {
+bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x, std::string& message,
+                  std::span<const double> extra_diagonal) {
+  if (!extra_diagonal.empty() && extra_diagonal.size() != 9 * static_cast<std::size_t>(A.rows()))
+    throw std::invalid_argument("sa_amg: the extra diagonal blocks do not match the matrix");
   const bool coords = !x.empty() && o_.near_null_modes == 6;
   if (!x.empty() && x.size() != 3 * static_cast<std::size_t>(A.rows()))
     throw std::invalid_argument("sa_amg: the coordinates do not match the matrix");
@@ -827,9 +851,11 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   }
   const bool s_changed = !rebuild && filter_changed(S);
   fill_level0(A, S);
+  const bool extra = !extra_diagonal.empty();
   if (!rebuild && !s_changed && since_hierarchy_ + 1 < o_.hierarchy_refresh_steps) {
     // Frozen coarse levels: only the smoother of level 0 follows the new matrix.
     ++since_hierarchy_;
+    if (extra) add_extra_diagonal(S, extra_diagonal);
     if (!invert_diagonal(0, message)) {
       built_ = false;
       return false;
@@ -840,6 +866,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   since_hierarchy_ = 0;
   ++hierarchy_builds_;
   const bool new_p = rebuild || s_changed || since_prolongator_ + 1 >= o_.prolongator_refresh_steps;
+  if (extra && o_.extra_on_coarse_levels) add_extra_diagonal(S, extra_diagonal);
   for (std::size_t l = 0;; ++l) {
     if (!invert_diagonal(l, message)) {
       built_ = false;
@@ -896,6 +923,13 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   if (!factor_coarsest(message)) {
     built_ = false;
     return false;
+  }
+  if (extra && !o_.extra_on_coarse_levels) {  // level 0 only: the coarse levels are A's
+    add_extra_diagonal(S, extra_diagonal);
+    if (!invert_diagonal(0, message)) {
+      built_ = false;
+      return false;
+    }
   }
   built_ = true;
   sync_float(false, new_p);

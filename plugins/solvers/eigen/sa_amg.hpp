@@ -78,6 +78,12 @@ struct SaAmgOptions {
   /// about 7% (NUMERICS.md 3.6). The range count depends on the level's size only, never on
   /// the thread count, so the result is the same on any number of threads.
   Index min_part_dofs = 24576;
+  /// With a matrix-free term E (setup()'s `extra_diagonal`, e.g. baraff_witkin's self-contact
+  /// springs): true, E's diagonal blocks join level 0 before the coarse levels are built, so
+  /// the Galerkin products carry P^T diag(E) P; false, they join level 0 (its smoother and
+  /// residual) only, after the coarse levels were built from A alone. Either way the V-cycle
+  /// stays SPD and the pattern is A's (NUMERICS.md 3.6, "Matrix-free terms").
+  bool extra_on_coarse_levels = true;
 };
 
 /// Block-sparse matrix with BR x BC blocks (row-major, 9 or 18 or 36 doubles per block).
@@ -127,8 +133,12 @@ class SaAmg {
   /// Build (first call, or after invalidate() / a new pattern) or refresh the hierarchy for
   /// A~ = S A S + (I - S). `x` holds the vertex positions (3n) for the rotation modes; when it
   /// is empty only the 3 translations are used. Returns false with `message` when a diagonal
-  /// block or the coarsest matrix is not positive definite.
-  bool setup(const BsrMatrix& A, const Filter& S, std::span<const double> x, std::string& message);
+  /// block or the coarsest matrix is not positive definite. `extra_diagonal` (9 per vertex,
+  /// row-major, or empty): the diagonal blocks E_ii of a positive semidefinite term E that the
+  /// outer iteration adds to A matrix-free; S_i E_ii S_i is added to level 0's diagonal blocks
+  /// (and, with extra_on_coarse_levels, reaches the coarse levels through the Galerkin products).
+  bool setup(const BsrMatrix& A, const Filter& S, std::span<const double> x, std::string& message,
+             std::span<const double> extra_diagonal = {});
   void invalidate() { built_ = false; }
 
   /// z = M r: one symmetric V-cycle on A~ (r and z have 3n entries and must not alias).
@@ -173,6 +183,7 @@ class SaAmg {
 
   void build(const BsrMatrix& A, const Filter& S, std::span<const double> x);
   void fill_level0(const BsrMatrix& A, const Filter& S);
+  void add_extra_diagonal(const Filter& S, std::span<const double> E);
   bool invert_diagonal(std::size_t l, std::string& message);
   void near_null_level0(const Filter& S, std::span<const double> x);
   void tentative(std::size_t l);
