@@ -45,9 +45,11 @@
 #include <algorithm>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 
 #include "baraff_witkin.hpp"
+#include "eigen_pcg.hpp"
 #include "loom/intersection_check.hpp"
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
@@ -478,6 +480,110 @@ void BM_BwStepSplit(benchmark::State& st) {
   st.counters["frozen"] = frozen / total;
 }
 BENCHMARK(BM_BwStepSplit)->Args({64, 40})->Args({128, 12})->Args({256, 2})->Iterations(1)->Unit(benchmark::kMillisecond);
+
+// The multilevel preconditioner with self-contact springs: baraff_witkin + filtered_pcg with
+// preconditioner sa_amg (tolerance 1e-5, one thread), from the draped state, the springs either
+// assembled into A (mode 0: the pattern is extended when a contact needs blocks it lacks, and
+// the hierarchy is then rebuilt from scratch) or applied matrix-free (the outer PCG applies
+// A + E; E's diagonal blocks on level 0 of the hierarchy built once from A's pattern: mode 1
+// on every level through the Galerkin products, mode 2 on level 0 only). Counters per step:
+// step_ms (thread CPU time of the integrator's step and the after-step response), bw_ms (the
+// integrator's step), amg_setup_ms (hierarchy set-ups and level-0 refreshes; amg_factorizes of
+// them per step, amg_full_setups of the whole hierarchy), iterations (every solve of the step),
+// spring_its (those of the solves with springs), solves (with springs), contacts, pattern_growths;
+// intersections at the end (exact count).
+//   OMP_NUM_THREADS=1 LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_BwSaAmgContact
+class AssembledOnly final : public loom::LinearSolver {  // hides set_extra_operator: the integrator assembles
+ public:
+  explicit AssembledOnly(std::unique_ptr<loom::LinearSolver> s) : s_(std::move(s)) {}
+  std::string name() const override { return s_->name(); }
+  void analyze_pattern(const loom::BsrMatrix& A, const loom::Filter& S) override { s_->analyze_pattern(A, S); }
+  bool factorize(const loom::BsrMatrix& A, const loom::Filter& S, loom::SolveReport& r) override {
+    return s_->factorize(A, S, r);
+  }
+  loom::SolveReport solve(const loom::BsrMatrix& A, const loom::Filter& S, std::span<const double> b,
+                          std::span<const double> z, std::span<double> dv) override {
+    return s_->solve(A, S, b, z, dv);
+  }
+  void set_coordinates(std::span<const double> x) override { s_->set_coordinates(x); }
+  bool set_tolerance_scale(double t) override { return s_->set_tolerance_scale(t); }
+
+ private:
+  std::unique_ptr<loom::LinearSolver> s_;
+};
+
+void BM_BwSaAmgContact(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const int mode = static_cast<int>(st.range(1));
+  const int steps = static_cast<int>(st.range(2));
+  omp_set_num_threads(1);
+  loom::Simulation::set_notes(false);
+  const double h = 2.0e-3;
+  double step_t = 0, bw_t = 0, setup = 0, its = 0, spring_its = 0, solves = 0, contacts = 0, growths = 0;
+  double intersections = 0, full_setups = 0, factorizes = 0;
+  for (auto _ : st) {
+    auto sim = loom::Simulation::from_string(scene(n, "baraff_witkin", true), "bench.yaml", ".", {"threads=1"}, loader());
+    omp_set_num_threads(1);
+    loom::Scene& sc = sim->scene();
+    sc.state = draped(n);
+    loom::PcgOptions o;
+    o.preconditioner = loom::PcgPreconditioner::SaAmg;
+    o.tolerance = 1e-5;
+    o.amg.extra_on_coarse_levels = mode != 2;
+    auto pcg = std::make_unique<loom::EigenPcg>(o);
+    loom::EigenPcg* amg = pcg.get();
+    if (mode == 0)
+      sc.solver = std::make_unique<AssembledOnly>(std::move(pcg));
+    else
+      sc.solver = std::move(pcg);
+    loom::BaraffWitkin bw;
+    bw.prepare(sc, h);
+    if (bw.self_contact_matrix_free() != (mode != 0)) {
+      st.SkipWithError("the springs' path is not the one asked for");
+      return;
+    }
+    auto one = [&](bool count) {
+      const double s0 = amg->amg() ? amg->amg()->timings().setup : 0.0;
+      const int f0 = amg->amg() ? amg->amg()->refreshes() : 0;
+      const long c0 = amg->amg() ? amg->amg()->timings().setups : 0;
+      const int g0 = bw.pattern_rebuilds();
+      const double t0 = thread_cpu_seconds();
+      sc.self_collision->begin_step(sc.state);
+      bw.step(sc, h);
+      const double t1 = thread_cpu_seconds();
+      sc.self_collision->resolve(sc.state, h);
+      const double t2 = thread_cpu_seconds();
+      if (!count) return;
+      step_t += t2 - t0;
+      bw_t += t1 - t0;
+      setup += amg->amg()->timings().setup - s0;
+      full_setups += amg->amg()->refreshes() - f0;
+      factorizes += static_cast<double>(amg->amg()->timings().setups - c0);
+      const auto& c = bw.self_contact()->stats();
+      its += bw.last_step().linear_iterations;
+      spring_its += c.iterations;
+      solves += c.solves;
+      contacts += c.contacts;
+      growths += bw.pattern_rebuilds() - g0;
+    };
+    for (int k = 0; k < 2; ++k) one(false);
+    for (int k = 0; k < steps; ++k) one(true);
+    intersections = static_cast<double>(loom::count_intersecting_pairs(sc.mesh, sc.state.x));
+  }
+  const double total = static_cast<double>(st.iterations()) * steps;
+  st.counters["step_ms"] = 1e3 * step_t / total;
+  st.counters["bw_ms"] = 1e3 * bw_t / total;
+  st.counters["amg_setup_ms"] = 1e3 * setup / total;
+  st.counters["iterations"] = its / total;
+  st.counters["spring_its"] = spring_its / total;
+  st.counters["solves"] = solves / total;
+  st.counters["contacts"] = contacts / total;
+  st.counters["pattern_growths"] = growths / total;
+  st.counters["intersections"] = intersections;
+  st.counters["amg_full_setups"] = full_setups / total;  // of the hierarchy (the rest refresh level 0's diagonal)
+  st.counters["amg_factorizes"] = factorizes / total;
+}
+BENCHMARK(BM_BwSaAmgContact)->ArgsProduct({{64, 128}, {0, 1, 2}, {12}})->Iterations(1)->Unit(benchmark::kMillisecond);
 
 // ---------------------------------------------------------------------------------------------
 // Broad phase alone, BVH against a uniform-grid spatial hash, on the draped cloth: find every

@@ -190,6 +190,62 @@ TEST(BwContactAmg, MatrixFreeSaAmgSolveEqualsLdltOnTheAssembledSum) {
   EXPECT_EQ(fs.bw.pattern().nnz_blocks(), fs.material_blocks);
 }
 
+// The solves of one step share A and S and differ in E (springs added, then released): a
+// factorize() whose only change is E refreshes level 0's diagonal alone (no new set-up of the
+// hierarchy), and the answer is still eigen_ldlt's on the assembled A + E. A change in A's
+// values sets the hierarchy up again.
+TEST(BwContactAmg, AFactorizeThatOnlyChangesERefreshesLevel0Alone) {
+  FoldedSystem fs;
+  fs.build();
+  if (HasFatalFailure()) return;
+  const Index N = 3 * fs.n;
+  const loom::BsrMatrix& A = fs.bw.system_matrix();
+  loom::EigenLdlt ldlt;
+  ldlt.analyze_pattern(*fs.M, fs.S());
+  loom::SolveReport f;
+  ASSERT_TRUE(ldlt.factorize(*fs.M, fs.S(), f)) << f.message;
+  std::vector<double> ref(N, 0.0);
+  ASSERT_TRUE(ldlt.solve(*fs.M, fs.S(), fs.b, fs.z, ref).converged);
+  const Eigen::MatrixXd Sd = fs.projector();
+  const Eigen::MatrixXd Md = Sd * loom_test::dense(*fs.M) * Sd;
+  const Eigen::Map<const Eigen::VectorXd> rv(ref.data(), N);
+
+  loom::PcgOptions o = amg_options(1e-10, 2000, true);
+  o.float_spmv = false;
+  loom::EigenPcg p(o);
+  p.set_coordinates(fs.x());
+  const WithoutDiagonal hidden(*fs.E);  // a different E's diagonal (none) at the first set-up
+  p.set_extra_operator(&hidden);
+  p.analyze_pattern(A, fs.S());
+  ASSERT_TRUE(p.factorize(A, fs.S(), f)) << f.message;
+  ASSERT_EQ(p.amg()->refreshes(), 1);
+  p.set_extra_operator(fs.E.get());
+  ASSERT_TRUE(p.factorize(A, fs.S(), f)) << f.message;
+  EXPECT_EQ(p.amg()->refreshes(), 1);  // level 0's diagonal only
+  std::vector<double> dv(N, 0.0);
+  const loom::SolveReport rep = p.solve(A, fs.S(), fs.b, fs.z, dv);
+  ASSERT_TRUE(rep.converged) << rep.message;
+  const Eigen::VectorXd e = Eigen::Map<const Eigen::VectorXd>(dv.data(), N) - rv;
+  EXPECT_LE(std::sqrt(e.dot(Md * e)), 1e-6 * std::sqrt(rv.dot(Md * rv)));
+  // The V-cycle with E's diagonal on level 0 and none on the coarse levels is SPD: the
+  // iterates above would otherwise have failed (r.s <= 0) or lost monotonicity; check directly.
+  std::vector<double> u(N), y(N);
+  for (int t = 0; t < 5; ++t) {
+    for (Index k = 0; k < N; ++k) u[k] = std::sin(1.0 + 7.0 * k + 3.0 * t);
+    p.amg()->apply(u.data(), y.data());
+    double d = 0;
+    for (Index k = 0; k < N; ++k) d += u[k] * y[k];
+    EXPECT_GT(d, 0.0);
+  }
+  // New values of A: the whole hierarchy again.
+  loom::BsrMatrix A2 = A;
+  for (Index i = 0; i < fs.n; ++i)
+    for (int a = 0; a < 3; ++a) A2.block(A2.pattern().diag[i])[4 * a] *= 1.5;
+  ASSERT_TRUE(p.factorize(A2, fs.S(), f)) << f.message;
+  EXPECT_EQ(p.amg()->refreshes(), 2);
+  if (verbose()) std::printf("after the level-0 refresh: %d iterations\n", rep.iterations);
+}
+
 // With E's diagonal blocks in the hierarchy (on every level, or on level 0 only) the V-cycle is
 // symmetric positive definite (dense: applied to every unit vector), and PCG with it decreases
 // the error monotonically in the norm of the assembled S (A + E) S: ||dv_k - dv*|| never grows.
@@ -239,6 +295,47 @@ TEST(BwContactAmg, PreconditionerStaysSpdAndPcgIsMonotoneInTheSumNorm) {
     if (verbose())
       std::printf("coarse %d: V-cycle eigenvalues [%.3g, %.3g], PCG monotone over %d iterations\n", coarse,
                   es.eigenvalues().minCoeff(), es.eigenvalues().maxCoeff(), steps);
+  }
+}
+
+// The alternative for the direct solvers (docs/CONTACT.md): keep the factorization of A for the
+// whole step and solve A + E by PCG preconditioned with it. E has rank at most the number of
+// springs m (each spring is rank one), so A^-1 (A + E) = I + A^-1 E has at most m eigenvalues
+// other than 1 and PCG converges in at most m + 1 iterations (exact arithmetic); the counts
+// this takes on the folded cloth are printed with LOOM_TEST_VERBOSE (dense, independent of the
+// solvers).
+TEST(BwContactAmg, FactorOfAAsPreconditionerOfTheSumConvergesWithinTheRankBound) {
+  FoldedSystem fs;
+  fs.build();
+  if (HasFatalFailure()) return;
+  const Index N = 3 * fs.n;
+  const Eigen::MatrixXd Sd = fs.projector();
+  const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(N, N);
+  const Eigen::MatrixXd Ad = Sd * loom_test::dense(fs.bw.system_matrix()) * Sd + (I - Sd);
+  const Eigen::MatrixXd Md = Sd * loom_test::dense(*fs.M) * Sd + (I - Sd);
+  const Eigen::LLT<Eigen::MatrixXd> fa(Ad);
+  ASSERT_EQ(fa.info(), Eigen::Success);
+  const Eigen::Map<const Eigen::VectorXd> bv(fs.b.data(), N);
+  const Eigen::VectorXd b = Sd * bv;
+  const int m = static_cast<int>(fs.E->contacts().size());
+  for (const double tol : {1e-5, 1e-8}) {
+    Eigen::VectorXd x = Eigen::VectorXd::Zero(N), r = b, s = fa.solve(r), c = s;
+    double delta = r.dot(s);
+    int it = 0;
+    while (r.norm() > tol * b.norm() && it < 10 * m) {
+      const Eigen::VectorXd q = Md * c;
+      const double alpha = delta / c.dot(q);
+      x += alpha * c;
+      r -= alpha * q;
+      s = fa.solve(r);
+      const double dn = r.dot(s);
+      c = s + (dn / delta) * c;
+      delta = dn;
+      ++it;
+    }
+    EXPECT_LE(it, m + 1) << "tolerance " << tol;
+    EXPECT_LE((b - Md * x).norm(), tol * b.norm());
+    if (verbose()) std::printf("A's factor as preconditioner: %d iterations to %.0e (%d springs)\n", it, tol, m);
   }
 }
 

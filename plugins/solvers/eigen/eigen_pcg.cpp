@@ -134,7 +134,10 @@ EigenPcg::EigenPcg(PcgOptions options, std::string name) : options_(options), na
 
 void EigenPcg::set_coordinates(std::span<const double> x) { coords_.assign(x.begin(), x.end()); }
 
-void EigenPcg::set_extra_operator(const ExtraOperator* E) { extra_ = E; }
+void EigenPcg::set_extra_operator(const ExtraOperator* E) {
+  extra_ = E;
+  if (E) extra_seen_ = true;
+}
 
 void EigenPcg::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   (void)S;
@@ -178,7 +181,19 @@ bool EigenPcg::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repor
       ed = diag_;
     }
     std::string msg;
-    const bool ok = amg_->setup(A, S, x, msg, ed);
+    // Only E changed since the last set-up (the solves of one step that add and release
+    // springs: same A, same S): level 0's diagonal follows E, the rest of the hierarchy stays.
+    const std::vector<double>& av = A.values();
+    const bool only_e = extra_ && amg_values_.size() == av.size() && amg_->set_up_for(A, S) &&
+                        std::equal(av.begin(), av.end(), amg_values_.begin());
+    bool ok;
+    if (only_e) {
+      ok = amg_->refresh_level0_diagonal(A, S, ed, msg);
+    } else {
+      ok = amg_->setup(A, S, x, msg, ed);
+      if (ok && extra_seen_) amg_values_.assign(av.begin(), av.end());
+      else amg_values_.clear();
+    }
     report.factorize_seconds = seconds_since(t0);
     if (!ok) {
       report.converged = false;

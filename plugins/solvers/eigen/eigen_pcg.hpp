@@ -81,6 +81,10 @@ class EigenPcg final : public LinearSolver {
   Index n_ = 0;
   std::vector<double> pinv_;  // 9 per vertex: S_i P_i^{-1} S_i
   const ExtraOperator* extra_ = nullptr;  // E of set_extra_operator (null: none)
+  // sa_amg with E: A's values at the last full set-up (kept once an E has been set), so that
+  // a factorize() whose only change is E refreshes level 0's diagonal alone.
+  bool extra_seen_ = false;
+  std::vector<double> amg_values_;
   double tolerance_scale_ = 1.0;          // set_tolerance_scale
   std::vector<double> diag_;  // 9 per vertex: A_ii + E_ii (with extra_)
   std::vector<double> r_, c_, q_, s_;

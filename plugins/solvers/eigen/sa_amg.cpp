@@ -191,6 +191,27 @@ void SaAmg::add_extra_diagonal(const Filter& S, std::span<const double> E) {
   }
 }
 
+bool SaAmg::refresh_level0_diagonal(const BsrMatrix& A, const Filter& S, std::span<const double> extra_diagonal,
+                                    std::string& message) {
+  if (!set_up_for(A, S)) throw std::logic_error("sa_amg: refresh_level0_diagonal() needs the last setup's A and S");
+  if (!extra_diagonal.empty() && extra_diagonal.size() != 9 * static_cast<std::size_t>(A.rows()))
+    throw std::invalid_argument("sa_amg: the extra diagonal blocks do not match the matrix");
+  ++t_.setups;
+  const ScopeTimer timer{t_.setup};
+  Level& L = L_[0];
+  const Index n = L.A.rows;
+  const BsrPattern& P = A.pattern();
+#pragma omp parallel for schedule(static) if (parallel(L))
+  for (Index i = 0; i < n; ++i) solver::projected_block(S, i, i, A.block(P.diag[i]), L.A.block(L.diag[i]));
+  if (!extra_diagonal.empty()) add_extra_diagonal(S, extra_diagonal);
+  if (!invert_diagonal(0, message)) {
+    built_ = false;
+    return false;
+  }
+  sync_float(true, false);
+  return true;
+}
+
 bool SaAmg::invert_diagonal(std::size_t l, std::string& message) {
   Level& L = L_[l];
   const Index n = L.A.rows;

@@ -140,6 +140,18 @@ class SaAmg {
   bool setup(const BsrMatrix& A, const Filter& S, std::span<const double> x, std::string& message,
              std::span<const double> extra_diagonal = {});
   void invalidate() { built_ = false; }
+  /// Whether the last setup() succeeded for this pattern and this filter (A's values are the
+  /// caller's to compare).
+  bool set_up_for(const BsrMatrix& A, const Filter& S) const {
+    return built_ && pattern_ == &A.pattern() && pattern_nnz_ == A.pattern().nnz_blocks() && !filter_changed(S);
+  }
+  /// Level 0's diagonal blocks only: S_i A_ii S_i (+ I - S_i) + S_i E_ii S_i again and their
+  /// inverses; the off-diagonal blocks and the coarse levels stay those of the last setup().
+  /// For a new E with the A and S of the last setup() (set_up_for, and the same values): the
+  /// V-cycle stays symmetric positive definite whatever E the coarse levels were built with
+  /// (NUMERICS.md 3.6, "Matrix-free terms").
+  bool refresh_level0_diagonal(const BsrMatrix& A, const Filter& S, std::span<const double> extra_diagonal,
+                               std::string& message);
 
   /// z = M r: one symmetric V-cycle on A~ (r and z have 3n entries and must not alias).
   void apply(const double* r, double* z);
