@@ -7,10 +7,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "baraff_witkin.hpp"
 #include "loom/intersection_check.hpp"
@@ -27,12 +29,13 @@ struct Fold {
   loom::Registry registry;
   loom::PluginLoader loader{registry};
   std::unique_ptr<loom::Simulation> sim;
-  explicit Fold(const std::string& solver) {
+  /// `integrator_keys`: more keys of the integrator map, e.g. ", substeps: 5".
+  explicit Fold(const std::string& solver, const std::string& integrator_keys = "") {
     loom::Simulation::set_notes(false);
     sim = loom::Simulation::from_string(R"(
 mesh: {grid: {nx: 14, ny: 14, width: 0.4, height: 0.4, plane: xy}}
 material: {type: mass_spring, stencil: structural_shear_bend, stiffness: {structural: 300, shear: 300, bend: 0.2}, damping: 0.01, density: 0.2}
-integrator: {type: baraff_witkin, dt: 2.0e-3}
+integrator: {type: baraff_witkin, dt: 2.0e-3)" + integrator_keys + R"(}
 solver: )" + solver + R"(
 threads: 1
 gravity: [0, -9.81, 1.5]
@@ -63,6 +66,22 @@ inline void fold_until_contacts(loom::Scene& sc, loom::BaraffWitkin& bw, loom::I
     if (bw.self_contact()->stats().contacts >= want) return;
   }
   FAIL() << "the fold never held " << want << " springs";
+}
+
+// The springs of a matrix-free contact set assembled the way the other solvers get them:
+// `as` becomes a copy of `mf` on the material's pattern extended by the springs' pairs (`P`).
+inline void assemble_springs_pattern(const loom::ImplicitSelfContact& mf, loom::Scene& sc, loom::ImplicitSelfContact& as,
+                                     loom::BsrPattern& P) {
+  const loom::Index n = sc.state.size();
+  as = mf;
+  as.set_matrix_free(false);
+  std::vector<std::array<loom::Index, 2>> pairs;
+  sc.material->jacobian_pairs(pairs);
+  const loom::BsrPattern material = loom::BsrPattern::from_pairs(n, pairs);
+  const auto& extra = as.reserve_pairs(1u << 30);
+  pairs.insert(pairs.end(), extra.begin(), extra.end());
+  P = loom::BsrPattern::from_pairs(n, pairs);
+  ASSERT_TRUE(as.bind(P, material));
 }
 
 // The folding cloth for 0.5 s (250 steps) with the springs matrix-free: no intersecting

@@ -67,15 +67,9 @@ struct FoldedSystem {
     b.assign(bw.rhs().begin(), bw.rhs().end());
     z.assign(3 * static_cast<std::size_t>(n), 0.0);
     loom::ImplicitSelfContact as = *E;
-    as.set_matrix_free(false);
-    std::vector<std::array<Index, 2>> pairs;
-    sc.material->jacobian_pairs(pairs);
-    const loom::BsrPattern material = loom::BsrPattern::from_pairs(n, pairs);
-    const auto& extra = as.reserve_pairs(1u << 30);
-    pairs.insert(pairs.end(), extra.begin(), extra.end());
-    P = loom::BsrPattern::from_pairs(n, pairs);
+    loom_test::assemble_springs_pattern(*E, sc, as, P);
+    if (::testing::Test::HasFatalFailure()) return;
     ASSERT_GT(P.nnz_blocks(), material_blocks);  // the springs couple vertices the material does not
-    ASSERT_TRUE(as.bind(P, material));
     M = std::make_unique<loom::BsrMatrix>(&P);
     const loom::BsrMatrix& A = bw.system_matrix();
     const loom::BsrPattern& Ap = A.pattern();
@@ -89,6 +83,17 @@ struct FoldedSystem {
     as.add_terms(*M, bdummy, sc.state.v, loom_test::kFoldH);
   }
   const loom::Filter& S() const { return bw.filter(); }
+  // eigen_ldlt on the assembled A + E (ref) and the dense S (A + E) S (Md).
+  void reference(std::vector<double>& ref, Eigen::MatrixXd& Md) {
+    loom::EigenLdlt ldlt;
+    ldlt.analyze_pattern(*M, S());
+    loom::SolveReport f;
+    ASSERT_TRUE(ldlt.factorize(*M, S(), f)) << f.message;
+    ref.assign(3 * static_cast<std::size_t>(n), 0.0);
+    ASSERT_TRUE(ldlt.solve(*M, S(), b, z, ref).converged);
+    const Eigen::MatrixXd Sd = projector();
+    Md = Sd * loom_test::dense(*M) * Sd;
+  }
   std::span<const double> x() { return fold.scene().state.x; }
 
   // The dense projected matrix S M S + (I - S) and the filter as a dense projector.
@@ -138,14 +143,11 @@ TEST(BwContactAmg, MatrixFreeSaAmgSolveEqualsLdltOnTheAssembledSum) {
   fs.build();
   if (HasFatalFailure()) return;
   const Index N = 3 * fs.n;
-  loom::EigenLdlt ldlt;
-  ldlt.analyze_pattern(*fs.M, fs.S());
-  loom::SolveReport f;
-  ASSERT_TRUE(ldlt.factorize(*fs.M, fs.S(), f)) << f.message;
-  std::vector<double> ref(N, 0.0);
-  ASSERT_TRUE(ldlt.solve(*fs.M, fs.S(), fs.b, fs.z, ref).converged);
+  std::vector<double> ref;
+  Eigen::MatrixXd Md;
+  fs.reference(ref, Md);
+  if (HasFatalFailure()) return;
   const Eigen::MatrixXd Sd = fs.projector();
-  const Eigen::MatrixXd Md = Sd * loom_test::dense(*fs.M) * Sd;
   const Eigen::Map<const Eigen::VectorXd> bv(fs.b.data(), N), rv(ref.data(), N);
   const Eigen::VectorXd sb = Sd * bv;
   const double ref_norm = std::sqrt(rv.dot(Md * rv));
@@ -200,15 +202,12 @@ TEST(BwContactAmg, AFactorizeThatOnlyChangesERefreshesLevel0Alone) {
   if (HasFatalFailure()) return;
   const Index N = 3 * fs.n;
   const loom::BsrMatrix& A = fs.bw.system_matrix();
-  loom::EigenLdlt ldlt;
-  ldlt.analyze_pattern(*fs.M, fs.S());
-  loom::SolveReport f;
-  ASSERT_TRUE(ldlt.factorize(*fs.M, fs.S(), f)) << f.message;
-  std::vector<double> ref(N, 0.0);
-  ASSERT_TRUE(ldlt.solve(*fs.M, fs.S(), fs.b, fs.z, ref).converged);
-  const Eigen::MatrixXd Sd = fs.projector();
-  const Eigen::MatrixXd Md = Sd * loom_test::dense(*fs.M) * Sd;
+  std::vector<double> ref;
+  Eigen::MatrixXd Md;
+  fs.reference(ref, Md);
+  if (HasFatalFailure()) return;
   const Eigen::Map<const Eigen::VectorXd> rv(ref.data(), N);
+  loom::SolveReport f;
 
   loom::PcgOptions o = amg_options(1e-10, 2000, true);
   o.float_spmv = false;

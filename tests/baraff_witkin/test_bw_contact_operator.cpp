@@ -78,14 +78,9 @@ TEST(BwContactOperator, MatrixFreeTermEqualsTheAssembledBlocksOnAFoldedCloth) {
 
   // The assembled term, from a copy of the same contact set.
   loom::ImplicitSelfContact as = mf;
-  as.set_matrix_free(false);
-  std::vector<std::array<Index, 2>> pairs;
-  sc.material->jacobian_pairs(pairs);
-  const loom::BsrPattern material = loom::BsrPattern::from_pairs(n, pairs);
-  const auto& extra = as.reserve_pairs(1u << 30);
-  pairs.insert(pairs.end(), extra.begin(), extra.end());
-  const loom::BsrPattern P = loom::BsrPattern::from_pairs(n, pairs);
-  ASSERT_TRUE(as.bind(P, material));
+  loom::BsrPattern P;
+  loom_test::assemble_springs_pattern(mf, sc, as, P);
+  if (HasFatalFailure()) return;
   loom::BsrMatrix E(&P);
   std::vector<double> b(N, 0.0);
   as.add_terms(E, b, sc.state.v, kH);

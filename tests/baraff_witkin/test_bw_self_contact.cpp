@@ -8,6 +8,7 @@
 #include <Eigen/Dense>
 
 #include "dense_matrix.hpp"
+#include "fold_scene.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -541,27 +542,8 @@ TEST(BwSelfContact, EveryPairWithinTheThicknessAtAStepEndKeepsHalfOfIt) {
 }
 
 namespace {
-// The folding cloth of tests/self_collision (a 0.4 m square standing on its edge collapses in
-// folds onto a plane), stepped by our own BaraffWitkin so that its counters can be read.
-struct Fold {
-  loom::Registry registry;
-  loom::PluginLoader loader{registry};
-  std::unique_ptr<loom::Simulation> sim;
-  Fold() {
-    loom::Simulation::set_notes(false);
-    sim = loom::Simulation::from_string(R"(
-mesh: {grid: {nx: 14, ny: 14, width: 0.4, height: 0.4, plane: xy}}
-material: {type: mass_spring, stencil: structural_shear_bend, stiffness: {structural: 300, shear: 300, bend: 0.2}, damping: 0.01, density: 0.2}
-integrator: {type: baraff_witkin, dt: 2.0e-3, substeps: 5}
-solver: {type: eigen_ldlt}
-threads: 1
-gravity: [0, -9.81, 1.5]
-colliders: [{type: plane, point: [0, -0.01, 0], normal: [0, 1, 0], friction: 0.8}]
-self_collision: {thickness: 0.004, friction: 0.3}
-)",
-                                        "fold.yaml", std::string(LOOM_SOURCE_DIR) + "/scenes", {}, loader);
-  }
-};
+// The folding cloth of tests/self_collision (fold_scene.hpp) with eigen_ldlt and 5 substeps,
+// stepped by our own BaraffWitkin so that its counters can be read.
 struct FoldRun {
   long long proximity = 0, ccd = 0, ccd_iterations = 0, frozen = 0, implicit = 0, friction = 0;
   int rebuilds = 0, max_intersections = 0;
@@ -569,7 +551,7 @@ struct FoldRun {
 };
 FoldRun run_fold(bool implicit, int frames) {
   if (std::getenv("LOOM_TEST_FRAMES")) frames = std::atoi(std::getenv("LOOM_TEST_FRAMES"));
-  Fold f;
+  loom_test::Fold f("{type: eigen_ldlt}", ", substeps: 5");
   Scene& sc = f.sim->scene();
   BaraffWitkinOptions o;
   o.implicit_self_contact = implicit;
