@@ -16,8 +16,13 @@ namespace {
 
 constexpr char kMagic[8] = {'L', 'O', 'O', 'M', 'R', 'S', 'T', '1'};
 
-std::uint64_t fnv1a(const char* p, std::size_t n) {
-  std::uint64_t h = 1469598103934665603ULL;
+// 64-bit FNV-1a (offset basis 0xcbf29ce484222325). Builds before 2026-11-29 wrote the hash
+// with the offset basis 1469598103934665603 (a digit short); read_restart accepts both.
+constexpr std::uint64_t kFnvBasis = 14695981039346656037ULL;
+constexpr std::uint64_t kFnvBasisOld = 1469598103934665603ULL;
+
+std::uint64_t fnv1a(const char* p, std::size_t n, std::uint64_t basis = kFnvBasis) {
+  std::uint64_t h = basis;
   for (std::size_t i = 0; i < n; ++i) {
     h ^= static_cast<unsigned char>(p[i]);
     h *= 1099511628211ULL;
@@ -86,7 +91,8 @@ RestartData read_restart(const std::string& dir) {
   if (s.size() < 8 + 8 || std::memcmp(s.data(), kMagic, 8) != 0) throw damaged("not a Loom restart file");
   std::uint64_t stored = 0;
   std::memcpy(&stored, s.data() + s.size() - 8, 8);
-  if (stored != fnv1a(s.data(), s.size() - 8)) throw damaged("checksum mismatch");
+  if (stored != fnv1a(s.data(), s.size() - 8) && stored != fnv1a(s.data(), s.size() - 8, kFnvBasisOld))
+    throw damaged("checksum mismatch");
   pos = 8;
   RestartData r;
   std::int32_t frame = 0, frames = 0;

@@ -22,7 +22,9 @@ struct RestartData {
 
 /// Binary layout (little endian): char[8] "LOOMRST1", int32 frame, int32 frames, int64 step, float64 time,
 /// int64 force evaluations, int64 linear iterations, int64 n (vertices), float64 x[3n],
-/// float64 v[3n], int64 k, float64 integrator state[k], uint64 FNV-1a hash of all bytes before it.
+/// float64 v[3n], int64 k, float64 integrator state[k], uint64 FNV-1a hash of all bytes before it
+/// (64-bit: offset basis 14695981039346656037, prime 1099511628211; read_restart also accepts
+/// the basis 1469598103934665603 that builds before 2026-11-29 used).
 std::string restart_bytes(const RestartData& r);
 /// Write DIR/restart.bin atomically (temporary file, then rename).
 void write_restart(const std::string& dir, const RestartData& r);
