@@ -525,7 +525,29 @@ constexpr double kLargeStepRefreshFraction = 1.0 / 16;
 // Traversal tasks of a parallel rebuild (fixed, so the pairs' order does not depend on the threads).
 constexpr std::size_t kTraversalTasks = 64;
 
+constexpr const char* kCannotUndo =
+    "self-collision keeps layers on the side they start on, so it cannot undo a crossing.";
+
+/// "N pairs of non-adjacent triangles, e.g. triangles a and b" by the exact check of `loom
+/// check`, or empty when the cloth at x does not intersect itself.
+std::string crossing_pairs(const Mesh& mesh, const std::vector<double>& x) {
+  std::vector<std::array<Index, 2>> pairs;
+  const std::size_t n = count_intersecting_pairs(mesh, x, &pairs);
+  if (n == 0) return {};
+  return std::to_string(n) + " pairs of non-adjacent triangles, e.g. triangles " + std::to_string(pairs[0][0]) +
+         " and " + std::to_string(pairs[0][1]);
+}
+
 }  // namespace
+
+void SelfCollision::refuse_crossing_state(const Mesh& mesh, const std::vector<double>& x, const std::string& where) {
+  const std::string crossing = crossing_pairs(mesh, x);
+  if (!crossing.empty())
+    throw InputError(where + ": the cloth in this state intersects itself (" + crossing + "), and the scene has "
+                     "self_collision: " + kCannotUndo + " Fix: rerun the scene from its start with --overwrite "
+                     "(self-collision keeps a cloth that starts without crossings free of them), or remove "
+                     "self_collision from the run's scene.yaml to continue without it.");
+}
 
 std::unique_ptr<SelfCollision> SelfCollision::parse(const Params& p, const Mesh& mesh, const std::vector<double>& x) {
   if (!p.valid()) return nullptr;
@@ -547,14 +569,11 @@ std::unique_ptr<SelfCollision> SelfCollision::parse(const Params& p, const Mesh&
   p.check_unused();
   // A cloth that starts intersecting itself cannot be untangled by the response (it keeps each
   // pair on the side it starts on), which would then fight the crossing at every step.
-  std::vector<std::array<Index, 2>> crossing;
-  const std::size_t ncross = count_intersecting_pairs(mesh, x, &crossing);
-  if (ncross > 0)
-    p.fail("the cloth as built intersects itself (" + std::to_string(ncross) +
-           " pairs of non-adjacent triangles, e.g. triangles " + std::to_string(crossing[0][0]) + " and " +
-           std::to_string(crossing[0][1]) +
-           "); self-collision keeps layers on the side they start on, so it cannot undo a crossing. Fix: give a "
-           "mesh without self-intersections (separate the layers by more than the thickness), or remove self_collision.");
+  const std::string crossing = crossing_pairs(mesh, x);
+  if (!crossing.empty())
+    p.fail("the cloth as built intersects itself (" + crossing + "); " + kCannotUndo +
+           " Fix: give a mesh without self-intersections (separate the layers by more than the thickness), or remove "
+           "self_collision.");
   auto sc = std::make_unique<SelfCollision>(o, mesh);
   const double dmin = sc->min_distance(x, o.thickness);
   if (dmin < o.thickness)

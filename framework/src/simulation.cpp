@@ -483,6 +483,7 @@ int Simulation::resume(int frames) {
                      "): nothing to resume. Fix: give --frames N with N > " + std::to_string(r.frame) + " to continue it.");
   for (std::size_t i = 0; i < r.x.size(); ++i)
     if (!std::isfinite(r.x[i]) || !std::isfinite(r.v[i])) throw InputError(where + ": holds non-finite values. Fix: rerun with --overwrite.");
+  if (scene_->self_collision) SelfCollision::refuse_crossing_state(scene_->mesh, r.x, where);  // as a start mesh
   st.x = r.x;
   st.v = r.v;
   st.time = r.time;

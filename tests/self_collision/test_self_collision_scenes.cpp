@@ -11,9 +11,12 @@
 #include <filesystem>
 #include <fstream>
 #include <sys/wait.h>
+#include <utility>
 
 #include "loom/simulation.hpp"
 #include "loom/intersection_check.hpp"
+#include "loom/restart.hpp"
+#include "common/restart_file.hpp"
 
 namespace fs = std::filesystem;
 
@@ -240,6 +243,39 @@ TEST_F(SelfCollisionScenes, BadSelfCollisionKeysAreRefusedWithFileLineAndFix) {
   }
 }
 
+namespace {
+
+// Two 2 x 2 sheets of 9 vertices each (the 18 positions, 3 per vertex): sheet 0 in the plane
+// y = 0, sheet 1 off-centre (no coincident points) either parallel to it at height `gap` or,
+// `crossing`, in the plane z = 0, through sheet 0 along the x axis.
+std::vector<double> two_sheets(bool crossing, double gap) {
+  std::vector<double> x;
+  for (int s = 0; s < 2; ++s)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) {
+        const double u = 0.1 * (i - 1) + 0.013, w = 0.1 * (j - 1) + 0.007;
+        if (s == 0) x.insert(x.end(), {0.1 * (i - 1), 0.0, 0.1 * (j - 1)});
+        else if (crossing) x.insert(x.end(), {u, w, 0.0});
+        else x.insert(x.end(), {u, gap, w});
+      }
+  return x;
+}
+
+// The OBJ of two_sheets' positions (8 triangles per sheet); returns its path.
+std::string write_two_sheets(const fs::path& path, const std::vector<double>& x) {
+  std::ofstream obj(path);
+  for (std::size_t k = 0; k < x.size(); k += 3) obj << "v " << x[k] << " " << x[k + 1] << " " << x[k + 2] << "\n";
+  for (int s = 0; s < 2; ++s)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) {
+        const int a = 9 * s + 3 * j + i + 1;
+        obj << "f " << a << " " << a + 1 << " " << a + 4 << "\nf " << a << " " << a + 4 << " " << a + 3 << "\n";
+      }
+  return path.string();
+}
+
+}  // namespace
+
 // A cloth mesh that starts intersecting itself is refused (the response keeps each pair on the
 // side it starts on, so it could not undo the crossing): two 2 x 2 sheets (8 triangles each),
 // one in the plane y = 0 and one in the plane z = 0, crossing along the x axis; so are two
@@ -249,22 +285,7 @@ TEST_F(SelfCollisionScenes, ACrossingOrTooCloseStartMeshIsRefused) {
   const fs::path dir = fs::temp_directory_path() / "loom_selfcol_start_mesh";
   fs::create_directories(dir);
   auto sheets = [&](const std::string& name, bool crossing, double gap) {
-    std::ofstream obj(dir / name);
-    for (int s = 0; s < 2; ++s)
-      for (int j = 0; j < 3; ++j)
-        for (int i = 0; i < 3; ++i) {
-          const double u = 0.1 * (i - 1) + 0.013, w = 0.1 * (j - 1) + 0.007;  // sheet 1 off-centre: no coincident points
-          if (s == 0) obj << "v " << 0.1 * (i - 1) << " 0 " << 0.1 * (j - 1) << "\n";
-          else if (crossing) obj << "v " << u << " " << w << " 0\n";
-          else obj << "v " << u << " " << gap << " " << w << "\n";
-        }
-    for (int s = 0; s < 2; ++s)
-      for (int j = 0; j < 2; ++j)
-        for (int i = 0; i < 2; ++i) {
-          const int a = 9 * s + 3 * j + i + 1;
-          obj << "f " << a << " " << a + 1 << " " << a + 4 << "\nf " << a << " " << a + 4 << " " << a + 3 << "\n";
-        }
-    return (dir / name).string();
+    return write_two_sheets(dir / name, two_sheets(crossing, gap));
   };
   const std::string cross = sheets("cross.obj", true, 0), close = sheets("close.obj", false, 0.002);
   auto scene = [](const std::string& obj, const std::string& self) {
@@ -299,18 +320,96 @@ TEST_F(SelfCollisionScenes, ACrossingOrTooCloseStartMeshIsRefused) {
   fs::remove_all(dir);
 }
 
+namespace {
+
+// Runs a shell command; returns its exit code (-1 if it did not exit) and its output.
+std::pair<int, std::string> run_command(const std::string& cmd) {
+  FILE* p = popen((cmd + " 2>&1").c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf{};
+  while (fgets(buf.data(), buf.size(), p)) out += buf.data();
+  const int status = pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+// Writes restart.bin with this test's own encoder (tests/common/restart_file.hpp).
+void write_restart_file(const fs::path& path, const loom::RestartData& r) {
+  std::ofstream(path, std::ios::binary) << loom_test::restart_file_bytes(r);
+}
+
+}  // namespace
+
+// `loom run --resume` gives the restored state the start mesh's crossing check: a restart.bin
+// whose cloth crosses itself (two_sheets' crossing positions, put into the restart point of a
+// run of the same two sheets 20 mm apart) is refused with exit 2, one error naming the file, the
+// count of the exact check, a pair and the fix, and the run folder is left as it was; the run's
+// own restart point, re-encoded by this test, resumes (and stays free of crossings by `loom
+// check`), and so does a state whose layers are closer than the thickness without crossing.
+TEST_F(SelfCollisionScenes, AResumedStateThatCrossesItselfIsRefused) {
+  const fs::path dir = fs::temp_directory_path() / "loom_selfcol_resume";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string obj = write_two_sheets(dir / "sheets.obj", two_sheets(false, 0.02));
+  const std::string yaml = "mesh: {obj: " + obj + "}\n" +
+                           "material: {type: mass_spring, stencil: mesh_edges, stiffness: 300, density: 0.2}\n"
+                           "integrator: {type: symplectic_euler, dt: 1.0e-4, substeps: 20}\nthreads: 1\n"
+                           "gravity: [0, -9.81, 0]\nself_collision: {thickness: 0.005}\n";
+  std::ofstream(dir / "scene.yaml") << yaml;
+  const std::string exe = std::string(LOOM_EXE), run = (dir / "run").string();
+  auto [rc0, out0] = run_command(exe + " run " + (dir / "scene.yaml").string() + " --quiet --frames 1 --out " + run);
+  ASSERT_EQ(rc0, 0) << out0;
+  const loom::RestartData clean = loom::read_restart(run);
+  ASSERT_EQ(clean.frame, 1);
+  ASSERT_EQ(clean.x.size(), 54u);
+  const loom::Mesh mesh = make(yaml)->scene().mesh;
+
+  // The crossing state: the exact check (that of `loom check`) counts its pairs.
+  loom::RestartData crossing = clean;
+  crossing.x = two_sheets(true, 0);
+  const std::size_t ncross = loom::count_intersecting_pairs(mesh, crossing.x);
+  ASSERT_GT(ncross, 0u);
+  ASSERT_EQ(loom::count_intersecting_pairs(mesh, clean.x), 0u);
+  write_restart_file(fs::path(run) / "restart.bin", crossing);
+  auto [rc1, out1] = run_command(exe + " run --resume " + run + " --quiet --frames 2");
+  EXPECT_EQ(rc1, 2) << out1;
+  if (verbose()) std::printf("%s", out1.c_str());
+  EXPECT_NE(out1.find(run + "/restart.bin: the cloth in this state intersects itself (" + std::to_string(ncross) +
+                      " pairs of non-adjacent triangles, e.g. triangles "),
+            std::string::npos)
+      << out1;
+  EXPECT_NE(out1.find("Fix:"), std::string::npos) << out1;
+  EXPECT_EQ(std::count(out1.begin(), out1.end(), '\n'), 1) << out1;  // one error, nothing else
+  EXPECT_FALSE(fs::exists(fs::path(run) / "frame_00002.obj"));
+  EXPECT_EQ(loom::read_restart(run).frame, 1);
+
+  // The run's own state, written by this test's encoder: resumes to frame 2, no crossing.
+  write_restart_file(fs::path(run) / "restart.bin", clean);
+  auto [rc2, out2] = run_command(exe + " run --resume " + run + " --quiet --frames 2");
+  EXPECT_EQ(rc2, 0) << out2;
+  EXPECT_TRUE(fs::exists(fs::path(run) / "frame_00002.obj"));
+
+  // Layers 2 mm apart (under the 5 mm thickness) but not crossing: resumed too, and pushed apart.
+  loom::RestartData close = loom::read_restart(run);
+  ASSERT_EQ(close.frame, 2);
+  close.x = two_sheets(false, 0.002);
+  ASSERT_EQ(loom::count_intersecting_pairs(mesh, close.x), 0u);
+  write_restart_file(fs::path(run) / "restart.bin", close);
+  auto [rc3, out3] = run_command(exe + " run --resume " + run + " --quiet --frames 3");
+  EXPECT_EQ(rc3, 0) << out3;
+  EXPECT_TRUE(fs::exists(fs::path(run) / "frame_00003.obj"));
+  // The independent judge over every frame written (0-3): no intersecting pair.
+  auto [rc4, out4] = run_command(exe + " check " + run);
+  EXPECT_EQ(rc4, 0) << out4;
+  fs::remove_all(dir);
+}
+
 TEST_F(SelfCollisionScenes, CliExitsWithCode2OnABadThickness) {
   const fs::path dir = fs::temp_directory_path() / "loom_selfcol_cli";
   fs::remove_all(dir);
   fs::create_directories(dir);
   std::ofstream(dir / "bad.yaml") << folding_cloth(kFoldIntegrators[0], "self_collision: {thickness: -1}\n");
-  FILE* p = popen((std::string(LOOM_EXE) + " validate " + (dir / "bad.yaml").string() + " 2>&1").c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf{};
-  while (fgets(buf.data(), buf.size(), p)) out += buf.data();
-  const int status = pclose(p);
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 2) << out;
+  const auto [rc, out] = run_command(std::string(LOOM_EXE) + " validate " + (dir / "bad.yaml").string());
+  EXPECT_EQ(rc, 2) << out;
   EXPECT_NE(out.find("bad.yaml:"), std::string::npos) << out;
   EXPECT_NE(out.find("Fix:"), std::string::npos) << out;
 }

@@ -245,6 +245,12 @@ class SelfCollision {
   /// cloth as built (x), since otherwise neighbours in the sheet would repel each other.
   static std::unique_ptr<SelfCollision> parse(const Params& p, const Mesh& mesh, const std::vector<double>& x);
   SelfCollision(const Options& o, const Mesh& mesh);
+  /// A state set from outside the scene file (`loom run --resume`'s restart.bin, named by
+  /// `where`) gets parse()'s crossing check: throws one InputError naming `where`, the number
+  /// of intersecting non-adjacent triangle pairs at x (the exact check of `loom check`), one
+  /// pair and the fix when there is one. Layers closer than the thickness are accepted here
+  /// (the response pushes them apart; a run with self-collision may stop with such a pair).
+  static void refuse_crossing_state(const Mesh& mesh, const std::vector<double>& x, const std::string& where);
 
   const Options& options() const { return opt_; }
   /// Save the start-of-step positions.
