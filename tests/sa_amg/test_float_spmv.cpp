@@ -53,6 +53,27 @@ double true_relative_residual(const ts::System& s, const std::vector<double>& dv
   return (S * (b - A * x)).norm() / (S * (b - A * z)).norm();
 }
 
+// R = Pᵀ for the level-0 transfer kernels: P has nf block rows of 3x6 blocks (rows prp, columns
+// pcol, 18 values per block), R gets nc block rows of 6x3 blocks, each the transpose of a block of P.
+template <class T>
+void transpose_transfer(Index nf, Index nc, const std::vector<Index>& prp, const std::vector<Index>& pcol,
+                        const std::vector<T>& pv, std::vector<Index>& rrp, std::vector<Index>& rcol,
+                        std::vector<T>& rv) {
+  rrp.assign(static_cast<std::size_t>(nc) + 1, 0);
+  rcol.assign(pcol.size(), 0);
+  rv.assign(pv.size(), T{});
+  for (Index c : pcol) ++rrp[c + 1];
+  for (Index I = 0; I < nc; ++I) rrp[I + 1] += rrp[I];
+  std::vector<Index> fill(rrp.begin(), rrp.end() - 1);
+  for (Index i = 0; i < nf; ++i)
+    for (Index k = prp[i]; k < prp[i + 1]; ++k) {
+      const Index q = fill[pcol[k]]++;
+      rcol[q] = i;
+      for (int a = 0; a < 3; ++a)
+        for (int c = 0; c < 6; ++c) rv[18 * q + 3 * c + a] = pv[18 * k + 6 * a + c];
+    }
+}
+
 }  // namespace
 
 // Each entry of the float-copy product differs from the double product (Eigen, dense) by at
@@ -236,20 +257,9 @@ TEST(FloatSpmv, TransferKernelsMatchTheirDefinition) {
   std::vector<float> pf(pcol.size() * 18);
   for (float& v : pf) v = static_cast<float>(u(rng));
   // R = Pᵀ: nc block rows of 6x3 blocks (each the transpose of a block of P).
-  std::vector<Index> rrp(nc + 1, 0), rcol(pcol.size());
-  std::vector<float> rf(pcol.size() * 18);
-  for (Index c : pcol) ++rrp[c + 1];
-  for (Index I = 0; I < nc; ++I) rrp[I + 1] += rrp[I];
-  {
-    std::vector<Index> fill(rrp.begin(), rrp.end() - 1);
-    for (Index i = 0; i < nf; ++i)
-      for (Index k = prp[i]; k < prp[i + 1]; ++k) {
-        const Index q = fill[pcol[k]]++;
-        rcol[q] = i;
-        for (int a = 0; a < 3; ++a)
-          for (int c = 0; c < 6; ++c) rf[18 * q + 3 * c + a] = pf[18 * k + 6 * a + c];
-      }
-  }
+  std::vector<Index> rrp, rcol;
+  std::vector<float> rf;
+  transpose_transfer(nf, nc, prp, pcol, pf, rrp, rcol, rf);
   const std::vector<double> pd(pf.begin(), pf.end()), rd(rf.begin(), rf.end());
   std::vector<double> r(3 * nf), xc(6 * nc);
   for (double& v : r) v = u(rng);
@@ -384,20 +394,9 @@ TEST(FloatSpmv, HalfTransferKernelsEqualTheWidenedDoubleKernels) {
   for (std::size_t k = 0; k < ph.size(); ++k) pd[k] = loom::widen(ph[k]);
   // R as 6x3 blocks per coarse row, from the same values (here one block row per coarse
   // row holding P's blocks of that column, transposed).
-  std::vector<Index> rrp(nc + 1, 0), rcol(pcol.size());
-  std::vector<loom::Half> rh(ph.size());
-  for (Index c : pcol) ++rrp[c + 1];
-  for (Index I = 0; I < nc; ++I) rrp[I + 1] += rrp[I];
-  {
-    std::vector<Index> fill(rrp.begin(), rrp.end() - 1);
-    for (Index i = 0; i < nf; ++i)
-      for (Index k = prp[i]; k < prp[i + 1]; ++k) {
-        const Index q = fill[pcol[k]]++;
-        rcol[q] = i;
-        for (int a = 0; a < 3; ++a)
-          for (int c = 0; c < 6; ++c) rh[18 * q + 3 * c + a] = ph[18 * k + 6 * a + c];
-      }
-  }
+  std::vector<Index> rrp, rcol;
+  std::vector<loom::Half> rh;
+  transpose_transfer(nf, nc, prp, pcol, ph, rrp, rcol, rh);
   std::vector<double> rd(rh.size());
   for (std::size_t k = 0; k < rh.size(); ++k) rd[k] = loom::widen(rh[k]);
   std::vector<double> r(3 * nf), xc(6 * nc);

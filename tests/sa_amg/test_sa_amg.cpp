@@ -51,6 +51,24 @@ loom::PcgOptions amg_pcg(double tol, int modes = 6, int maxit = 500) {
 // The test systems: ts::preconditioner_systems() (solver_systems.hpp).
 std::vector<ts::System> systems() { return ts::preconditioner_systems(); }
 
+// PCG with options o on s: converges to 1e-10, reaches the dense projected solution within 1e-7;
+// returns its iterations (-1 after a failed check).
+int iterations_to_dense_solution(ts::System& s, const loom::PcgOptions& o) {
+  loom::EigenPcg p(o);
+  p.set_coordinates(s.x);
+  p.analyze_pattern(s.A, s.S);
+  loom::SolveReport fr;
+  const bool factorized = p.factorize(s.A, s.S, fr);
+  EXPECT_TRUE(factorized) << fr.message;
+  if (!factorized) return -1;
+  std::vector<double> dv(3 * s.n, 0.0);
+  const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
+  EXPECT_TRUE(rep.converged) << rep.message;
+  EXPECT_LE(rep.residual, 1e-10);
+  EXPECT_LT(ts::rel_diff(dv, ts::dense_solution(s)), 1e-7) << "n " << s.n;
+  return rep.converged ? rep.iterations : -1;
+}
+
 // Dense matrix of x -> S M S x (columns: the V-cycle applied to S e_k).
 Eigen::MatrixXd dense_preconditioner(SaAmg& M, const loom::Filter& S, Index n) {
   const Index N = 3 * n;
@@ -497,23 +515,11 @@ TEST(SaAmg, FloatStorageStaysSpdAndExact) {
     EXPECT_LT((D - Dfd).cwiseAbs().maxCoeff() / Dfd.cwiseAbs().maxCoeff(), 1e-4) << "n " << s.n;
     EXPECT_GT((D - Dfd).cwiseAbs().maxCoeff(), 0.0) << "the float diagonal inverses must be what the sweeps read";
 
-    int its[2] = {0, 0};
-    for (int f = 0; f < 2; ++f) {
-      loom::PcgOptions o = amg_pcg(1e-10);
-      o.amg.float_storage = f == 1;
-      loom::EigenPcg p(o);
-      p.set_coordinates(s.x);
-      p.analyze_pattern(s.A, s.S);
-      loom::SolveReport fr;
-      ASSERT_TRUE(p.factorize(s.A, s.S, fr)) << fr.message;
-      std::vector<double> dv(3 * s.n, 0.0);
-      const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
-      ASSERT_TRUE(rep.converged) << rep.message;
-      EXPECT_LE(rep.residual, 1e-10);
-      EXPECT_LT(ts::rel_diff(dv, ts::dense_solution(s)), 1e-7) << "n " << s.n;
-      its[f] = rep.iterations;
-    }
-    EXPECT_LE(its[1], its[0] + std::max(2, its[0] / 10)) << "n " << s.n;
+    loom::PcgOptions od = amg_pcg(1e-10), of = od;
+    od.amg.float_storage = false;
+    of.amg.float_storage = true;
+    const int its_double = iterations_to_dense_solution(s, od), its_float = iterations_to_dense_solution(s, of);
+    EXPECT_LE(its_float, its_double + std::max(2, its_double / 10)) << "n " << s.n;
   }
 }
 
@@ -569,22 +575,11 @@ TEST(SaAmg, HalfTransfersStaySpdAndExact) {
                 static_cast<int>(s.n), M.half_transfer_error(), d);
     EXPECT_GT(d, 0.0) << "the half copies must be what the transfers read";
     EXPECT_LT(d, 2 * 0x1p-11) << "n " << s.n;  // about half's rounding of P, not more
-    int its[2] = {0, 0};
-    for (int h = 0; h < 2; ++h) {
-      loom::PcgOptions o = amg_pcg(1e-10);
-      o.amg.half_transfers = h == 1;
-      loom::EigenPcg p(o);
-      p.set_coordinates(s.x);
-      p.analyze_pattern(s.A, s.S);
-      loom::SolveReport fr;
-      ASSERT_TRUE(p.factorize(s.A, s.S, fr)) << fr.message;
-      std::vector<double> dv(3 * s.n, 0.0);
-      const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
-      ASSERT_TRUE(rep.converged) << rep.message;
-      EXPECT_LT(ts::rel_diff(dv, ts::dense_solution(s)), 1e-7) << "n " << s.n;
-      its[h] = rep.iterations;
-    }
-    EXPECT_LE(its[1], its[0] + std::max(2, its[0] / 10)) << "n " << s.n;
+    loom::PcgOptions of2 = amg_pcg(1e-10), oh = of2;
+    of2.amg.half_transfers = false;
+    oh.amg.half_transfers = true;
+    const int its_float = iterations_to_dense_solution(s, of2), its_half = iterations_to_dense_solution(s, oh);
+    EXPECT_LE(its_half, its_float + std::max(2, its_float / 10)) << "n " << s.n;
   }
 }
 
