@@ -66,8 +66,13 @@ void ThreadController::on_sample(double s, int steps) {
   const double m = median(recent_, nrecent_);
   if (ref_ <= 0) ref_ = m;
   double need;
+  bool early = false;  // the early down-probe (see the top of loom/thread_controller.hpp)
   if (decisions_ == 0) {
     need = cfg_.first_probe_steps * m;  // early: a wrong start-up guess costs most in a short run
+    if (!early_tried_ && since_decision_ < need)
+      for (int k = 0; k < ncand_; ++k)
+        if (cand_[k] < chosen_ && down_worst(k) <= cfg_.early_probe_cost) early = true;
+    if (early) need = 0;
   } else {
     const bool drifted = m > cfg_.drift * ref_ || m * cfg_.drift < ref_;
     need = std::max(cfg_.min_interval, next_loss_ / ((drifted ? 2.0 : 1.0) * cfg_.overhead));
@@ -93,7 +98,8 @@ void ThreadController::on_sample(double s, int steps) {
   }
   bool any = false;
   for (int k = 0; k < ncand_; ++k) {
-    blocked_[k] = cand_[k] > chosen_ && (small || (free_now_ > 0 && cand_[k] > free_now_));
+    blocked_[k] = (cand_[k] > chosen_ && (small || (free_now_ > 0 && cand_[k] > free_now_))) ||
+                  (early && !(cand_[k] < chosen_ && down_worst(k) <= cfg_.early_probe_cost));
     any = any || (cand_[k] != chosen_ && !blocked_[k]);
   }
   if (!any) {
@@ -101,12 +107,25 @@ void ThreadController::on_sample(double s, int steps) {
     since_decision_ = 0;
     return;
   }
+  if (early) early_tried_ = true;  // once: a skipped early probe leaves the schedule as it was
   if (probe_pays(m)) {
     start_probe();
   } else {   // wait a full interval before asking again (the answer only gets worse as the run ends)
     ++skipped_;
-    since_decision_ = 0;
+    if (!early) since_decision_ = 0;  // a skipped early probe keeps the first probe's time
   }
+}
+
+// The most a count below the chosen one can cost in a probe, in step times of the chosen
+// count: its step is at most chosen/count times as long; one sample when that is above
+// reject_factor (the probe then ends), `samples` otherwise; a sample of the chosen count's
+// steps per sample.
+double ThreadController::down_worst(int k) const {
+  int sps = 1;
+  for (int j = 0; j < ncand_; ++j)
+    if (cand_[j] == chosen_) sps = std::max(1, steps_per_sample_[j]);
+  const double r = static_cast<double>(chosen_) / cand_[k];
+  return (r > cfg_.reject_factor ? 1 : cfg_.samples) * sps * (r - 1.0);
 }
 
 bool ThreadController::probe_pays(double m) const {

@@ -16,7 +16,18 @@
 //   `switch_gain` (3%) faster.
 // - When: the first probe after `first_probe_steps` (10) step times (and the baseline's 3
 //   samples): a probe of a count twice as slow then costs about one step in ten, once, and a
-//   wrong start-up guess is corrected early in a short run; later probes when the time since the last decision reaches the expected cost of
+//   wrong start-up guess is corrected early in a short run. Early down-probe: a count below the
+//   start count whose worst cost is at most `early_probe_cost` (1.5) step times is tried at
+//   once, as soon as the baseline exists (that first probe leaves the other counts out for the
+//   next probe, due as after any decision). With
+//   fewer threads a step is at most start/count times as long (the same work on fewer
+//   threads), so its worst cost is (start/count - 1) step times per sample: one sample when
+//   that ratio is above `reject_factor`, `samples` otherwise; so 1 of 2 threads costs at most
+//   one step, 2 of 3 or 4 at most 1.5, 1 of 4 (3 step times) waits for the 10. Why: a start on
+//   2 threads next to a competitor the set-up did not see (the scene draped_ball_gnatv_bw with
+//   the start forced to 2 under a load average of 9: 2-thread steps 350-420 ms against 70-120
+//   ms on 1) spent 11 steps (about 4 s, more than the other 29 steps) before its first probe.
+//   Later probes when the time since the last decision reaches the expected cost of
 //   the next probe divided by `overhead` (3%), and at least `min_interval`; so probing costs
 //   about 3% of the step time. The expected cost is the larger of what the last probe cost (its
 //   steps' excess over the baseline) and the losers' median excess times their probe steps, and
@@ -73,6 +84,7 @@ struct ThreadControllerConfig {
   double repay_gain = 0.10;       ///< with a known run length: a probe must be repaid by a count this much faster
   double unmeasured_cost = 10;    ///< ... and a never-measured count above the chosen one may cost this many step times
   double min_step_seconds = 1e-4; ///< a chosen count's step shorter than this never tries more threads
+  double early_probe_cost = 1.5;  ///< first probe: fewer threads whose worst cost is at most this many step times go at once
 };
 
 class ThreadController {
@@ -117,6 +129,7 @@ class ThreadController {
   void on_sample(double s, int steps);
   void start_probe();
   bool probe_pays(double m) const;
+  double down_worst(int k) const;
   void next_candidate();
   void decide();
 
@@ -159,6 +172,7 @@ class ThreadController {
   bool blocked_[kMaxCandidates] = {};        // left out of the due probe by the gate
   int gated_ = 0;
   int small_held_ = 0;
+  bool early_tried_ = false;                 // the early down-probe was started or skipped
   double start_load_ = -1;
   double gate_read_at_ = -1;                 // elapsed_ at the last gate reading
   int gate_reads_ = 0;
