@@ -12,7 +12,9 @@
 // from 2 dv(n-1) - dv(n-2); *_saved: each system also solved from dv = 0, untimed, for the
 // counter iters_saved = cold minus warm (or extrapolated) iterations per solve; *_sweeps2,
 // *_coarse2, *_hierarchy2: cycle variants of NUMERICS.md 3.6; *_upperspmv: the PCG's SpMV from
-// the upper triangle instead of the full rows; *_floatspmv: from a float copy of A),
+// the upper triangle instead of the full rows; *_floatspmv: from a float copy of A;
+// *_drop<t>, *_damp<d>, *_strength<t>: coarse_drop_tolerance, prolongator_damping and
+// strength_threshold probes, docs/plugins/solvers.md "Issue 15, fifth pass"),
 // with a timing wrapper around the solver: setup_ms (the first factorize: aggregation and
 // patterns + values), factorize_ms and solve_ms per step, iters per step, step_ms.
 //   bench_baraff_witkin --benchmark_filter=bw_solver --benchmark_counters_tabular=true
@@ -221,6 +223,24 @@ std::vector<SolverVariant> variants() {
   amg.amg.aggressive_levels = 2;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_aggressive2", false, amg});
   amg.amg.aggressive_levels = 0;
+  // Sparser coarse levels (coarse_drop_tolerance, issue 15): weak Galerkin blocks dropped,
+  // diagonal blocks scaled to keep every level SPD.
+  for (const char* d : {"0.02", "0.05", "0.1", "0.2"}) {
+    amg.amg.coarse_drop_tolerance = std::stod(d);
+    v.push_back({std::string("eigen_pcg_sa_amg_rigid_refresh10_drop") + d, false, amg});
+  }
+  amg.amg.coarse_drop_tolerance = 0;
+  // Probes of the existing knobs (issue 15): prolongator damping and the strength threshold.
+  for (const char* d : {"1.0", "1.6"}) {
+    amg.amg.prolongator_damping = std::stod(d);
+    v.push_back({std::string("eigen_pcg_sa_amg_rigid_refresh10_damp") + d, false, amg});
+  }
+  amg.amg.prolongator_damping = loom::amg::SaAmgOptions{}.prolongator_damping;
+  for (const char* d : {"0.02", "0.08"}) {
+    amg.amg.strength_threshold = std::stod(d);
+    v.push_back({std::string("eigen_pcg_sa_amg_rigid_refresh10_strength") + d, false, amg});
+  }
+  amg.amg.strength_threshold = 0;
   // The defaults before the range rule and the float diagonal inverses (A/B, issue 15):
   // 8 ranges on every threaded level, double diagonal inverses; and each change alone.
   amg.amg.min_part_dofs = 0;

@@ -69,6 +69,8 @@ ParamSpec make_pcg_spec(const char* name, const char* summary) {
         "precision of the hierarchy's matrices read by the V-cycle (set-up and sums stay double)");
     a.number("prolongator_damping", m.prolongator_damping).range(ParamRange::closed(0, 1.9)).help(
         "omega = damping / lambda_max(D^-1 A)");
+    a.number("coarse_drop_tolerance", m.coarse_drop_tolerance).range(ParamRange::closed(0, 10)).help(
+        "drop coarse-level blocks with |L_I^-1 A_IJ L_J^-T|_F below this, scaling the diagonal blocks to stay SPD (0: off)");
     s.map("sa_amg", std::move(a)).backends({"cpu"}).help("options of preconditioner: sa_amg");
     return s;
 }
@@ -125,6 +127,7 @@ PcgOptions parse_pcg_options(const Params& p, const ParamSpec& spec, const std::
     m.aggressive_levels = a.int32("aggressive_levels");
     m.float_storage = a.text("storage") == "float";
     m.prolongator_damping = a.number("prolongator_damping");
+    m.coarse_drop_tolerance = a.number("coarse_drop_tolerance");
     a.params().check_unused();
   }
   return o;

@@ -44,6 +44,15 @@ inline void gemv_add(const T* M, const double* x, double* y) {
     y[a] += s;
   }
 }
+// y = M x
+template <int R, int C, class T>
+inline void gemv_set(const T* M, const double* x, double* y) {
+  for (int a = 0; a < R; ++a) {
+    double s = 0;
+    for (int c = 0; c < C; ++c) s += M[a * C + c] * x[c];
+    y[a] = s;
+  }
+}
 // y -= M x
 template <int R, int C, class T>
 inline void gemv_sub(const T* M, const double* x, double* y) {
@@ -136,6 +145,49 @@ bool spd_inverse(const double* A, double* Ainv) {
       Ainv[i * B + j] = s;
     }
   return true;
+}
+
+// Lower Cholesky factor L (row-major, upper part zero) of a B x B SPD block; false when it is
+// not (numerically) positive definite.
+template <int B>
+bool cholesky(const double* A, double* L) {
+  for (int e = 0; e < B * B; ++e) L[e] = 0;
+  for (int j = 0; j < B; ++j) {
+    double d = A[j * B + j];
+    for (int k = 0; k < j; ++k) d -= L[j * B + k] * L[j * B + k];
+    if (!(d > 0) || !std::isfinite(d)) return false;
+    const double ljj = std::sqrt(d);
+    L[j * B + j] = ljj;
+    for (int i = j + 1; i < B; ++i) {
+      double s = 0.5 * (A[i * B + j] + A[j * B + i]);
+      for (int k = 0; k < j; ++k) s -= L[i * B + k] * L[j * B + k];
+      L[i * B + j] = s / ljj;
+    }
+  }
+  return true;
+}
+
+// |LI^-1 M LJ^-T|_F for a B x B block M and lower Cholesky factors LI, LJ.
+template <int B>
+double scaled_frobenius(const double* LI, const double* M, const double* LJ) {
+  double X[B * B];
+  for (int c = 0; c < B; ++c)  // X = LI^-1 M, column by column
+    for (int a = 0; a < B; ++a) {
+      double s = M[a * B + c];
+      for (int k = 0; k < a; ++k) s -= LI[a * B + k] * X[k * B + c];
+      X[a * B + c] = s / LI[a * B + a];
+    }
+  double f = 0;
+  for (int a = 0; a < B; ++a) {  // row a of X LJ^-T is (LJ^-1 x_a)^T
+    double y[B];
+    for (int c = 0; c < B; ++c) {
+      double s = X[a * B + c];
+      for (int k = 0; k < c; ++k) s -= LJ[c * B + k] * y[k];
+      y[c] = s / LJ[c * B + c];
+      f += y[c] * y[c];
+    }
+  }
+  return std::sqrt(f);
 }
 
 double since(Clock::time_point t0) { return seconds_since(t0); }  // the one clock (loom/clock.hpp)
@@ -475,6 +527,13 @@ void SaAmg::build_patterns(std::size_t l) {
   C.b.assign(static_cast<std::size_t>(nc) * m, 0.0);
   C.r.assign(static_cast<std::size_t>(nc) * m, 0.0);
   L.T.assign(static_cast<std::size_t>(n) * b * m, 0.0);
+  if (o_.coarse_drop_tolerance > 0) {
+    // The Galerkin product goes to G; A gets its pattern after the first product (drop_weak).
+    C.G = C.A;
+    C.g_diag = C.diag;
+    C.g_trans = C.trans;
+    C.a_from_g.clear();
+  }
   L_.push_back(std::move(C));
 }
 
@@ -680,6 +739,11 @@ void SaAmg::galerkin(std::size_t l) {
   if (static_cast<int>(marker_.size()) < nt) marker_.resize(nt);
   for (auto& mk : marker_)
     if (static_cast<Index>(mk.size()) < nc) mk.assign(nc, 0);
+  // With coarse_drop_tolerance the product goes to C.G (drop_weak() then writes C.A).
+  const bool to_g = !C.G.rp.empty();
+  BlockMatrix& CA = to_g ? C.G : C.A;
+  const std::vector<Index>& cdiag = to_g ? C.g_diag : C.diag;
+  const std::vector<Index>& ctrans = to_g ? C.g_trans : C.trans;
   with_sizes(L.A.br, m_, [&](auto Bc, auto Mc) {
     constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
     constexpr std::size_t PB = static_cast<std::size_t>(B) * M, CB = static_cast<std::size_t>(M) * M;
@@ -701,28 +765,119 @@ void SaAmg::galerkin(std::size_t l) {
       // below it as the transpose of its mirror (half the products; exactly symmetric).
 #pragma omp for schedule(dynamic, 64)
       for (Index I = 0; I < nc; ++I) {
-        const Index c0 = C.A.rp[I], c1 = C.A.rp[I + 1];
-        for (Index q = c0; q < c1; ++q) mk[C.A.ci[q]] = q;
-        std::fill(C.A.v.begin() + CB * c0, C.A.v.begin() + CB * c1, 0.0);
+        const Index c0 = CA.rp[I], c1 = CA.rp[I + 1];
+        for (Index q = c0; q < c1; ++q) mk[CA.ci[q]] = q;
+        std::fill(CA.v.begin() + CB * c0, CA.v.begin() + CB * c1, 0.0);
         for (Index k = L.R.rp[I]; k < L.R.rp[I + 1]; ++k) {
           const Index i = L.R.ci[k];
           const double* Rk = L.R.v.data() + PB * k;
           for (Index q = L.AP.rp[i]; q < L.AP.rp[i + 1]; ++q)
-            if (L.AP.ci[q] >= I) gemm_add<M, B, M>(Rk, L.AP.v.data() + PB * q, C.A.v.data() + CB * mk[L.AP.ci[q]]);
+            if (L.AP.ci[q] >= I) gemm_add<M, B, M>(Rk, L.AP.v.data() + PB * q, CA.v.data() + CB * mk[L.AP.ci[q]]);
         }
-        double* D = C.A.block(C.diag[I]);
+        double* D = CA.block(cdiag[I]);
         for (int c = 0; c < M; ++c)
           if (C.dead[static_cast<std::size_t>(M) * I + c]) D[c * M + c] += 1.0;
       }
 #pragma omp for schedule(static)
       for (Index I = 0; I < nc; ++I)
-        for (Index q = C.A.rp[I]; q < C.A.rp[I + 1]; ++q) {
-          if (C.A.ci[q] >= I) continue;
-          const double* U = C.A.v.data() + CB * C.trans[q];
-          double* Lq = C.A.v.data() + CB * q;
+        for (Index q = CA.rp[I]; q < CA.rp[I + 1]; ++q) {
+          if (CA.ci[q] >= I) continue;
+          const double* U = CA.v.data() + CB * ctrans[q];
+          double* Lq = CA.v.data() + CB * q;
           for (int a = 0; a < M; ++a)
             for (int c = 0; c < M; ++c) Lq[a * M + c] = U[c * M + a];
         }
+    }
+  });
+}
+
+// coarse_drop_tolerance: level l's A from the full Galerkin product G. For a dropped pair
+// (I, J), with s = |L_I^-1 G_IJ L_J^-T|_F >= its spectral norm,
+//   [s G_II, -G_IJ; -G_JI, s G_JJ] = diag(L_I, L_J) [s I, -X; -X^T, s I] diag(L_I, L_J)^T
+// (X = L_I^-1 G_IJ L_J^-T) is positive semidefinite, so A = G - (dropped blocks) + the
+// diagonal blocks scaled by 1 + sum of s = G + (a sum of those PSD terms) is SPD whenever G is.
+// The pattern (which blocks to drop: s below the tolerance) is decided on the first call.
+void SaAmg::drop_weak(std::size_t l) {
+  Level& C = L_[l];
+  const BlockMatrix& G = C.G;
+  const Index n = G.rows;
+  const int b = G.br;
+  const std::size_t bs = G.bsize();
+  const bool par = static_cast<Index>(n) * b >= o_.parallel_min_dofs;
+  C.chol.resize(bs * static_cast<std::size_t>(n));
+  Index bad = n;
+  with_size(b, [&](auto Bc) {
+    constexpr int B = decltype(Bc)::value;
+#pragma omp parallel for schedule(static) reduction(min : bad) if (par)
+    for (Index I = 0; I < n; ++I)
+      if (!cholesky<B>(G.block(C.g_diag[I]), C.chol.data() + bs * I)) bad = std::min(bad, I);
+    if (C.a_from_g.empty()) {
+      // The pattern: keep the diagonal and every block with s >= tolerance (or next to a
+      // diagonal block that is not positive definite: set-up reports it below).
+      std::vector<std::uint8_t> keep(static_cast<std::size_t>(G.nnz()), 1);
+      std::vector<std::uint8_t> chol_ok(n, 1);
+      for (Index I = 0; I < n; ++I) chol_ok[I] = cholesky<B>(G.block(C.g_diag[I]), C.chol.data() + bs * I);
+      C.drop_g.clear();
+      C.drop_i.clear();
+      for (Index I = 0; I < n; ++I)
+        for (Index q = G.rp[I]; q < G.rp[I + 1]; ++q) {
+          const Index J = G.ci[q];
+          if (J <= I || !chol_ok[I] || !chol_ok[J]) continue;
+          const double sq = scaled_frobenius<B>(C.chol.data() + bs * I, G.block(q), C.chol.data() + bs * J);
+          if (sq < o_.coarse_drop_tolerance) {
+            keep[q] = keep[C.g_trans[q]] = 0;
+            C.drop_g.push_back(q);
+            C.drop_i.push_back(I);
+          }
+        }
+      C.A.rp.assign(static_cast<std::size_t>(n) + 1, 0);
+      C.A.ci.clear();
+      C.a_from_g.clear();
+      C.diag.assign(n, -1);
+      for (Index I = 0; I < n; ++I) {
+        for (Index q = G.rp[I]; q < G.rp[I + 1]; ++q)
+          if (keep[q]) {
+            if (G.ci[q] == I) C.diag[I] = static_cast<Index>(C.A.ci.size());
+            C.A.ci.push_back(G.ci[q]);
+            C.a_from_g.push_back(q);
+          }
+        C.A.rp[I + 1] = static_cast<Index>(C.A.ci.size());
+      }
+      C.A.v.assign(C.A.ci.size() * bs, 0.0);
+      // Each row's dropped pairs (as row I and as row J).
+      const std::size_t nd = C.drop_g.size();
+      C.drop_ptr.assign(static_cast<std::size_t>(n) + 1, 0);
+      for (std::size_t d = 0; d < nd; ++d) {
+        ++C.drop_ptr[C.drop_i[d] + 1];
+        ++C.drop_ptr[G.ci[C.drop_g[d]] + 1];
+      }
+      for (Index I = 0; I < n; ++I) C.drop_ptr[I + 1] += C.drop_ptr[I];
+      C.drop_idx.resize(2 * nd);
+      std::vector<Index> fill(C.drop_ptr.begin(), C.drop_ptr.end() - 1);
+      for (std::size_t d = 0; d < nd; ++d) {
+        C.drop_idx[fill[C.drop_i[d]]++] = static_cast<Index>(d);
+        C.drop_idx[fill[G.ci[C.drop_g[d]]]++] = static_cast<Index>(d);
+      }
+      C.drop_s.assign(nd, 0.0);
+    }
+    const Index nd = static_cast<Index>(C.drop_g.size());
+    const Index na = C.A.nnz();
+#pragma omp parallel if (par)
+    {
+#pragma omp for schedule(static)
+      for (Index d = 0; d < nd; ++d) {
+        const Index I = C.drop_i[d], q = C.drop_g[d], J = G.ci[q];
+        C.drop_s[d] = bad < n ? 0.0 : scaled_frobenius<B>(C.chol.data() + bs * I, G.block(q), C.chol.data() + bs * J);
+      }
+#pragma omp for schedule(static)
+      for (Index k = 0; k < na; ++k) std::copy_n(G.block(C.a_from_g[k]), bs, C.A.block(k));
+#pragma omp for schedule(static)
+      for (Index I = 0; I < n; ++I) {
+        double s = 1.0;
+        for (Index t = C.drop_ptr[I]; t < C.drop_ptr[I + 1]; ++t) s += C.drop_s[C.drop_idx[t]];
+        double* D = C.A.block(C.diag[I]);
+        for (std::size_t e = 0; e < bs; ++e) D[e] *= s;
+      }
     }
   });
 }
@@ -932,6 +1087,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
     }
     const auto tg = Clock::now();
     galerkin(l);
+    if (!L_[l + 1].G.rp.empty()) drop_weak(l + 1);
     t_.setup_galerkin += since(tg);
   }
   if (new_p) {
@@ -1022,6 +1178,13 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
   const Index n = A.rows;
 #pragma omp parallel if (par)
   {
+    // x starts at 0: only the boundary rows are read before they are written (the interior
+    // rows are assigned in order), so only they are cleared.
+    for (int c = 0; c < nc; ++c) {
+#pragma omp for schedule(static) nowait
+      for (Index t = cp[c]; t < cp[c + 1]; ++t) std::fill_n(x + static_cast<std::size_t>(B) * cr[t], B, 0.0);
+    }
+#pragma omp barrier
 #pragma omp for schedule(static, 1)
     for (int p = 0; p < np; ++p)
       for (Index t = pp[p]; t < pp[p + 1]; ++t) {
@@ -1030,7 +1193,7 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
         row_partial<B, T>(A, A.rp[i], diag[i], x, lo);
         double* acc = r + static_cast<std::size_t>(B) * i;
         for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - lo[a];
-        gemv_add<B, B>(dinv + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+        gemv_set<B, B>(dinv + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
       }
     for (int c = 0; c < nc; ++c) {
 #pragma omp for schedule(static)
@@ -1099,16 +1262,17 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
     total += seconds_between(t0, t1);
     t0 = t1;
   };
-  std::fill(x, x + N, 0.0);
+  // The first forward sweep starts from x = 0 and reads only the blocks left of the
+  // diagonal of the interior rows; it clears x itself.
+  const bool from_zero = L.clean.size() == static_cast<std::size_t>(n);
+  if (!from_zero) std::fill(x, x + N, 0.0);
   with_sizes(bs, m_, [&](auto Bc, auto Mc) {
     constexpr int B = decltype(Bc)::value, M = decltype(Mc)::value;
     constexpr std::size_t PB = static_cast<std::size_t>(B) * M;
     double* r = L.r.data();
     const Index nc = C.A.rows;
     const int sweeps = l == 0 || o_.coarse_smoothing_sweeps == 0 ? o_.smoothing_sweeps : o_.coarse_smoothing_sweeps;
-    // The first forward sweep starts from x = 0 and reads only the blocks left of the
-    // diagonal of the interior rows; with one sweep the residual is fused into it as well.
-    const bool from_zero = L.clean.size() == static_cast<std::size_t>(n);
+    // With one sweep the residual is fused into the first one as well.
     const bool fused = sweeps == 1 && from_zero;
     if (from_zero)
       gs_forward_from_zero_and_residual<B, T>(L.A, L.diag, Dv, L.clean, L.colour_ptr, L.colour_rows, L.part_ptr,

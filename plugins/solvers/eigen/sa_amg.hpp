@@ -84,6 +84,14 @@ struct SaAmgOptions {
   /// residual) only, after the coarse levels were built from A alone. Either way the V-cycle
   /// stays SPD and the pattern is A's (NUMERICS.md 3.6, "Matrix-free terms").
   bool extra_on_coarse_levels = true;
+  /// Sparser coarse levels: an off-diagonal block A_IJ of a coarse (Galerkin) matrix whose
+  /// scaled norm s_IJ = |L_I^-1 A_IJ L_J^-T|_F (A_II = L_I L_I^T) is below this is dropped,
+  /// and each diagonal block is scaled by 1 + (the sum of its row's dropped s_IJ). The result
+  /// is the Galerkin matrix plus a positive semidefinite term, so it stays SPD and so does the
+  /// V-cycle (NUMERICS.md 3.6, "Why M is SPD"; measured in docs/plugins/solvers.md). Which
+  /// blocks are dropped is decided on the first set-up of a pattern (later refreshes keep
+  /// the pattern and recompute the values and the scaling). 0: off.
+  double coarse_drop_tolerance = 0;
 };
 
 /// Block-sparse matrix with BR x BC blocks (row-major, 9 or 18 or 36 doubles per block).
@@ -191,6 +199,14 @@ class SaAmg {
     std::vector<Index> trans;         // position of the transposed block (j, i) of each block (i, j) of A
     std::vector<double> x, b, r;      // work vectors
     std::vector<double> ev;           // last power-iteration vector of D^-1 A (warm start)
+    // coarse_drop_tolerance: G is the full Galerkin product, A its copy without the dropped
+    // blocks (decided once per pattern) and with the diagonal blocks scaled.
+    BlockMatrix G;
+    std::vector<Index> g_diag, g_trans;   // diagonal / transposed block positions in G
+    std::vector<Index> a_from_g;          // block of G copied into each block of A
+    std::vector<Index> drop_g, drop_i;    // dropped blocks of G above the diagonal, their rows
+    std::vector<Index> drop_ptr, drop_idx;  // per row of G: its dropped pairs (indices into drop_g)
+    std::vector<double> drop_s, chol;     // s_IJ per dropped pair, Cholesky factors of G's diagonal
   };
 
   void build(const BsrMatrix& A, const Filter& S, std::span<const double> x);
@@ -202,6 +218,7 @@ class SaAmg {
   double lambda_max(std::size_t l);
   void smooth_prolongator(std::size_t l);
   void galerkin(std::size_t l);
+  void drop_weak(std::size_t l);
   bool factor_coarsest(std::string& message);
   void aggregate(std::size_t l);
   void colour(std::size_t l);
