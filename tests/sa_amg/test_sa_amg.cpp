@@ -10,9 +10,11 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "baraff_witkin.hpp"
@@ -85,6 +87,46 @@ Eigen::MatrixXd dense_preconditioner(SaAmg& M, const loom::Filter& S, Index n) {
   return D;
 }
 
+// What every V-cycle variant must be, checked on its dense form D (dense_preconditioner):
+// symmetric to 1e-11 of its largest entry, and positive definite on range(S), i.e.
+// (D + D^T) / 2 + (I - S) has only positive eigenvalues. `what` labels a failure.
+void expect_spd_on_range(const Eigen::MatrixXd& D, const loom::Filter& S, const std::string& what = "") {
+  EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11) << what;
+  const Eigen::MatrixXd Sd = ts::dense_filter(S);
+  const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
+  EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << what;
+}
+
+// The same through the operator itself (M.apply, not its dense form), on 5 pairs of random
+// vectors x, y in range(S): y^T M x = x^T M y to rounding, and x^T M x > 0.
+void expect_spd_on_random_vectors(SaAmg& M, const loom::Filter& S, Index n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> g;
+  const std::size_t N = 3 * static_cast<std::size_t>(n);
+  std::vector<double> x(N), y(N), Mx(N), My(N);
+  for (int t = 0; t < 5; ++t) {
+    for (std::size_t k = 0; k < N; ++k) {
+      x[k] = g(rng);
+      y[k] = g(rng);
+    }
+    loom::solver::filter(S, x);
+    loom::solver::filter(S, y);
+    M.apply(x.data(), Mx.data());
+    M.apply(y.data(), My.data());
+    double yMx = 0, xMy = 0, xMx = 0, nx = 0, ny = 0;
+    for (std::size_t k = 0; k < N; ++k) {
+      yMx += y[k] * Mx[k];
+      xMy += x[k] * My[k];
+      xMx += x[k] * Mx[k];
+      nx += Mx[k] * Mx[k];
+      ny += y[k] * y[k];
+    }
+    EXPECT_LT(std::abs(yMx - xMy), 1e-11 * std::sqrt(nx * ny));
+    EXPECT_GT(xMx, 0.0);
+  }
+}
+
 }  // namespace
 
 TEST(SaAmg, VCycleIsSymmetricPositiveDefiniteOnRangeOfS) {
@@ -97,38 +139,8 @@ TEST(SaAmg, VCycleIsSymmetricPositiveDefiniteOnRangeOfS) {
       ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
       ASSERT_GE(M.levels().size(), 3u) << "the test needs a real hierarchy";
       const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
-      const double asym = (D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff();
-      EXPECT_LT(asym, 1e-11) << "modes " << modes << " n " << s.n;
-      // Positive on range(S): S M S + (I - S) has only positive eigenvalues.
-      const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-      const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-      EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "modes " << modes << " n " << s.n;
-      // Random vectors in range(S): x^T M y = y^T M x and x^T M x > 0.
-      std::mt19937_64 rng(11);
-      std::normal_distribution<double> g;
-      const std::size_t N = 3 * static_cast<std::size_t>(s.n);
-      std::vector<double> x(N), y(N), Mx(N), My(N);
-      for (int t = 0; t < 5; ++t) {
-        for (std::size_t k = 0; k < N; ++k) {
-          x[k] = g(rng);
-          y[k] = g(rng);
-        }
-        loom::solver::filter(s.S, x);
-        loom::solver::filter(s.S, y);
-        M.apply(x.data(), Mx.data());
-        M.apply(y.data(), My.data());
-        double yMx = 0, xMy = 0, xMx = 0, nx = 0, ny = 0;
-        for (std::size_t k = 0; k < N; ++k) {
-          yMx += y[k] * Mx[k];
-          xMy += x[k] * My[k];
-          xMx += x[k] * Mx[k];
-          nx += Mx[k] * Mx[k];
-          ny += y[k] * y[k];
-        }
-        EXPECT_LT(std::abs(yMx - xMy), 1e-11 * std::sqrt(nx * ny));
-        EXPECT_GT(xMx, 0.0);
-      }
+      expect_spd_on_range(D, s.S, "modes " + std::to_string(modes) + " n " + std::to_string(s.n));
+      expect_spd_on_random_vectors(M, s.S, s.n, 11);
     }
   }
 }
@@ -225,11 +237,7 @@ TEST(SaAmg, NumericRefreshAndStaleHierarchy) {
       EXPECT_LT(ts::rel_diff(dv, ts::dense_solution(s)), 1e-7);
       if (step == 5) {  // after a refresh that may have kept stale parts
         const Eigen::MatrixXd D = dense_preconditioner(*p.amg(), s.S, s.n);
-        EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11);
-        const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-        const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-        EXPECT_GT(es.eigenvalues().minCoeff(), 0.0);
+        expect_spd_on_range(D, s.S);
       }
     }
     EXPECT_EQ(p.amg()->refreshes(), 6);
@@ -307,11 +315,7 @@ TEST(SaAmg, RangeCountFollowsLevelSizeSameOnAnyThreadsAndSpd) {
   omp_set_num_threads(1);  // the dense check: one thread (barriers on a loaded machine are slow)
   EXPECT_EQ(out[0], out[1]) << "the range schedule must not depend on the threads";
   const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
-  EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11);
-  const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-  const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-  EXPECT_GT(es.eigenvalues().minCoeff(), 0.0);
+  expect_spd_on_range(D, s.S);
   omp_set_num_threads(saved);
 }
 
@@ -433,11 +437,7 @@ TEST(SaAmg, AggressiveCoarseningIsCoarserAndStaysSpdAndExact) {
     EXPECT_LT(A.levels()[1].rows, P.levels()[1].rows) << "n " << s.n;
     EXPECT_LT(A.operator_complexity(), P.operator_complexity()) << "n " << s.n;
     const Eigen::MatrixXd D = dense_preconditioner(A, s.S, s.n);
-    EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11);
-    const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-    const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-    EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "n " << s.n;
+    expect_spd_on_range(D, s.S, "n " + std::to_string(s.n));
 
     loom::PcgOptions o = amg_pcg(1e-10);
     o.amg = aggressive;
@@ -491,11 +491,7 @@ TEST(SaAmg, FloatStorageStaysSpdAndExact) {
     std::string msg;
     ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
     const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
-    EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11) << "n " << s.n;
-    const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-    const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-    EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "n " << s.n;
+    expect_spd_on_range(D, s.S, "n " + std::to_string(s.n));
     // The float V-cycle differs from the double one at float rounding, not more.
     SaAmgOptions dou = small_coarse();
     dou.float_storage = false;
@@ -513,9 +509,7 @@ TEST(SaAmg, FloatStorageStaysSpdAndExact) {
     SaAmg Mfd(fdd);
     ASSERT_TRUE(Mfd.setup(s.A, s.S, s.x, msg)) << msg;
     const Eigen::MatrixXd Dfd = dense_preconditioner(Mfd, s.S, s.n);
-    EXPECT_LT((Dfd - Dfd.transpose()).cwiseAbs().maxCoeff() / Dfd.cwiseAbs().maxCoeff(), 1e-11) << "n " << s.n;
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> esd(0.5 * (Dfd + Dfd.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-    EXPECT_GT(esd.eigenvalues().minCoeff(), 0.0) << "n " << s.n;
+    expect_spd_on_range(Dfd, s.S, "n " + std::to_string(s.n));
     EXPECT_LT((D - Dfd).cwiseAbs().maxCoeff() / Dfd.cwiseAbs().maxCoeff(), 1e-4) << "n " << s.n;
     EXPECT_GT((D - Dfd).cwiseAbs().maxCoeff(), 0.0) << "the float diagonal inverses must be what the sweeps read";
 
@@ -563,11 +557,7 @@ TEST(SaAmg, HalfTransfersStaySpdAndExact) {
           for (int c = 0; c < 6; ++c) EXPECT_EQ(R.h[18 * q + 3 * c + a].bits, P.h[18 * k + 6 * a + c].bits);
       }
     const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
-    EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11) << "n " << s.n;
-    const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-    const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-    EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "n " << s.n;
+    expect_spd_on_range(D, s.S, "n " + std::to_string(s.n));
     SaAmgOptions fo = small_coarse();
     fo.half_transfers = false;
     SaAmg Mf(fo);
@@ -605,11 +595,7 @@ TEST(SaAmg, RangeScheduleWithBoundaryRowsIsSpdAndExact) {
     ASSERT_EQ(M.levels()[0].parts, 8);
     ASSERT_GT(M.levels()[0].colours, 0) << "the schedule must have boundary rows";
     const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
-    EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11) << "n " << s.n;
-    const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-    const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-    EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "n " << s.n;
+    expect_spd_on_range(D, s.S, "n " + std::to_string(s.n));
     // The post-smoothing is the plain (unfused) backward sweep and residual, the adjoint of a
     // correct fused forward half: a wrong fused residual would break the symmetry above.
     loom::PcgOptions po = amg_pcg(1e-10);
@@ -654,13 +640,7 @@ TEST(SaAmg, SweepCountsPerLevelStaySpdMonotoneAndExact) {
         ASSERT_TRUE(M.setup(s.A, s.S, s.x, msg)) << msg;
         ASSERT_GE(M.levels().size(), 3u);
         const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
-        EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11)
-            << "sweeps " << fine << "/" << coarse << " n " << s.n << " parts " << M.levels()[0].parts;
-        const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-        const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd),
-                                                          Eigen::EigenvaluesOnly);
-        EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "sweeps " << fine << "/" << coarse << " n " << s.n;
+        expect_spd_on_range(D, s.S, "sweeps " + std::to_string(fine) + "/" + std::to_string(coarse) + " n " + std::to_string(s.n));
         // PCG: the A-norm error of the iterates never grows, and the answer is the dense one
         // (on the 8-part schedule, on a random network and on the cloth with contacts; the
         // others are covered by the dense check above).
@@ -860,36 +840,8 @@ TEST(SaAmg, CoarseDropKeepsLevelsSpdAndTheVCycleSpd) {
       Al = Ac;
     }
     const Eigen::MatrixXd D = dense_preconditioner(M, s.S, s.n);
-    EXPECT_LT((D - D.transpose()).cwiseAbs().maxCoeff() / D.cwiseAbs().maxCoeff(), 1e-11) << "n " << s.n;
-    const Eigen::MatrixXd Sd = ts::dense_filter(s.S);
-    const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(D.rows(), D.cols());
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (D + D.transpose()) + (I - Sd), Eigen::EigenvaluesOnly);
-    EXPECT_GT(es.eigenvalues().minCoeff(), 0.0) << "n " << s.n;
-    // Random vectors in range(S): x^T M y = y^T M x and x^T M x > 0.
-    std::mt19937_64 rng(5);
-    std::normal_distribution<double> gd;
-    const std::size_t N = 3 * static_cast<std::size_t>(s.n);
-    std::vector<double> x(N), y(N), Mx(N), My(N);
-    for (int t = 0; t < 5; ++t) {
-      for (std::size_t k = 0; k < N; ++k) {
-        x[k] = gd(rng);
-        y[k] = gd(rng);
-      }
-      loom::solver::filter(s.S, x);
-      loom::solver::filter(s.S, y);
-      M.apply(x.data(), Mx.data());
-      M.apply(y.data(), My.data());
-      double yMx = 0, xMy = 0, xMx = 0, nx = 0, ny = 0;
-      for (std::size_t k = 0; k < N; ++k) {
-        yMx += y[k] * Mx[k];
-        xMy += x[k] * My[k];
-        xMx += x[k] * Mx[k];
-        nx += Mx[k] * Mx[k];
-        ny += y[k] * y[k];
-      }
-      EXPECT_LT(std::abs(yMx - xMy), 1e-11 * std::sqrt(nx * ny));
-      EXPECT_GT(xMx, 0.0);
-    }
+    expect_spd_on_range(D, s.S, "n " + std::to_string(s.n));
+    expect_spd_on_random_vectors(M, s.S, s.n, 5);
     loom::PcgOptions po = amg_pcg(1e-10);
     po.amg = o;
     EXPECT_GT(iterations_to_dense_solution(s, po), 0) << "n " << s.n;
