@@ -69,6 +69,9 @@ double triad_bandwidth(int threads) {
   return cache[threads] = best;
 }
 
+// Block sizes of the grouped sweeps' A/B rows (*_block64, *_block128, *_block256).
+constexpr Index kGroupBlocks[3] = {64, 128, 256};
+
 // One Table 1 cloth: 336 x 336 etc., hanging (plane xy), top corners pinned, k = 2000,
 // density 0.1, HO velocity variant. Built once per size.
 struct Cloth {
@@ -87,6 +90,11 @@ struct Cloth {
   SpringSweep<float> fsweep;
   SpringSweep<double> sweep_plain;    // one spring at a time (build(..., false))
   SpringSweep<float> fsweep_plain;
+  // the grouped sweeps with blocks of 64 (the default), 128 and 256 vertices (kGroupBlocks), for
+  // A/B runs of the block size
+  SpringSweep<double> sweep_blk[3];
+  SpringLayout ho_blk_layout[3];
+  HoSprings<double> ho_blk[3];
   Index springs() const { return ho.springs().size(); }
 };
 
@@ -117,6 +125,12 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   c->fsweep.convert_from(c->sweep);
   c->sweep_plain.build(sc.state.size(), *sc.material->springs(), false);
   c->fsweep_plain.convert_from(c->sweep_plain);
+  for (int b = 0; b < 3; ++b) {
+    c->sweep_blk[b].build(sc.state.size(), *sc.material->springs(), true, kGroupBlocks[b]);
+    build_ho_springs(sc.state.size(), *sc.material->springs(), c->ho_blk_layout[b], c->ho_blk[b], true,
+                     kGroupBlocks[b]);
+    update_ho_coefficients(c->ho_blk[b], HoVariant::Velocity, sc.state.inv_mass.data(), c->h);
+  }
   return *c;
 }
 
@@ -229,13 +243,15 @@ void BM_HoStep_double_table(benchmark::State& st) {
 // A/B of the windowed grouped sweep (ho_window.hpp): the HO step on raw arrays (the plugin's
 // step without pins and clock), window on (the default) and off (the plain grouped sweep, what
 // the step ran before). Same springs, same cloth, interleave them with --benchmark_repetitions.
-void ho_window_bench(benchmark::State& st, bool window) {
+// blk >= 0: the springs grouped with blocks of kGroupBlocks[blk] vertices.
+void ho_window_bench(benchmark::State& st, bool window, int blk = -1) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
   Cloth& c = cloth(r.n);
   omp_set_num_threads(threads);
-  HoSprings<double> s = c.ho.springs();
+  HoSprings<double> s = blk >= 0 ? c.ho_blk[blk] : c.ho.springs();
+  const SpringLayout& layout = blk >= 0 ? c.ho_blk_layout[blk] : c.ho.layout();
   if (!window) s.win_cap = 0;
   st.counters["window"] = static_cast<double>(s.win_cap);
   // the grouped structure: segments, springs left over after whole groups of 4 (the vector
@@ -272,12 +288,15 @@ void ho_window_bench(benchmark::State& st, bool window) {
   std::vector<double> x = c.x0, v(x.size(), 0.0), dv(x.size(), 0.0);
   const std::array<double, 3> g{0.0, -9.81, 0.0};
   for (auto _ : st)
-    ho_step_arrays<double, HoVariant::Velocity>(c.ho.layout(), s, x.data(), v.data(), dv.data(), nullptr,
+    ho_step_arrays<double, HoVariant::Velocity>(layout, s, x.data(), v.data(), dv.data(), nullptr,
                                                 c.scene.state.inv_mass.data(), c.h, g);
-  set_counters(st, r, threads, ho_bytes(s, c.ho.layout(), c.scene.state.size()));
+  set_counters(st, r, threads, ho_bytes(s, layout, c.scene.state.size()));
 }
 void BM_HoStep_double_window(benchmark::State& st) { ho_window_bench(st, true); }
 void BM_HoStep_double_nowindow(benchmark::State& st) { ho_window_bench(st, false); }
+void BM_HoStep_double_block64(benchmark::State& st) { ho_window_bench(st, true, 0); }
+void BM_HoStep_double_block128(benchmark::State& st) { ho_window_bench(st, true, 1); }
+void BM_HoStep_double_block256(benchmark::State& st) { ho_window_bench(st, true, 2); }
 
 void BM_HoStep_float(benchmark::State& st) {
   const Row& r = rows()[st.range(0)];
@@ -343,7 +362,8 @@ void BM_Rk4Step_float(benchmark::State& st) {
 }
 
 // kind 0: the default sweep (grouped and windowed, loom/spring_groups.hpp), 1: plain (one spring
-// at a time, what the step ran before), 2: blocked (plain order, forces of 128 springs by one loop).
+// at a time, what the step ran before), 2: blocked (plain order, forces of 128 springs by one loop),
+// 3 + b: grouped and windowed with blocks of kGroupBlocks[b] vertices.
 template <class T>
 void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const Row& r = rows()[st.range(0)];
@@ -357,9 +377,10 @@ void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const T g[3] = {T(0), T(-9.81), T(0)};
   SpringSweep<T>* sw = nullptr;
   if constexpr (std::is_same_v<T, float>) sw = kind == 0 ? &c.fsweep : &c.fsweep_plain;
-  else sw = kind == 0 ? &c.sweep : &c.sweep_plain;
+  else sw = kind == 0 ? &c.sweep : (kind >= 3 ? &c.sweep_blk[kind - 3] : &c.sweep_plain);
   sw->blocked = kind == 2;
   st.counters["window"] = static_cast<double>(sw->win_cap);
+  st.counters["segs"] = static_cast<double>(sw->segs.size());
   for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
   sw->blocked = false;
   benchmark::DoNotOptimize(x.data());
@@ -372,6 +393,9 @@ void BM_SeStep_float_plain(benchmark::State& st) { se_bench<float>(st, true, 1);
 // The blocked sweep (forces of 128 springs by one `omp simd` loop, then scattered).
 void BM_SeStep_double_blocked(benchmark::State& st) { se_bench<double>(st, false, 2); }
 void BM_SeStep_float_blocked(benchmark::State& st) { se_bench<float>(st, true, 2); }
+void BM_SeStep_double_block64(benchmark::State& st) { se_bench<double>(st, false, 3); }
+void BM_SeStep_double_block128(benchmark::State& st) { se_bench<double>(st, false, 4); }
+void BM_SeStep_double_block256(benchmark::State& st) { se_bench<double>(st, false, 5); }
 
 template <class T>
 void rk4_fused_bench(benchmark::State& st, bool /*is_float*/, bool plain = false) {
@@ -502,6 +526,9 @@ BENCHMARK(BM_HoStep_double_direct)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_table)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_window)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_nowindow)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_block64)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_block128)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_block256)->Apply(rows_args);
 BENCHMARK(BM_HoStep_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_float)->Apply(rows_args);
@@ -511,6 +538,9 @@ BENCHMARK(BM_SeStep_double_plain)->Apply(rows_args);
 BENCHMARK(BM_SeStep_float_plain)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_blocked)->Apply(rows_args);
 BENCHMARK(BM_SeStep_float_blocked)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_block64)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_block128)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_block256)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double_plain)->Apply(rows_args);

@@ -612,6 +612,68 @@ TEST(HoStorage, WindowedSweepIsBitIdentical) {
   EXPECT_EQ(checked, 6);
 }
 
+// The block size of the grouping (build_ho_springs' group_block, default kHoGroupBlock) changes
+// only the order of the additions into a vertex: 12 velocity steps with blocks of 16, 64, 128 and
+// 256 vertices agree with the plain (ungrouped) sweep to rounding; every segment stays inside one
+// block.
+TEST(HoStorage, GroupBlockSizeOnlyReordersSums) {
+  const int nx = 60;
+  std::vector<double> x, v, w;
+  SpringSet s;
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      x.insert(x.end(), {0.02 * c + 0.003 * std::sin(1.3 * r * c), 0.001 * std::sin(0.7 * c + r), 0.02 * r});
+      v.insert(v.end(), {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.005 * std::sin(c - r)});
+      w.push_back(r == nx - 1 && (c == 0 || c == nx - 1) ? 0.0 : 1000.0 / (1 + 0.5 * ((r * 7 + c * 3) % 5)));
+      const int a = r * nx + c;
+      if (c + 1 < nx) s.add(a, a + 1, 0.02, 2000, 0.0, SpringClass::Structural);
+      if (r + 1 < nx) s.add(a + nx, a, 0.02, 2000, 0.01, SpringClass::Structural);
+      if (c + 1 < nx && r + 1 < nx) s.add(a, a + nx + 1, 0.02 * std::sqrt(2.0), 500, 0.0, SpringClass::Shear);
+      if (r + 2 < nx && (c % 2 == 0)) s.add(a, a + 2 * nx, 0.04, 50, 0.0, SpringClass::Bend);   // step-2 runs
+      if (c + 2 < nx && r % 3 == 0) s.add(a, a + 2, 0.04, 50, 0.0, SpringClass::Bend);
+    }
+  const Index n = nx * nx;
+  const std::array<double, 3> g{0, -9.81, 0};
+  auto run = [&](bool grouped, Index block) {
+    SpringLayout layout;
+    HoSprings<double> sp;
+    build_ho_springs(n, s, layout, sp, grouped, block);
+    EXPECT_EQ(sp.grouped, grouped);
+    if (grouped) {
+      EXPECT_GT(sp.win_cap, 0);
+      for (int p = 0; p < layout.parts(); ++p)
+        for (Index bk = sp.part_block[p]; bk < sp.part_block[p + 1]; ++bk)
+          for (Index sg = sp.blocks[bk].seg_begin; sg < sp.blocks[bk].seg_end; ++sg) {
+            const HoSegment& G = sp.segs[sg];
+            const Index last = G.i0 + G.step * (G.len - 1);
+            EXPECT_LE(G.len, block);
+            EXPECT_EQ((G.i0 - layout.part_vertex_begin(p)) / block, (last - layout.part_vertex_begin(p)) / block);
+            EXPECT_LT(last, sp.blocks[bk].vertex_end);
+          }
+    }
+    update_ho_coefficients(sp, HoVariant::Velocity, w.data(), 1e-4);
+    std::vector<double> X = x, V = v, dv(x.size(), 0.0);
+    for (int st = 0; st < 12; ++st)
+      ho_step_arrays<double, HoVariant::Velocity>(layout, sp, X.data(), V.data(), dv.data(), nullptr, w.data(), 1e-4,
+                                                  g);
+    X.insert(X.end(), V.begin(), V.end());
+    return X;
+  };
+  const std::vector<double> plain = run(false, kSpringGroupBlock);
+  double scale = 0, change = 0;
+  for (std::size_t q = 0; q < plain.size(); ++q) {
+    scale = std::max(scale, std::abs(plain[q]));
+    change = std::max(change, std::abs(plain[q] - (q < x.size() ? x[q] : v[q - x.size()])));
+  }
+  EXPECT_GT(change, 1e-6);   // the springs did act
+  for (Index block : {16, 64, 128, 256}) {
+    const std::vector<double> res = run(true, block);
+    double err = 0;
+    for (std::size_t q = 0; q < plain.size(); ++q) err = std::max(err, std::abs(res[q] - plain[q]));
+    EXPECT_LE(err, 1e-13 * scale) << "block " << block;
+  }
+}
+
 // ---- Vertex order (reorder key): RCM order, user-visible results unchanged ----
 
 namespace {

@@ -18,11 +18,11 @@
 //
 // Grouped, windowed sweep (the default when it applies; loom/spring_groups.hpp, the same grouping
 // and window as harmonic_oscillation's): each part's interior springs are stored as segments of
-// springs (i0 + step r, i0 + step r + off) per block of 64 vertices; the part's live vertices are
-// copied once into a structure-of-arrays window (x, y, z, the force sums, and v when some spring
-// is damped), a segment's forces are computed by one vectorised loop with unit-stride (or
-// stride-2) loads and no gathers, then added to the window's sums, and a vertex is handed to fin
-// from the window as soon as its block is done. Per-spring arithmetic is block_forces' (one sqrt
+// springs (i0 + step r, i0 + step r + off) per block of kSpringGroupBlock (64) vertices; the
+// part's live vertices are copied once into a structure-of-arrays window (x, y, z, the force
+// sums, and v when some spring is damped), a segment's forces are computed by one vectorised
+// loop with unit-stride (or stride-2) loads and no gathers, then added to the window's sums, and
+// a vertex is handed to fin from the window as soon as its block is done. Per-spring arithmetic is block_forces' (one sqrt
 // and one division per spring); only the order of the additions into a vertex differs from the
 // one-spring-at-a-time sweep, so the two agree to rounding (tests/symplectic_euler,
 // SymplecticEulerFused.WindowedSweepMatchesPlainSweep). Used when grouping pays (segments average
@@ -103,8 +103,9 @@ struct SpringSweep {
   bool parallel() const { return size() >= kParallelMinSprings && traversal_threads() > 1; }
 
   /// Build from a spring set over nv vertices (any order, either endpoint first).
-  /// allow_grouping = false keeps the plain sweep (tests and benchmarks compare the two).
-  void build(Index nv, const SpringSet& set, bool allow_grouping = true) {
+  /// allow_grouping = false keeps the plain sweep (tests and benchmarks compare the two);
+  /// group_block: vertices per block of the grouped sweep (group_springs).
+  void build(Index nv, const SpringSet& set, bool allow_grouping = true, Index group_block = kSpringGroupBlock) {
     n = nv;
     SpringSet s = set;
     layout = SpringLayout(nv, s);
@@ -124,7 +125,7 @@ struct SpringSweep {
       l0[q] = static_cast<T>(s.rest_length[q]);
       if (any_damped) c[q] = static_cast<T>(s.damping[q]);
     }
-    group(allow_grouping);
+    group(allow_grouping, group_block);
     is_deferred.assign(static_cast<std::size_t>(nv), 0);
     for (Index q = layout.colour_begin(0); q < S; ++q) is_deferred[i[q]] = is_deferred[j[q]] = 1;
     deferred.clear();
@@ -171,7 +172,7 @@ struct SpringSweep {
 
  private:
   /// Store the interior springs grouped (when it pays and the window fits) and plan the window.
-  void group(bool allow) {
+  void group(bool allow, Index block) {
     grouped = false;
     segs.clear();
     blocks.clear();
@@ -181,7 +182,7 @@ struct SpringSweep {
     win.clear();
     if (!allow) return;
     SpringGroups g;
-    const std::vector<Index> perm = group_springs(layout, i, j, g);
+    const std::vector<Index> perm = group_springs(layout, i, j, g, block);
     if (!g.grouped) return;
     grouped = true;
     segs = std::move(g.segs);
@@ -206,7 +207,7 @@ struct SpringSweep {
   /// The grouped, windowed sweep (see the top of this file).
   template <bool Damped, class Fin>
   void run_window(const T* x, const T* v, T* f, Fin& fin) const {
-    constexpr Index Bk = kSpringGroupBlock;
+    constexpr Index Bk = kSpringGroupBlockMax;   // buffer capacity: segments hold at most this many springs
     const Index* I = i.data();
     const Index* J = j.data();
     const T* K = k.data();

@@ -44,7 +44,16 @@ struct SpringBlock {
   Index vertex_end, seg_begin, seg_end;
 };
 
-/// Vertices per block of the grouped traversal (and the most springs per segment).
+/// The most vertices per block of the grouped traversal, so the most springs per segment: the
+/// sweeps' per-segment buffers hold this many springs.
+constexpr Index kSpringGroupBlockMax = 256;
+/// Vertices per block of the grouped traversal, the default of group_springs' block (the fused
+/// symplectic Euler / RK4 sweep's; harmonic_oscillation's is kHoGroupBlock). Larger blocks give
+/// fewer, longer segments (on the 112,896-vertex Table 1 grid 23,983 segments with 64, 8,505 with
+/// 256: a segment then runs to the end of its grid row or block) and a larger window (live span =
+/// block + the largest offset j - i: 2,944 and 3,712 vertices). table1's *_block64/128/256 rows
+/// compare the sizes; under the load of the measurements so far (docs/benchmarks/ho.md, issue 16)
+/// the differences were within the noise, so the default stays 64.
 constexpr Index kSpringGroupBlock = 64;
 /// Largest live span (vertices) for which a window is used.
 constexpr Index kSpringWinMaxSpan = 1 << 16;
@@ -61,8 +70,12 @@ struct SpringGroups {
 /// springs sorted by lower endpoint). Returns perm: the grouped order is q' -> perm[q'] (apply it
 /// to every per-spring array: a_new[q'] = a_old[perm[q']]); cross springs keep their places.
 /// The segments in g refer to positions in the grouped order.
+/// block: vertices per block, clamped to [1, kSpringGroupBlockMax] (benchmarks and tests compare
+/// block sizes; only the order of the additions into a vertex depends on it).
 inline std::vector<Index> group_springs(const SpringLayout& layout, const std::vector<Index>& i,
-                                        const std::vector<Index>& j, SpringGroups& g) {
+                                        const std::vector<Index>& j, SpringGroups& g,
+                                        Index block = kSpringGroupBlock) {
+  block = std::clamp<Index>(block, 1, kSpringGroupBlockMax);
   const Index S = static_cast<Index>(i.size());
   std::vector<Index> perm(static_cast<std::size_t>(S));
   std::iota(perm.begin(), perm.end(), Index(0));
@@ -75,7 +88,7 @@ inline std::vector<Index> group_springs(const SpringLayout& layout, const std::v
     const Index vb = layout.part_vertex_begin(p), ve = layout.part_vertex_end(p);
     Index* P = perm.data() + sb;
     const std::size_t m = static_cast<std::size_t>(se - sb);
-    auto blk = [&](Index q) { return (i[q] - vb) / kSpringGroupBlock; };
+    auto blk = [&](Index q) { return (i[q] - vb) / block; };
     // duplicate pairs (i, j) (some stencils carry two springs on a pair) get ranks 0, 1, ... so
     // that each copy joins its own run of consecutive i
     rank.assign(m, 0);
@@ -94,15 +107,15 @@ inline std::vector<Index> group_springs(const SpringLayout& layout, const std::v
     auto I = [&](Index q) { return i[perm[q]]; };
     auto O = [&](Index q) { return j[perm[q]] - i[perm[q]]; };
     Index q = sb;
-    for (Index v0 = vb; v0 < ve; v0 += kSpringGroupBlock) {
-      const Index v1 = std::min<Index>(v0 + kSpringGroupBlock, ve);
+    for (Index v0 = vb; v0 < ve; v0 += block) {
+      const Index v1 = std::min<Index>(v0 + block, ve);
       const Index seg_begin = static_cast<Index>(g.segs.size());
       while (q < se && I(q) < v1) {
         SpringSegment s{q, 1, I(q), O(q), 1};
         ++q;
         // the step (1 or 2) is fixed by the second spring
         if (q < se && I(q) < v1 && O(q) == s.off && I(q) - s.i0 == 2) s.step = 2;
-        while (q < se && I(q) < v1 && O(q) == s.off && I(q) == s.i0 + s.step * s.len && s.len < kSpringGroupBlock) {
+        while (q < se && I(q) < v1 && O(q) == s.off && I(q) == s.i0 + s.step * s.len && s.len < block) {
           ++s.len;
           ++q;
         }

@@ -60,7 +60,7 @@ HoIntegrator::HoIntegrator(const Params& p) {
 }
 
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out,
-                      bool allow_grouping) {
+                      bool allow_grouping, Index group_block) {
   SpringSet sorted = set;            // copied once, so that the layout can store it in traversal order
   layout = SpringLayout(n, sorted);
   layout.reorder(sorted);
@@ -88,7 +88,7 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
   // consecutive i.
   {
     SpringGroups g;
-    const std::vector<Index> perm = group_springs(layout, out.i, out.j, g);
+    const std::vector<Index> perm = group_springs(layout, out.i, out.j, g, group_block);
     out.grouped = allow_grouping && g.grouped;
     if (out.grouped) {
       apply_spring_perm(perm, out.i);

@@ -87,15 +87,19 @@ struct HoSprings {
   Index size() const { return static_cast<Index>(i.size()); }
 };
 
-/// Vertices per block of the grouped traversal.
-constexpr Index kHoVertexBlock = kSpringGroupBlock;
+/// The most vertices per block of the grouped traversal (the per-segment buffers' capacity).
+constexpr Index kHoVertexBlock = kSpringGroupBlockMax;
+/// Vertices per block of HO's grouped traversal (build_ho_springs' default; see kSpringGroupBlock
+/// for what the size changes; table1's HoStep_double_block64/128/256 rows compare sizes).
+constexpr Index kHoGroupBlock = kSpringGroupBlock;
 
 /// Build the traversal layout and the spring arrays from a spring set over n vertices: springs
 /// in traversal order with i < j (HO is symmetric in its endpoints), sorted by i within each
 /// part, and the vertices that cross springs touch.
 /// allow_grouping = false keeps the plain blocked sweep (tests compare the two).
+/// group_block: vertices per block of the grouped sweep (group_springs; benchmarks compare sizes).
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out,
-                      bool allow_grouping = true);
+                      bool allow_grouping = true, Index group_block = kHoGroupBlock);
 
 /// Copy the structure (endpoints, traversal data) and the material constants to another scalar.
 template <class T, class U>
