@@ -21,6 +21,9 @@
 #include "dense_matrix.hpp"
 #include "eigen_ldlt.hpp"
 #include "eigen_pcg.hpp"
+#ifdef LOOM_TEST_CHOLMOD
+#include "cholmod_solver.hpp"
+#endif
 #include "fold_scene.hpp"
 
 namespace {
@@ -343,3 +346,229 @@ TEST(BwContactAmg, FactorOfAAsPreconditionerOfTheSumConvergesWithinTheRankBound)
 TEST(BwContactAmg, FoldingClothUnderSaAmgNeverIntersects) {
   loom_test::fold_run_never_intersects("{type: filtered_pcg, filtered_pcg: {preconditioner: sa_amg}}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// The direct solvers' mode `contact_springs: factor_preconditioned_pcg` (loom/factor_pcg.hpp):
+// the solver factors A~ = S A S + (I - S) alone and solves A + E by the filtered PCG with that
+// factor as preconditioner. Checked for eigen_ldlt and (when built) cholmod against eigen_ldlt
+// on the assembled A + E, with pins and a direction constraint in the filter and prescribed
+// values on them.
+
+namespace {
+
+struct DirectMode {
+  const char* name;
+  std::unique_ptr<loom::LinearSolver> (*make)(bool factor_pcg, double tol, int maxit);
+  int (*factorizations)(const loom::LinearSolver&);
+};
+
+std::unique_ptr<loom::LinearSolver> make_ldlt(bool factor_pcg, double tol, int maxit) {
+  loom::LdltOptions o;
+  if (factor_pcg) o.contact_springs = "factor_preconditioned_pcg";
+  o.contact_tolerance = tol;
+  o.contact_max_iterations = maxit;
+  return std::make_unique<loom::EigenLdlt>(o);
+}
+int ldlt_count(const loom::LinearSolver& s) { return static_cast<const loom::EigenLdlt&>(s).numeric_factorizations(); }
+#ifdef LOOM_TEST_CHOLMOD
+std::unique_ptr<loom::LinearSolver> make_cholmod(bool factor_pcg, double tol, int maxit) {
+  loom::CholmodOptions o;
+  if (factor_pcg) o.contact_springs = "factor_preconditioned_pcg";
+  o.contact_tolerance = tol;
+  o.contact_max_iterations = maxit;
+  return std::make_unique<loom::CholmodSolver>(o);
+}
+int cholmod_count(const loom::LinearSolver& s) {
+  return static_cast<const loom::CholmodSolver&>(s).numeric_factorizations();
+}
+#endif
+
+std::vector<DirectMode> direct_modes() {
+  std::vector<DirectMode> m{{"eigen_ldlt", &make_ldlt, &ldlt_count}};
+#ifdef LOOM_TEST_CHOLMOD
+  m.push_back({"cholmod", &make_cholmod, &cholmod_count});
+#endif
+  return m;
+}
+
+// The folded system's filter with two pinned vertices and one direction constraint added, and
+// prescribed values z = (I - S) w on them.
+struct PinnedFilter {
+  loom::Filter S;
+  std::vector<double> z;
+  std::vector<Index> pinned{0, 97};
+  Index slid = 150;
+  explicit PinnedFilter(const FoldedSystem& fs) : S(fs.S()) {
+    for (Index i : pinned) S.constrain_all(i);
+    const double d[3] = {0.0, 0.6, 0.8};
+    S.constrain_direction(slid, d);
+    z.assign(3 * static_cast<std::size_t>(fs.n), 0.0);
+    for (std::size_t k = 0; k < z.size(); ++k) z[k] = 0.01 * std::cos(0.7 * static_cast<double>(k));
+    S.apply_complement(z);
+  }
+  Eigen::MatrixXd dense(Index n) const {
+    Eigen::MatrixXd Sd = Eigen::MatrixXd::Identity(3 * n, 3 * n);
+    for (Index i : S.constrained())
+      for (int a = 0; a < 3; ++a)
+        for (int c = 0; c < 3; ++c) Sd(3 * i + a, 3 * i + c) = S.projector(i)[3 * a + c];
+    return Sd;
+  }
+};
+
+// m rank-one springs of the self-contact form: E = sum_j k_j u_j u_j^T, u_j = sum_b w_b e_b (x) n.
+struct FewSprings final : loom::ExtraOperator {
+  struct Spring {
+    std::array<Index, 4> v;
+    std::array<double, 4> w;
+    std::array<double, 3> nrm;
+    double k;
+  };
+  std::vector<Spring> springs;
+  void apply_add(const double* x, double* y, double scale) const override {
+    for (const Spring& s : springs) {
+      double d = 0;
+      for (int b = 0; b < 4; ++b)
+        for (int a = 0; a < 3; ++a) d += s.w[b] * s.nrm[a] * x[3 * s.v[b] + a];
+      for (int b = 0; b < 4; ++b)
+        for (int a = 0; a < 3; ++a) y[3 * s.v[b] + a] += scale * s.k * s.w[b] * d * s.nrm[a];
+    }
+  }
+  void add_diagonal(double* D) const override {
+    for (const Spring& s : springs)
+      for (int b = 0; b < 4; ++b)
+        for (int a = 0; a < 3; ++a)
+          for (int c = 0; c < 3; ++c) D[9 * s.v[b] + 3 * a + c] += s.k * s.w[b] * s.w[b] * s.nrm[a] * s.nrm[c];
+  }
+  Eigen::MatrixXd dense(Index n) const {
+    Eigen::MatrixXd E = Eigen::MatrixXd::Zero(3 * n, 3 * n);
+    for (const Spring& s : springs) {
+      Eigen::VectorXd u = Eigen::VectorXd::Zero(3 * n);
+      for (int b = 0; b < 4; ++b)
+        for (int a = 0; a < 3; ++a) u[3 * s.v[b] + a] += s.w[b] * s.nrm[a];
+      E += s.k * u * u.transpose();
+    }
+    return E;
+  }
+};
+
+}  // namespace
+
+// On the folded cloth's real contact set (E = its springs) with pins: the mode's answer equals
+// eigen_ldlt on the assembled A + E (its residual on the assembled matrix within the
+// tolerance, error 1e-8 in the (A + E)-norm), the prescribed values are exact, PCG stays within
+// the rank bound m + 1, and a factorize() whose only change is E does not refactor (one whose A
+// changed does).
+TEST(BwContactDirect, FactorPreconditionedPcgEqualsLdltOnTheAssembledSumWithPins) {
+  FoldedSystem fs;
+  fs.build();
+  if (HasFatalFailure()) return;
+  const Index N = 3 * fs.n;
+  const PinnedFilter pf(fs);
+  const loom::BsrMatrix& A = fs.bw.system_matrix();
+  // Reference: eigen_ldlt, assembled.
+  loom::EigenLdlt ref_solver;
+  ref_solver.analyze_pattern(*fs.M, pf.S);
+  loom::SolveReport f;
+  ASSERT_TRUE(ref_solver.factorize(*fs.M, pf.S, f)) << f.message;
+  std::vector<double> ref(N, 0.0);
+  ASSERT_TRUE(ref_solver.solve(*fs.M, pf.S, fs.b, pf.z, ref).converged);
+  const Eigen::MatrixXd Sd = pf.dense(fs.n);
+  const Eigen::MatrixXd Md = Sd * loom_test::dense(*fs.M) * Sd;
+  const Eigen::Map<const Eigen::VectorXd> bv(fs.b.data(), N), zv(pf.z.data(), N), rv(ref.data(), N);
+  const Eigen::VectorXd bh = Sd * (bv - loom_test::dense(*fs.M) * zv);
+  const double ref_norm = std::sqrt(rv.dot(Md * rv));
+  const int m = static_cast<int>(fs.E->contacts().size());
+  const double tol = 1e-10;
+  for (const DirectMode& mode : direct_modes()) {
+    auto solver = mode.make(true, tol, 100);
+    ASSERT_TRUE(solver->supports_extra_operator()) << mode.name;
+    ASSERT_FALSE(mode.make(false, tol, 100)->supports_extra_operator()) << mode.name;  // assembled by default
+    solver->set_extra_operator(fs.E.get());
+    solver->analyze_pattern(A, pf.S);
+    ASSERT_TRUE(solver->factorize(A, pf.S, f)) << mode.name << ": " << f.message;
+    EXPECT_EQ(mode.factorizations(*solver), 1) << mode.name;
+    std::vector<double> dv(N, 0.0);
+    const loom::SolveReport rep = solver->solve(A, pf.S, fs.b, pf.z, dv);
+    ASSERT_TRUE(rep.converged) << mode.name << ": " << rep.message;
+    EXPECT_LE(rep.iterations, m + 1) << mode.name;
+    const Eigen::Map<const Eigen::VectorXd> d(dv.data(), N);
+    const Eigen::VectorXd full = Sd * (bv - loom_test::dense(*fs.M) * d);
+    EXPECT_LE(full.norm() / bh.norm(), tol * (1 + 1e-3)) << mode.name;
+    const Eigen::VectorXd e = d - rv;
+    EXPECT_LE(std::sqrt(e.dot(Md * e)), 1e-8 * ref_norm) << mode.name;
+    for (Index i : pf.pinned)
+      for (int a = 0; a < 3; ++a) EXPECT_EQ(dv[3 * i + a], pf.z[3 * i + a]) << mode.name << " vertex " << i;
+    // Only E changed (the solves of one step): no numeric factorization.
+    solver->set_extra_operator(nullptr);
+    ASSERT_TRUE(solver->factorize(A, pf.S, f));
+    solver->set_extra_operator(fs.E.get());
+    ASSERT_TRUE(solver->factorize(A, pf.S, f));
+    EXPECT_EQ(mode.factorizations(*solver), 1) << mode.name;
+    // New values of A: refactored.
+    loom::BsrMatrix A2 = A;
+    for (Index i = 0; i < fs.n; ++i) A2.block(A2.pattern().diag[i])[0] *= 1.5;
+    ASSERT_TRUE(solver->factorize(A2, pf.S, f));
+    EXPECT_EQ(mode.factorizations(*solver), 2) << mode.name;
+    if (verbose())
+      std::printf("%s factor_preconditioned_pcg: %d iterations for %d springs, residual %.3g, error %.3g\n",
+                  mode.name, rep.iterations, m, full.norm() / bh.norm(), std::sqrt(e.dot(Md * e)) / ref_norm);
+  }
+}
+
+// The rank bound on a small set: 3 rank-one springs, stiff (10 x A's largest diagonal entry),
+// one touching a pinned vertex: PCG with A~'s factor converges within m + 1 = 4 iterations to
+// 1e-11, to the dense solve of S (A + E) S + (I - S). With a cap of 1 iteration the solve fails
+// with a message naming the key (no silent wrong answer).
+TEST(BwContactDirect, FewSpringsConvergeWithinTheRankBound) {
+  FoldedSystem fs;
+  fs.build();
+  if (HasFatalFailure()) return;
+  const Index N = 3 * fs.n;
+  const PinnedFilter pf(fs);
+  const loom::BsrMatrix& A = fs.bw.system_matrix();
+  double amax = 0;
+  for (Index i = 0; i < fs.n; ++i) amax = std::max(amax, A.block(A.pattern().diag[i])[0]);
+  FewSprings E;
+  const double s = 1.0 / std::sqrt(3.0);
+  E.springs.push_back({{10, 11, 24, 160}, {1.0, -0.3, -0.3, -0.4}, {0.0, 0.0, 1.0}, 10 * amax});
+  E.springs.push_back({{97, 40, 41, 55}, {1.0, -0.5, -0.25, -0.25}, {s, s, s}, 20 * amax});
+  E.springs.push_back({{150, 3, 4, 18}, {1.0, -0.2, -0.4, -0.4}, {0.6, -0.8, 0.0}, 5 * amax});
+  const Eigen::MatrixXd Sd = pf.dense(fs.n);
+  const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(N, N);
+  const Eigen::MatrixXd Ad = loom_test::dense(A) + E.dense(fs.n);
+  const Eigen::Map<const Eigen::VectorXd> bv(fs.b.data(), N), zv(pf.z.data(), N);
+  const Eigen::VectorXd x = (Sd * Ad * Sd + (I - Sd)).ldlt().solve(Sd * (bv - Ad * zv)) + zv;
+  for (const DirectMode& mode : direct_modes()) {
+    auto solver = mode.make(true, 1e-11, 100);
+    solver->set_extra_operator(&E);
+    loom::SolveReport f;
+    ASSERT_TRUE(solver->factorize(A, pf.S, f)) << mode.name << ": " << f.message;
+    std::vector<double> dv(N, 0.0);
+    const loom::SolveReport rep = solver->solve(A, pf.S, fs.b, pf.z, dv);
+    ASSERT_TRUE(rep.converged) << mode.name << ": " << rep.message;
+    EXPECT_LE(rep.iterations, 4) << mode.name;
+    EXPECT_GE(rep.iterations, 1) << mode.name;
+    const Eigen::VectorXd e = Eigen::Map<const Eigen::VectorXd>(dv.data(), N) - x;
+    EXPECT_LE(e.norm(), 1e-8 * x.norm()) << mode.name;
+    if (verbose()) std::printf("%s: %d iterations for 3 springs\n", mode.name, rep.iterations);
+    // A cap below what the springs need: a failed solve, and the message says which key.
+    auto capped = mode.make(true, 1e-11, 1);
+    capped->set_extra_operator(&E);
+    ASSERT_TRUE(capped->factorize(A, pf.S, f));
+    std::fill(dv.begin(), dv.end(), 0.0);
+    const loom::SolveReport bad = capped->solve(A, pf.S, fs.b, pf.z, dv);
+    EXPECT_FALSE(bad.converged) << mode.name;
+    EXPECT_NE(bad.message.find("contact_springs"), std::string::npos) << bad.message;
+  }
+}
+
+// The folding cloth for 0.5 s with eigen_ldlt (and cholmod) in the mode: the springs
+// matrix-free, the pattern never extended, no intersecting pair.
+TEST(BwContactDirect, FoldingClothUnderLdltFactorPcgNeverExtendsThePattern) {
+  loom_test::fold_run_never_intersects("{type: eigen_ldlt, eigen_ldlt: {contact_springs: factor_preconditioned_pcg}}");
+}
+#ifdef LOOM_TEST_CHOLMOD
+TEST(BwContactDirect, FoldingClothUnderCholmodFactorPcgNeverExtendsThePattern) {
+  loom_test::fold_run_never_intersects("{type: cholmod, cholmod: {contact_springs: factor_preconditioned_pcg}}");
+}
+#endif

@@ -1,6 +1,8 @@
 #include "eigen_ldlt.hpp"
 #include "loom/clock.hpp"
+#include "loom/factor_pcg.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -16,6 +18,14 @@ const ParamSpec& ldlt_spec() {
     ParamSpec s("eigen_ldlt", "Eigen SimplicialLDLT of the projected system");
     s.number("pivot_tolerance", d.pivot_tolerance).range(ParamRange::closed(0, 1e-2)).help(
         "a pivot d_k <= pivot_tolerance max|d| counts as non-positive (A not SPD: the solve fails)");
+    s.choice("contact_springs", d.contact_springs, {factor_pcg::kAssembled, factor_pcg::kFactorPreconditionedPcg})
+        .help("assembled: self-contact springs assembled into A (the pattern grows, each solve refactors); "
+              "factor_preconditioned_pcg: A alone factored, A + springs solved by PCG with that factor "
+              "(docs/CONTACT.md)");
+    s.number("contact_tolerance", d.contact_tolerance).range(ParamRange::closed(1e-15, 1e-2)).help(
+        "factor_preconditioned_pcg: true relative residual |S(b - (A + E) dv)| / |S(b - (A + E) z)| to reach");
+    s.integer("contact_max_iterations", d.contact_max_iterations).range(ParamRange::closed(1, 100000)).help(
+        "factor_preconditioned_pcg: PCG iterations before the solve fails (then reduce dt or use assembled)");
     return s;
   }();
   return spec;
@@ -24,11 +34,16 @@ const ParamSpec& ldlt_spec() {
 LdltOptions parse_ldlt_options(const Params& p) {
   LdltOptions o;
   if (!p.valid()) return o;
-  o.pivot_tolerance = ParamReader(p, ldlt_spec()).number("pivot_tolerance");
+  const ParamReader r(p, ldlt_spec());
+  o.pivot_tolerance = r.number("pivot_tolerance");
+  o.contact_springs = r.text("contact_springs");
+  o.contact_tolerance = r.number("contact_tolerance");
+  o.contact_max_iterations = r.int32("contact_max_iterations");
   return o;
 }
 
-EigenLdlt::EigenLdlt(LdltOptions options) : options_(options) {}
+EigenLdlt::EigenLdlt(LdltOptions options)
+    : options_(options), factor_pcg_(options_.contact_springs == factor_pcg::kFactorPreconditionedPcg) {}
 
 void EigenLdlt::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   const auto t0 = Clock::now();
@@ -46,6 +61,10 @@ void EigenLdlt::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   rhs_.resize(N);
   sol_.resize(N);
   work_.assign(N, 0.0);
+  if (factor_pcg_) {
+    for (auto* v : {&r_, &c_, &q_, &s_}) v->assign(N, 0.0);
+    factored_values_.assign(nnz, 0.0);
+  }
   factorized_ = false;
   analyze_seconds_ = seconds_since(t0);
 }
@@ -56,7 +75,17 @@ bool EigenLdlt::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repo
   analyze_seconds_ = 0;
   const auto t0 = Clock::now();
   solver::fill_projected_csc(A, S, sp_, mat_.valuePtr());
+  if (factor_pcg_ && factorized_) {
+    // The solves of one step that only add or release springs (E): same A, same S, so the
+    // factor of A~ stands.
+    const double* v = mat_.valuePtr();
+    if (std::equal(v, v + factored_values_.size(), factored_values_.begin())) {
+      report.factorize_seconds = seconds_since(t0);
+      return true;
+    }
+  }
   ldlt_.factorize(mat_);
+  ++numeric_count_;
   factorized_ = false;
   report.factorize_seconds = seconds_since(t0);
   if (ldlt_.info() != Eigen::Success) {
@@ -82,6 +111,7 @@ bool EigenLdlt::factorize(const BsrMatrix& A, const Filter& S, SolveReport& repo
     return false;
   }
   factorized_ = true;
+  if (factor_pcg_) std::copy_n(mat_.valuePtr(), factored_values_.size(), factored_values_.begin());
   return true;
 }
 
@@ -94,6 +124,18 @@ SolveReport EigenLdlt::solve(const BsrMatrix& A, const Filter& S, std::span<cons
     throw std::invalid_argument("eigen_ldlt: vector sizes do not match the matrix");
   if (!factorized_ || &A.pattern() != pattern_) {
     rep.message = "eigen_ldlt: solve() called without a successful factorize()";
+    return rep;
+  }
+  if (extra_) {  // A + E by PCG with A~'s factor as preconditioner
+    auto factor = [this, N](const double* r, double* s) {
+      std::copy_n(r, N, rhs_.data());
+      sol_.noalias() = ldlt_.solve(rhs_);
+      std::copy_n(sol_.data(), N, s);
+      return ldlt_.info() == Eigen::Success;
+    };
+    rep = factor_pcg::solve(name(), A, S, b, z, extra_, factor, options_.contact_tolerance,
+                            options_.contact_max_iterations, dv, r_, c_, q_, s_);
+    rep.solve_seconds = seconds_since(t0);
     return rep;
   }
   std::span<double> rhs(rhs_.data(), N);

@@ -20,6 +20,13 @@ namespace loom {
 struct LdltOptions {
   /// A pivot d_k <= pivot_tolerance * max_k |d_k| counts as non-positive (A not SPD).
   double pivot_tolerance = 1e-14;
+  /// assembled: an extra operator E (self-contact springs) is assembled into A by the
+  /// integrator (the pattern grows, each solve refactors). factor_preconditioned_pcg: the
+  /// solver takes E matrix-free, factors A~ alone (again only when A or S changed) and solves
+  /// A + E by the filtered PCG preconditioned with that factor (loom/factor_pcg.hpp).
+  std::string contact_springs = "assembled";
+  double contact_tolerance = 1e-10;  ///< that PCG's true relative residual on S (A + E)
+  int contact_max_iterations = 100;  ///< that PCG's cap; past it the solve fails (clear message)
 };
 
 /// The keys of eigen_ldlt (pivot_tolerance), read by parse_ldlt_options.
@@ -35,6 +42,11 @@ class EigenLdlt final : public LinearSolver {
   SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                     std::span<const double> z, std::span<double> dv) override;
 
+  /// contact_springs: factor_preconditioned_pcg takes E matrix-free.
+  bool supports_extra_operator() const override { return factor_pcg_; }
+  void set_extra_operator(const ExtraOperator* E) override { extra_ = factor_pcg_ ? E : nullptr; }
+  /// How many numeric factorizations ran (tests, benchmarks).
+  int numeric_factorizations() const { return numeric_count_; }
   /// The projected matrix of the last factorize() (tests).
   const Eigen::SparseMatrix<double>& projected_matrix() const { return mat_; }
 
@@ -49,6 +61,11 @@ class EigenLdlt final : public LinearSolver {
   std::vector<double> work_;
   bool factorized_ = false;
   double analyze_seconds_ = 0;
+  bool factor_pcg_ = false;            // contact_springs: factor_preconditioned_pcg
+  const ExtraOperator* extra_ = nullptr;
+  std::vector<double> factored_values_;  // A~'s values of the factor (factor_pcg_: skip a refactor)
+  std::vector<double> r_, c_, q_, s_;    // the PCG's work vectors
+  int numeric_count_ = 0;
 };
 
 }  // namespace loom

@@ -13,6 +13,7 @@
 #include <cholmod.h>
 
 #include "loom/clock.hpp"
+#include "loom/factor_pcg.hpp"
 #include "loom/param_fields.hpp"
 #include "loom/solver_common.hpp"
 
@@ -112,6 +113,14 @@ const ParamFields<CholmodOptions>& cholmod_fields() {
     f.choice("factorization", &O::factorization, {"supernodal", "simplicial", "auto"}).help("CHOLMOD factorization kind");
     f.integer("blas_threads", &O::blas_threads).range(ParamRange::closed(0, 1024)).units("threads").help(
         "OpenBLAS threads (0: $OPENBLAS_NUM_THREADS if set, else 1 below 10000 vertices and the OpenMP count above)");
+    f.choice("contact_springs", &O::contact_springs, {factor_pcg::kAssembled, factor_pcg::kFactorPreconditionedPcg})
+        .help("assembled: self-contact springs assembled into A (the pattern grows, each solve refactors); "
+              "factor_preconditioned_pcg: A alone factored, A + springs solved by PCG with that factor "
+              "(docs/CONTACT.md)");
+    f.number("contact_tolerance", &O::contact_tolerance).range(ParamRange::closed(1e-15, 1e-2)).help(
+        "factor_preconditioned_pcg: true relative residual |S(b - (A + E) dv)| / |S(b - (A + E) z)| to reach");
+    f.integer("contact_max_iterations", &O::contact_max_iterations).range(ParamRange::closed(1, 100000)).help(
+        "factor_preconditioned_pcg: PCG iterations before the solve fails (then reduce dt or use assembled)");
     return f;
   }();
   return fields;
@@ -143,12 +152,17 @@ struct CholmodSolver::Impl {
 
   bool have_factor = false;
   bool have_values = false;
+  bool factor_pcg = false;              // contact_springs: factor_preconditioned_pcg
+  const ExtraOperator* extra = nullptr;
+  std::vector<double> factored;         // Acsc's values of the factor (factor_pcg: skip a refactor)
+  std::vector<double> c2;               // the PCG's fourth work vector
   int since_factor = 0;
   int numeric_count = 0;
   double analyze_seconds = 0;
   bool analyze_reported = false;
 
   explicit Impl(const CholmodOptions& o) : opt(o) {
+    factor_pcg = opt.contact_springs == factor_pcg::kFactorPreconditionedPcg;
     cholmod_l_start(&c);
     c.print = 0;                 // no printing; statuses are turned into messages here
     c.error_handler = nullptr;
@@ -242,6 +256,9 @@ struct CholmodSolver::Impl {
 CholmodSolver::CholmodSolver(const CholmodOptions& options) : impl_(std::make_unique<Impl>(options)) {}
 CholmodSolver::~CholmodSolver() = default;
 
+bool CholmodSolver::supports_extra_operator() const { return impl_->factor_pcg; }
+void CholmodSolver::set_extra_operator(const ExtraOperator* E) { impl_->extra = impl_->factor_pcg ? E : nullptr; }
+
 int CholmodSolver::numeric_factorizations() const { return impl_->numeric_count; }
 std::string CholmodSolver::ordering_used() const {
   return impl_->L ? ordering_name(impl_->L->ordering) : "none";
@@ -309,6 +326,10 @@ void CholmodSolver::analyze_pattern(const BsrMatrix& A, const Filter& S) {
   m.cons_list.clear();
   m.cons_S.clear();
   for (auto* v : {&m.bhat, &m.y, &m.r, &m.p, &m.q, &m.s}) v->assign(N, 0.0);
+  if (m.factor_pcg) {
+    m.c2.assign(N, 0.0);
+    m.factored.assign(nnz, 0.0);
+  }
   m.since_factor = 0;
   m.have_factor = false;
   m.analyze_seconds = seconds_since(t0);
@@ -391,11 +412,17 @@ bool CholmodSolver::factorize(const BsrMatrix& A, const Filter& S, SolveReport& 
   for (long e = 0; e < nnz; ++e) Ax[e] = Pv[src[e]];
   m.have_values = true;
 
+  if (m.factor_pcg && m.have_factor && !s_changed &&
+      std::equal(Ax, Ax + nnz, m.factored.begin())) {  // only E changed: the factor of A~ stands
+    report.factorize_seconds = seconds_since(t0);
+    return true;
+  }
   bool ok = true;
   const bool refactor = !m.have_factor || s_changed || m.since_factor + 1 >= m.opt.reuse_factorization_steps ||
                         m.opt.reuse_factorization_steps <= 1;
   if (refactor) {
     ok = m.numeric(report.message);
+    if (ok && m.factor_pcg) std::copy_n(Ax, nnz, m.factored.begin());
   } else {
     ++m.since_factor;
   }
@@ -415,6 +442,13 @@ SolveReport CholmodSolver::solve(const BsrMatrix& A, const Filter& S, std::span<
   }
   if (static_cast<long>(b.size()) != N || static_cast<long>(z.size()) != N || static_cast<long>(dv.size()) != N)
     throw SolverError("cholmod: vector sizes differ from 3 x " + std::to_string(m.n));
+  if (m.extra) {  // A + E by PCG with A~'s factor as preconditioner
+    auto factor = [&m](const double* r, double* s) { return m.factor_solve(r, s); };
+    rep = factor_pcg::solve(name(), A, S, b, z, m.extra, factor, m.opt.contact_tolerance,
+                            m.opt.contact_max_iterations, dv, m.r, m.c2, m.q, m.s);
+    rep.solve_seconds = seconds_since(t0);
+    return rep;
+  }
   // b^ = S (b - A z)  (z = (I - S) z by the interface's contract)
   double* bh = m.bhat.data();
   double norm0;

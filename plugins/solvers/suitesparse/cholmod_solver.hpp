@@ -21,6 +21,11 @@ struct CholmodOptions {
   std::string ordering = "auto";    ///< auto | amd | metis | nesdis | natural
   std::string factorization = "supernodal";  ///< supernodal | simplicial | auto
   int blas_threads = 0;             ///< 0: $OPENBLAS_NUM_THREADS if set, else omp_get_max_threads()
+  /// assembled | factor_preconditioned_pcg: how an extra operator E (self-contact springs) is
+  /// solved; as eigen_ldlt's key of the same name (loom/factor_pcg.hpp).
+  std::string contact_springs = "assembled";
+  double contact_tolerance = 1e-10;  ///< factor_preconditioned_pcg: true relative residual on A + E
+  int contact_max_iterations = 100;  ///< factor_preconditioned_pcg: iterations before the solve fails
   /// The keys of cholmod, read by from_params.
   static const ParamSpec& spec();
   static CholmodOptions from_params(const Params& p);
@@ -39,6 +44,10 @@ class CholmodSolver final : public LinearSolver {
   bool factorize(const BsrMatrix& A, const Filter& S, SolveReport& report) override;
   SolveReport solve(const BsrMatrix& A, const Filter& S, std::span<const double> b,
                     std::span<const double> z, std::span<double> dv) override;
+
+  /// contact_springs: factor_preconditioned_pcg takes E matrix-free.
+  bool supports_extra_operator() const override;
+  void set_extra_operator(const ExtraOperator* E) override;
 
   // Introspection (tests, benchmarks, `loom validate`).
   int numeric_factorizations() const;    ///< how many times the numeric factorisation ran
