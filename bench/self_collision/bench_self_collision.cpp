@@ -42,6 +42,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <fstream>
+#include <functional>
 #include <algorithm>
 #include <map>
 #include <memory>
@@ -49,7 +50,11 @@
 #include <string>
 
 #include "baraff_witkin.hpp"
+#include "eigen_ldlt.hpp"
 #include "eigen_pcg.hpp"
+#ifdef LOOM_BENCH_CHOLMOD
+#include "cholmod_solver.hpp"
+#endif
 #include "loom/intersection_check.hpp"
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
@@ -584,6 +589,103 @@ void BM_BwSaAmgContact(benchmark::State& st) {
   st.counters["amg_factorizes"] = factorizes / total;
 }
 BENCHMARK(BM_BwSaAmgContact)->ArgsProduct({{64, 128}, {0, 1, 2}, {12}})->Iterations(1)->Unit(benchmark::kMillisecond);
+
+// The direct solvers with self-contact springs: baraff_witkin + eigen_ldlt (second argument 0)
+// or cholmod (1, when built), one thread, from the draped state, the springs assembled into A
+// (third argument 0: the pattern is extended when a contact needs blocks it lacks, the solver
+// analyses it again, and every solve refactors A + E) or `contact_springs:
+// factor_preconditioned_pcg` (1: A alone factored, once per step, A + E solved by PCG with that
+// factor, tolerance 1e-10). Counters per step: step_ms, bw_ms (as BM_BwSaAmgContact),
+// factorizations (numeric), iterations (every solve; 1 per direct solve), spring_its (those of
+// the solves with springs), solves (with springs), contacts, pattern_growths; intersections at
+// the end.
+//   OMP_NUM_THREADS=1 LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_BwDirectContact
+void BM_BwDirectContact(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const int which = static_cast<int>(st.range(1));
+  const bool factor_pcg = st.range(2) != 0;
+  const int steps = static_cast<int>(st.range(3));
+  // contact_max_iterations (default 100; $LOOM_BENCH_CONTACT_MAXIT overrides it)
+  const char* mi = std::getenv("LOOM_BENCH_CONTACT_MAXIT");
+  const int max_its = mi ? std::atoi(mi) : 100;
+  omp_set_num_threads(1);
+  loom::Simulation::set_notes(false);
+  const double h = 2.0e-3;
+  double step_t = 0, bw_t = 0, its = 0, spring_its = 0, solves = 0, contacts = 0, growths = 0, facts = 0;
+  double intersections = 0, max_solve_its = 0;
+  for (auto _ : st) {
+    auto sim = loom::Simulation::from_string(scene(n, "baraff_witkin", true), "bench.yaml", ".", {"threads=1"}, loader());
+    omp_set_num_threads(1);
+    loom::Scene& sc = sim->scene();
+    sc.state = draped(n);
+    std::function<int()> count;
+    if (which == 0) {
+      loom::LdltOptions o;
+      if (factor_pcg) o.contact_springs = "factor_preconditioned_pcg";
+      o.contact_max_iterations = max_its;
+      auto s = std::make_unique<loom::EigenLdlt>(o);
+      loom::EigenLdlt* p = s.get();
+      count = [p] { return p->numeric_factorizations(); };
+      sc.solver = std::move(s);
+    } else {
+#ifdef LOOM_BENCH_CHOLMOD
+      loom::CholmodOptions o;
+      o.blas_threads = 1;
+      if (factor_pcg) o.contact_springs = "factor_preconditioned_pcg";
+      o.contact_max_iterations = max_its;
+      auto s = std::make_unique<loom::CholmodSolver>(o);
+      loom::CholmodSolver* p = s.get();
+      count = [p] { return p->numeric_factorizations(); };
+      sc.solver = std::move(s);
+#else
+      st.SkipWithError("cholmod not built");
+      return;
+#endif
+    }
+    loom::BaraffWitkin bw;
+    bw.prepare(sc, h);
+    if (bw.self_contact_matrix_free() != factor_pcg) {
+      st.SkipWithError("the springs' path is not the one asked for");
+      return;
+    }
+    auto one = [&](bool counted) {
+      const int g0 = bw.pattern_rebuilds();
+      const int f0 = count();
+      const double t0 = thread_cpu_seconds();
+      sc.self_collision->begin_step(sc.state);
+      bw.step(sc, h);
+      const double t1 = thread_cpu_seconds();
+      sc.self_collision->resolve(sc.state, h);
+      const double t2 = thread_cpu_seconds();
+      if (!counted) return;
+      step_t += t2 - t0;
+      bw_t += t1 - t0;
+      facts += count() - f0;
+      max_solve_its = std::max(max_solve_its, static_cast<double>(bw.last_step().linear_iterations));
+      const auto& c = bw.self_contact()->stats();
+      its += bw.last_step().linear_iterations;
+      spring_its += c.iterations;
+      solves += c.solves;
+      contacts += c.contacts;
+      growths += bw.pattern_rebuilds() - g0;
+    };
+    for (int k = 0; k < 2; ++k) one(false);
+    for (int k = 0; k < steps; ++k) one(true);
+    intersections = static_cast<double>(loom::count_intersecting_pairs(sc.mesh, sc.state.x));
+  }
+  const double total = static_cast<double>(st.iterations()) * steps;
+  st.counters["step_ms"] = 1e3 * step_t / total;
+  st.counters["bw_ms"] = 1e3 * bw_t / total;
+  st.counters["factorizations"] = facts / total;
+  st.counters["iterations"] = its / total;
+  st.counters["spring_its"] = spring_its / total;
+  st.counters["solves"] = solves / total;
+  st.counters["contacts"] = contacts / total;
+  st.counters["pattern_growths"] = growths / total;
+  st.counters["intersections"] = intersections;
+  st.counters["max_step_its"] = max_solve_its;  // the most iterations of one step
+}
+BENCHMARK(BM_BwDirectContact)->ArgsProduct({{64, 128}, {0, 1}, {0, 1}, {12}})->Iterations(1)->Unit(benchmark::kMillisecond);
 
 // ---------------------------------------------------------------------------------------------
 // Broad phase alone, BVH against a uniform-grid spatial hash, on the draped cloth: find every
