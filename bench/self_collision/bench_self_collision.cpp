@@ -605,7 +605,7 @@ void BM_BwDirectContact(benchmark::State& st) {
   const int which = static_cast<int>(st.range(1));
   const bool factor_pcg = st.range(2) != 0;
   const int steps = static_cast<int>(st.range(3));
-  // contact_max_iterations (default 100; $LOOM_BENCH_CONTACT_MAXIT overrides it)
+  // contact_max_iterations (default 1000; $LOOM_BENCH_CONTACT_MAXIT overrides it)
   const char* mi = std::getenv("LOOM_BENCH_CONTACT_MAXIT");
   const int max_its = mi ? std::atoi(mi) : 100;
   omp_set_num_threads(1);

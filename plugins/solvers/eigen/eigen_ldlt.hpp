@@ -26,7 +26,7 @@ struct LdltOptions {
   /// A + E by the filtered PCG preconditioned with that factor (loom/factor_pcg.hpp).
   std::string contact_springs = "assembled";
   double contact_tolerance = 1e-10;  ///< that PCG's true relative residual on S (A + E)
-  int contact_max_iterations = 100;  ///< that PCG's cap; past it the solve fails (clear message)
+  int contact_max_iterations = 1000;  ///< that PCG's cap; past it the solve fails (clear message)
 };
 
 /// The keys of eigen_ldlt (pivot_tolerance), read by parse_ldlt_options.

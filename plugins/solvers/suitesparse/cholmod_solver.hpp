@@ -25,7 +25,7 @@ struct CholmodOptions {
   /// solved; as eigen_ldlt's key of the same name (loom/factor_pcg.hpp).
   std::string contact_springs = "assembled";
   double contact_tolerance = 1e-10;  ///< factor_preconditioned_pcg: true relative residual on A + E
-  int contact_max_iterations = 100;  ///< factor_preconditioned_pcg: iterations before the solve fails
+  int contact_max_iterations = 1000;  ///< factor_preconditioned_pcg: iterations before the solve fails
   /// The keys of cholmod, read by from_params.
   static const ParamSpec& spec();
   static CholmodOptions from_params(const Params& p);
