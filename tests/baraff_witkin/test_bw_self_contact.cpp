@@ -281,8 +281,10 @@ TEST(BwSelfContact, FallingLayerLandsInTheStepOfTheExactContactTimeMatrixFree) {
 
 static void friction_slows_sliding_not_landing() {
   const double h = 0.01, mu = 0.3, g = 9.81, u = 0.5;
+  for (const bool implicit : {true, false})  // friction inside the solve, or after it
   for (const bool landing : {false, true}) {
     SCOPED_TRACE(landing ? "landing" : "sliding");
+    SCOPED_TRACE(implicit ? "implicit friction" : "friction after the solve");
     Scene sc;
     two_layers(sc, landing ? 0.0537 : 0.999 * kThick, mu, 0, 0, 3);
     const Index nv = kN * kN, n = sc.state.size();
@@ -293,7 +295,9 @@ static void friction_slows_sliding_not_landing() {
       sc.state.v[3 * i] = u;
       if (landing) sc.state.v[3 * i + 1] = -1.0;
     }
-    BaraffWitkin bw;
+    BaraffWitkinOptions bo;
+    bo.implicit_friction = implicit;
+    BaraffWitkin bw(bo);
     bw.prepare(sc, h);
     auto mean_vx = [&] {
       double m = 0;

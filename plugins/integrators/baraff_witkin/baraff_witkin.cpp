@@ -33,6 +33,9 @@ const ParamSpec& baraff_witkin_spec() {
     s.flag("warm_start", d.warm_start).help("start each solve from the previous step's dv");
     s.flag("implicit_self_contact", d.implicit_self_contact).backends({"cpu"}).help(
         "self-contacts of self_collision as stiff springs inside the implicit solve (docs/CONTACT.md)");
+    s.flag("implicit_friction", d.implicit_friction).backends({"cpu"}).help(
+        "Coulomb friction of contacts as tangential dampers inside the solve (up to 3 more solves), "
+        "instead of a velocity correction after it (docs/CONTACT.md)");
     declare_device_keys(s);
     return s;
   }();
@@ -57,7 +60,10 @@ BaraffWitkinOptions parse_baraff_witkin_options(const Params& p, const std::stri
   o.warm_start = r.flag("warm_start");
   // cpu only: a device backend leaves the key unread, so check_unused names the backend that
   // honours it instead of accepting it silently.
-  if (backend == "cpu") o.implicit_self_contact = r.flag("implicit_self_contact");
+  if (backend == "cpu") {
+    o.implicit_self_contact = r.flag("implicit_self_contact");
+    o.implicit_friction = r.flag("implicit_friction");
+  }
   return o;
 }
 
@@ -93,6 +99,7 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
   material_pairs_ = pairs;
   material_pattern_ = *pattern_;
   pattern_rebuilds_ = 0;
+  friction_solves_ = 0;
   self_contact_.reset();
   if (scene.self_collision && options_.implicit_self_contact) {
     self_contact_ = std::make_unique<ImplicitSelfContact>();
@@ -273,6 +280,94 @@ void BaraffWitkin::apply_friction(const Scene& scene) {
   }
 }
 
+// Coulomb friction inside the solve (BaraffWitkinOptions::implicit_friction): a contact vertex
+// that is not landing gets a damper on its velocity relative to the surface in the tangent
+// plane, f = -c P (v1 - v_s), P = I - n n^T: A_ii += h c P, b_i += -h c P (v0 - v_s), with h c
+// from coulomb_damping (self_contact.hpp): the normal impulse of the last solve, the tangential
+// relative speed it gave, and the vertex's mass as its response (exact for a vertex alone or
+// a sheet sliding as one). Returns whether any vertex got a damper.
+bool BaraffWitkin::add_collider_friction(const Scene& scene) {
+  const State& s = scene.state;
+  bool any = false;
+  for (Contact& ct : contacts_) {
+    ct.stick = false;
+    ct.hc = 0;
+    if (ct.landing || (ct.mu_static <= 0 && ct.mu_kinetic <= 0) || !(ct.impulse > 0)) continue;
+    ct.len0 = tangential_speed(s, ct);
+    ct.hc = coulomb_damping(ct.len0, s.mass[ct.vertex], ct.mu_static * ct.impulse, ct.mu_kinetic * ct.impulse,
+                            ct.stick);
+    add_collider_damper(s, ct, ct.hc);
+    any = true;
+  }
+  return any;
+}
+
+double BaraffWitkin::tangential_speed(const State& s, const Contact& ct, double* vt) const {
+  const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
+  double vrel[3];
+  for (int k = 0; k < 3; ++k) vrel[k] = s.v[o + k] + dv_[o + k] - ct.surface_velocity[k];
+  const double vn = vrel[0] * ct.normal[0] + vrel[1] * ct.normal[1] + vrel[2] * ct.normal[2];
+  double t[3];
+  for (int k = 0; k < 3; ++k) t[k] = vrel[k] - vn * ct.normal[k];
+  if (vt)
+    for (int k = 0; k < 3; ++k) vt[k] = t[k];
+  return std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
+}
+
+void BaraffWitkin::add_collider_damper(const State& s, const Contact& ct, double dhc) {
+  const BsrPattern& P = *pattern_;
+  const Index i = ct.vertex;
+  const std::size_t o = 3 * static_cast<std::size_t>(i);
+  double* blk = nullptr;
+  for (Index q = P.row_ptr[i]; q < P.row_ptr[i + 1]; ++q)
+    if (P.col[q] == i) blk = A_.block(q);
+  double w0[3];
+  for (int k = 0; k < 3; ++k) w0[k] = s.v[o + k] - ct.surface_velocity[k];
+  const double w0n = w0[0] * ct.normal[0] + w0[1] * ct.normal[1] + w0[2] * ct.normal[2];
+  for (int r = 0; r < 3; ++r) {
+    b_[o + r] -= dhc * (w0[r] - w0n * ct.normal[r]);
+    for (int q = 0; q < 3; ++q) blk[3 * r + q] += dhc * ((r == q ? 1.0 : 0.0) - ct.normal[r] * ct.normal[q]);
+  }
+}
+
+// After a solve with the dampers: where a vertex's friction impulse h c |v_t(v1)| misses the
+// Coulomb bound (a held vertex above mu_s j, a sliding one off mu_k j) by more than
+// ImplicitSelfContact::kCoulombTolerance, its damper is chosen again with the response
+// D = h c |v_t(v1)| / (len0 - |v_t(v1)|) the solve showed (its neighbours' pull included).
+bool BaraffWitkin::correct_collider_friction(const Scene& scene) {
+  const State& s = scene.state;
+  constexpr double tol = ImplicitSelfContact::kCoulombTolerance;
+  bool changed = false;
+  for (Contact& ct : contacts_) {
+    if (ct.hc == 0) continue;
+    const double l1 = tangential_speed(s, ct);
+    const double impulse = ct.hc * l1;
+    const double ms = ct.mu_static * ct.impulse, mk = ct.mu_kinetic * ct.impulse;
+    if (ct.stick ? impulse <= ms * (1 + tol) : std::abs(impulse - mk) <= tol * mk) continue;
+    const double D = ct.len0 > l1 && l1 > 0 ? impulse / (ct.len0 - l1) : s.mass[ct.vertex];
+    bool stick = false;
+    const double hc = coulomb_damping(ct.len0, D, ms, mk, stick);
+    if (ct.stick && stick) continue;
+    add_collider_damper(s, ct, hc - ct.hc);
+    ct.hc = hc;
+    ct.stick = stick;
+    changed = true;
+  }
+  return changed;
+}
+
+// After the last solve: a vertex held by static friction loses the tangential velocity the
+// finite damper leaves (about 1/kStickDamping of its slip without friction).
+void BaraffWitkin::finish_collider_friction(const Scene& scene) {
+  const State& s = scene.state;
+  for (const Contact& ct : contacts_) {
+    if (!ct.stick) continue;
+    double vt[3];
+    tangential_speed(s, ct, vt);
+    for (int k = 0; k < 3; ++k) dv_[3 * static_cast<std::size_t>(ct.vertex) + k] -= vt[k];
+  }
+}
+
 // A vertex that landed during the step arrives on the surface with its approach velocity
 // (the one that closed the gap). The impact is inelastic: at the end of the step its normal
 // velocity becomes the surface's, as resolve_contacts does for the explicit integrators, so
@@ -410,11 +505,40 @@ struct BaraffWitkin::StepOps {
       if (mf) scene.solver->set_extra_operator(nullptr);
       sst.solve_seconds = thread_seconds() - ts;
     }
+    if (ok && bw.options_.implicit_friction) ok = friction_solve(h, solve_once);
+    return ok;
+  }
+  // Friction inside the solve: the contacts' tangential dampers join A and b (the springs of
+  // the self-contacts stay) and the step is solved once more.
+  template <class F>
+  bool friction_solve(double h, F&& solve_once) {
+    State& s = scene.state;
+    const bool col = !bw.contacts_.empty() && bw.add_collider_friction(scene);
+    const bool self = bw.self_contact_ && !bw.self_contact_->contacts().empty() &&
+                      bw.self_contact_->add_friction(s, bw.A_, bw.b_, bw.dv_, h);
+    if (!col && !self) return true;
+    const bool mf = bw.self_contact_ && bw.self_contact_->matrix_free() && !bw.self_contact_->contacts().empty();
+    if (mf) scene.solver->set_extra_operator(bw.self_contact_.get());
+    bool ok = solve_once();
+    ++bw.friction_solves_;
+    for (int r = 1; ok && r < ImplicitSelfContact::kFrictionSolves; ++r) {
+      // (both corrected before the next solve: no short-circuit)
+      const bool c1 = col && bw.correct_collider_friction(scene);
+      const bool c2 = self && bw.self_contact_->correct_friction(s, bw.A_, bw.b_, bw.dv_);
+      if (!c1 && !c2) break;
+      ok = solve_once();
+      ++bw.friction_solves_;
+    }
+    if (mf) scene.solver->set_extra_operator(nullptr);
+    if (ok && col) bw.finish_collider_friction(scene);
+    if (ok && self) bw.self_contact_->finish_friction(s, bw.dv_);
     return ok;
   }
   void after_solve(double h) {
-    if (!bw.contacts_.empty()) bw.apply_friction(scene);
-    if (bw.self_contact_) bw.self_contact_->apply_friction(scene.state, bw.dv_, h);
+    if (!bw.options_.implicit_friction) {
+      if (!bw.contacts_.empty()) bw.apply_friction(scene);
+      if (bw.self_contact_) bw.self_contact_->apply_friction(scene.state, bw.dv_, h);
+    }
     bw.record_pin_forces(scene, h);
   }
   void update(double h) {
@@ -437,7 +561,10 @@ struct BaraffWitkin::StepOps {
     // Moving pins: x0 + h v1 equals p(t + h) up to rounding; store it exactly.
     scene.pins.apply_positions(s, bw.t0_ + h);
     if (!bw.contacts_.empty()) bw.stop_landed(scene);
-    if (bw.self_contact_) bw.self_contact_->stop_approach(s);
+    if (bw.self_contact_) {
+      bw.self_contact_->clear_friction();
+      bw.self_contact_->stop_approach(s);
+    }
     if (!bw.in_contact_.empty()) {
       std::fill(bw.in_contact_.begin(), bw.in_contact_.end(), 0);
       for (const Contact& ct : bw.contacts_) bw.in_contact_[ct.vertex] = 1;

@@ -31,6 +31,10 @@ struct BaraffWitkinOptions {
   int max_halvings = 3;          ///< nesting depth of halve_step retries
   bool warm_start = true;        ///< start each solve from the previous step's dv
   bool implicit_self_contact = true;  ///< self-contacts as springs in the solve (self_contact.hpp)
+  /// Coulomb friction of collider contacts and self-contact springs as tangential dampers in
+  /// one more solve (add_collider_friction, ImplicitSelfContact::add_friction) instead of a
+  /// velocity correction after the solve (docs/CONTACT.md, "Friction inside the solve").
+  bool implicit_friction = true;
 };
 
 /// The keys of baraff_witkin (cpu and cuda): kang_cho_damping, rayleigh {alpha, beta},
@@ -72,6 +76,8 @@ class BaraffWitkin final : public Integrator {
   /// implicit_self_contact is on), and how often the pattern was extended for them.
   const ImplicitSelfContact* self_contact() const { return self_contact_.get(); }
   int pattern_rebuilds() const { return pattern_rebuilds_; }
+  /// Solves with friction dampers since prepare() (implicit_friction).
+  long long friction_solves() const { return friction_solves_; }
   /// Whether the self-contact springs are applied matrix-free by the solver (it supports an
   /// ExtraOperator: filtered_pcg on the CPU, every preconditioner); else they are assembled into A.
   bool self_contact_matrix_free() const { return self_contact_ && self_contact_->matrix_free(); }
@@ -84,6 +90,12 @@ class BaraffWitkin final : public Integrator {
   void set_constraints(const Scene& scene, double h);
   bool release_pulling_contacts(const Scene& scene, double h);
   void apply_friction(const Scene& scene);
+  bool add_collider_friction(const Scene& scene);
+  bool correct_collider_friction(const Scene& scene);
+  void finish_collider_friction(const Scene& scene);
+  struct Contact;
+  double tangential_speed(const State& s, const Contact& ct, double* vt = nullptr) const;
+  void add_collider_damper(const State& s, const Contact& ct, double dhc);
   void project_positions(Scene& scene, double t);
   void record_pin_forces(Scene& scene, double h);
   void stop_landed(Scene& scene);
@@ -107,6 +119,9 @@ class BaraffWitkin final : public Integrator {
     double dvn;      // prescribed normal velocity change (z = dvn * normal)
     double impulse;  // normal constraint impulse (A dv - b).n after the solve (>= 0 when pushing)
     bool landing;    // outside the surface at the step start: lands at its end, no friction
+    bool stick;      // implicit friction: held by static friction
+    double hc;       // implicit friction: h c of the tangential damper (kg), 0 when none
+    double len0;     // implicit friction: tangential relative speed of the solve without it (m/s)
   };
   std::vector<Contact> contacts_;   // capacity reserved in prepare()
   std::vector<char> in_contact_;    // per vertex: constrained by a collider at the end of the last step
@@ -118,6 +133,7 @@ class BaraffWitkin final : public Integrator {
   BsrPattern material_pattern_;                      // the material's blocks (pattern_ may hold more)
   std::vector<std::array<Index, 2>> material_pairs_, pattern_pairs_;
   int pattern_rebuilds_ = 0;
+  long long friction_solves_ = 0;
   BsrMatrix dfdx_, dfdv_, A_;
   Filter S_;
   std::vector<double> degree_;           // graph-Laplacian diagonal n_i

@@ -82,6 +82,10 @@ bool ImplicitSelfContact::find(SelfCollision& sc, const State& s, const std::vec
     c.lambda = 0;
     c.c1 = 0;
     c.touching = p.distance < th * (1 + kTouchingTolerance);
+    c.stick = false;
+    c.fr = 0;
+    c.len0 = 0;
+    c.jn = 0;
     if (matrix_free_) {  // the solver applies the term: no blocks needed
       std::fill(std::begin(c.blk), std::end(c.blk), Index{-1});
       contacts_.push_back(c);
@@ -201,6 +205,17 @@ void ImplicitSelfContact::apply_add(const double* x, double* y, double scale) co
       const double q = t * c.w[a];
       for (int k = 0; k < 3; ++k) ya[k] += q * c.n[k];
     }
+    if (c.fr == 0) continue;
+    // The friction damper: y_a += scale h c w_a P (sum_b w_b x_b).
+    double u[3] = {0, 0, 0};
+    for (int b = 0; b < 4; ++b)
+      for (int k = 0; k < 3; ++k) u[k] += c.w[b] * x[3 * static_cast<std::size_t>(c.v[b]) + k];
+    const double un = dot3(u, c.n);
+    for (int k = 0; k < 3; ++k) u[k] = scale * c.fr * (u[k] - un * c.n[k]);
+    for (int a = 0; a < 4; ++a) {
+      double* ya = &y[3 * static_cast<std::size_t>(c.v[a])];
+      for (int k = 0; k < 3; ++k) ya[k] += c.w[a] * u[k];
+    }
   }
 }
 
@@ -210,8 +225,9 @@ void ImplicitSelfContact::add_diagonal(double* D) const {
     for (int a = 0; a < 4; ++a) {
       double* Da = &D[9 * static_cast<std::size_t>(c.v[a])];
       const double s = hh * c.k * c.w[a] * c.w[a];
+      const double f = c.fr * c.w[a] * c.w[a];
       for (int r = 0; r < 3; ++r)
-        for (int q = 0; q < 3; ++q) Da[3 * r + q] += s * c.n[r] * c.n[q];
+        for (int q = 0; q < 3; ++q) Da[3 * r + q] += (s - f) * c.n[r] * c.n[q] + (r == q ? f : 0.0);
     }
 }
 
@@ -269,6 +285,118 @@ void ImplicitSelfContact::apply_friction(const State& s, std::vector<double>& dv
       for (int k = 0; k < 3; ++k) dv[3 * static_cast<std::size_t>(c.v[a]) + k] += q * vt[k];
     }
     ++stats_.friction;
+  }
+}
+
+namespace {
+// dA = dhc w_a w_b P on the contact's blocks (assembled), db_a = -dhc w_a P u0.
+void add_damper(const ImplicitSelfContact::Contact& c, double dhc, const State& s, BsrMatrix& A,
+                std::vector<double>& b, bool matrix_free) {
+  double u0[3] = {0, 0, 0};
+  for (int a = 0; a < 4; ++a)
+    for (int k = 0; k < 3; ++k) u0[k] += c.w[a] * s.v[3 * static_cast<std::size_t>(c.v[a]) + k];
+  const double u0n = dot3(u0, c.n);
+  double pu[3];
+  for (int k = 0; k < 3; ++k) pu[k] = u0[k] - u0n * c.n[k];
+  for (int aa = 0; aa < 4; ++aa) {
+    double* ba = &b[3 * static_cast<std::size_t>(c.v[aa])];
+    for (int k = 0; k < 3; ++k) ba[k] -= dhc * c.w[aa] * pu[k];
+    if (matrix_free) continue;
+    for (int bb = 0; bb < 4; ++bb) {
+      double* blk = A.block(c.blk[4 * aa + bb]);
+      const double q = dhc * c.w[aa] * c.w[bb];
+      for (int r = 0; r < 3; ++r)
+        for (int p = 0; p < 3; ++p) blk[3 * r + p] += q * ((r == p ? 1.0 : 0.0) - c.n[r] * c.n[p]);
+    }
+  }
+}
+// |u_t| of the pair at v + dv.
+double tangential_speed(const ImplicitSelfContact::Contact& c, const State& s, const std::vector<double>& dv,
+                        double* ut = nullptr) {
+  double u[3] = {0, 0, 0};
+  for (int a = 0; a < 4; ++a) {
+    const std::size_t o = 3 * static_cast<std::size_t>(c.v[a]);
+    for (int k = 0; k < 3; ++k) u[k] += c.w[a] * (s.v[o + k] + dv[o + k]);
+  }
+  const double un = dot3(u, c.n);
+  double t[3];
+  for (int k = 0; k < 3; ++k) t[k] = u[k] - un * c.n[k];
+  if (ut)
+    for (int k = 0; k < 3; ++k) ut[k] = t[k];
+  return std::sqrt(dot3(t, t));
+}
+}  // namespace
+
+double coulomb_damping(double len, double D, double mus_Jn, double muk_Jn, bool& stick) {
+  const double hold = ImplicitSelfContact::kStickDamping * D;
+  if (D * len <= mus_Jn) {
+    stick = true;
+    return hold;
+  }
+  stick = false;
+  return std::min(hold, muk_Jn * D / (D * len - muk_Jn));
+}
+
+bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector<double>& b,
+                                       const std::vector<double>& dv, double h) {
+  if (friction_ <= 0) return false;
+  bool any = false;
+  for (Contact& c : contacts_) {
+    c.fr = 0;
+    c.stick = false;
+    double u1[3] = {0, 0, 0};
+    for (int a = 0; a < 4; ++a) {
+      const std::size_t o = 3 * static_cast<std::size_t>(c.v[a]);
+      for (int k = 0; k < 3; ++k) u1[k] += c.w[a] * (s.v[o + k] + dv[o + k]);
+    }
+    c.c1 = c.gap0 - c.rest + h * dot3(u1, c.n);
+    if (!c.touching || c.c1 >= 0 || !(c.W > 0)) continue;
+    c.jn = h * c.k * -c.c1;
+    c.len0 = tangential_speed(c, s, dv);
+    const double mj = friction_ * c.jn;
+    c.fr = coulomb_damping(c.len0, 1.0 / c.W, mj, mj, c.stick);
+    ++stats_.friction;
+    any = true;
+    add_damper(c, c.fr, s, A, b, matrix_free_);
+  }
+  return any;
+}
+
+bool ImplicitSelfContact::correct_friction(const State& s, BsrMatrix& A, std::vector<double>& b,
+                                           const std::vector<double>& dv) {
+  bool changed = false;
+  for (Contact& c : contacts_) {
+    if (c.fr == 0) continue;
+    const double l1 = tangential_speed(c, s, dv);
+    const double mj = friction_ * c.jn;
+    const double impulse = c.fr * l1;  // the damper's friction impulse (N s)
+    // Within the bound: a held pair (static friction may take any impulse up to mu J), or a
+    // sliding one at mu J.
+    if (c.stick ? impulse <= mj * (1 + kCoulombTolerance) : std::abs(impulse - mj) <= kCoulombTolerance * mj) continue;
+    const double D = c.len0 > l1 && l1 > 0 ? impulse / (c.len0 - l1) : 1.0 / c.W;
+    bool stick = false;
+    const double fr = coulomb_damping(c.len0, D, mj, mj, stick);
+    if (c.stick && stick) continue;  // (the estimate disagrees with the first: keep holding)
+    add_damper(c, fr - c.fr, s, A, b, matrix_free_);
+    c.fr = fr;
+    c.stick = stick;
+    changed = true;
+  }
+  return changed;
+}
+
+void ImplicitSelfContact::finish_friction(const State& s, std::vector<double>& dv) {
+  for (const Contact& c : contacts_) {
+    if (!c.stick) continue;
+    double ut[3];
+    const double len = tangential_speed(c, s, dv, ut);
+    if (!(len > 0)) continue;
+    const double a = friction_ * c.jn * c.W;
+    const double Jt = std::min(len, a) / (c.W * len);
+    for (int aa = 0; aa < 4; ++aa) {
+      const double q = -c.w[aa] * s.inv_mass[c.v[aa]] * Jt;
+      for (int k = 0; k < 3; ++k) dv[3 * static_cast<std::size_t>(c.v[aa]) + k] += q * ut[k];
+    }
   }
 }
 

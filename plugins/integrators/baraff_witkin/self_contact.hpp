@@ -40,6 +40,14 @@ namespace loom {
 /// CPU time of the calling thread (s), for the counters of one-thread probes.
 double thread_seconds();
 
+/// h c (kg) of a Coulomb friction damper f = -c P u inside the implicit step, for a contact
+/// whose tangential speed without friction is len (m/s), answering a tangential impulse p
+/// with the speed change p / D (D in kg: the mass of a vertex alone), normal impulse Jn
+/// (N s): a contact that static friction holds (D len <= mu_s Jn) gets kStickDamping D and
+/// stick = true; a sliding one the damper with which it loses exactly mu_k Jn / D of its speed:
+/// h c = mu_k Jn D / (D len - mu_k Jn) (then the friction impulse h c |u_t(v1)| is mu_k Jn).
+double coulomb_damping(double len, double D, double mus_Jn, double muk_Jn, bool& stick);
+
 /// As an ExtraOperator (matrix-free, when the scene's solver supports it: filtered_pcg with
 /// any preconditioner, sa_amg included), the springs' term E = h^2 sum_c k_c (w w^T) (x) (n n^T) is
 /// applied inside the solver's product and its diagonal blocks join the preconditioner's, so
@@ -69,6 +77,10 @@ class ImplicitSelfContact final : public ExtraOperator {
     double W;          ///< sum_a w_a^2 / m_a
     double lambda;     ///< accumulated impulse of stop_approach (N s)
     bool touching;     ///< within (1 + kTouchingTolerance) thickness at the step start: friction acts
+    bool stick;        ///< implicit friction: held by static friction (add_friction)
+    double fr;         ///< implicit friction: h c of the tangential damper (kg), 0 when none
+    double len0;       ///< implicit friction: |u_t| of the solve without the damper (m/s)
+    double jn;         ///< implicit friction: the spring's normal impulse h k (-C(x1)) (N s)
     Index blk[16];     ///< positions of blocks (v[a], v[b]) in the pattern, a-major
   };
   struct Stats {
@@ -135,6 +147,34 @@ class ImplicitSelfContact final : public ExtraOperator {
                double h);
   /// Coulomb friction on touching pairs: changes dv.
   void apply_friction(const State& s, std::vector<double>& dv, double h);
+  /// Coulomb friction inside the solve (BaraffWitkinOptions::implicit_friction): for every
+  /// touching pair whose spring pushes after the last solve (C(x1) < 0, normal impulse
+  /// J = h k (-C(x1))), a damper on the relative tangential velocity u = sum_a w_a v_a,
+  /// f_a = -c w_a P u (P = I - n n^T), is added to A (assembled, or through apply_add when
+  /// matrix-free) and b; h c from coulomb_damping with the pair's response D = 1/W (W = sum
+  /// w_a^2 / m_a) and its |u_t| in the last solve. Implicit damping can only take energy out
+  /// of the step, and the cloth around the pair sees the friction in the same solve. Returns
+  /// whether any pair got a damper.
+  bool add_friction(const State& s, BsrMatrix& A, std::vector<double>& b, const std::vector<double>& dv, double h);
+  /// After a solve with the dampers: each pair's friction impulse h c |u_t(v1)| against the
+  /// Coulomb bound; where it misses it by more than kCoulombTolerance, h c is chosen again from
+  /// the response D = h c |u_t(v1)| / (len0 - |u_t(v1)|) the solve showed (coulomb_damping),
+  /// and A, b changed by the difference. Returns whether any damper changed (solve again).
+  bool correct_friction(const State& s, BsrMatrix& A, std::vector<double>& b, const std::vector<double>& dv);
+  /// After the last solve: the pairs held by static friction lose the relative tangential
+  /// velocity the finite damper leaves (about 1/kStickDamping of it), within mu J W.
+  void finish_friction(const State& s, std::vector<double>& dv);
+  /// The step is over: the dampers leave the operator (apply_add, add_diagonal: the springs' term again).
+  void clear_friction() {
+    for (Contact& c : contacts_) c.fr = 0;
+  }
+  /// h c / D of a contact held by static friction: its tangential slip within the step is
+  /// about 1/(1 + this) of the one without friction (finish_friction removes the rest).
+  static constexpr double kStickDamping = 1.0e4;
+  /// Relative miss of the Coulomb bound that makes correct_friction choose a damper again.
+  static constexpr double kCoulombTolerance = 0.01;
+  /// Solves with dampers per step, at most (the first and the corrections).
+  static constexpr int kFrictionSolves = 3;
   /// After the step (x1 = x0 + h v1 has landed the approaching pairs at the thickness, with
   /// v1 still their approach velocity): make every contact inelastic, relative normal velocity
   /// >= 0, by the smallest mass-weighted velocity change (projected Gauss-Seidel on the
