@@ -181,6 +181,7 @@ Outcome run_bw(const ColliderSet& cols, double y0, int steps) {
   loom_cuda_test::tight_pcg(*cpu, *dev);
   BaraffWitkinOptions o;
   o.kang_cho_damping = 0.01;
+  o.implicit_friction = false;  // the device's friction rule: the correction after the solve
   BaraffWitkin ci(o);
   lc::BwOptionsD d;
   d.kang_cho_damping = o.kang_cho_damping;

@@ -35,7 +35,7 @@ const ParamSpec& baraff_witkin_spec() {
         "self-contacts of self_collision as stiff springs inside the implicit solve (docs/CONTACT.md)");
     s.flag("implicit_friction", d.implicit_friction).backends({"cpu"}).help(
         "Coulomb friction of contacts as tangential dampers inside the solve (up to 3 more solves), "
-        "instead of a velocity correction after it (docs/CONTACT.md)");
+        "instead of a velocity correction after it (docs/CONTACT.md; the cuda backend applies the correction after it)");
     declare_device_keys(s);
     return s;
   }();
