@@ -496,7 +496,8 @@ BENCHMARK(BM_BwStepSplit)->Args({64, 40})->Args({128, 12})->Args({256, 2})->Iter
 // integrator's step), amg_setup_ms (hierarchy set-ups and level-0 refreshes; amg_factorizes of
 // them per step, amg_full_setups of the whole hierarchy), iterations (every solve of the step),
 // spring_its (those of the solves with springs), solves (with springs), contacts, pattern_growths;
-// intersections at the end (exact count).
+// intersections at the end (exact count). Last argument: implicit_friction (1, the default:
+// friction inside the solve, up to 3 more solves per step; 0: the correction after it).
 //   OMP_NUM_THREADS=1 LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_BwSaAmgContact
 class AssembledOnly final : public loom::LinearSolver {  // hides set_extra_operator: the integrator assembles
  public:
@@ -521,6 +522,8 @@ void BM_BwSaAmgContact(benchmark::State& st) {
   const int n = static_cast<int>(st.range(0));
   const int mode = static_cast<int>(st.range(1));
   const int steps = static_cast<int>(st.range(2));
+  loom::BaraffWitkinOptions bo;
+  bo.implicit_friction = st.range(3) != 0;  // friction inside the solve (the default) or after it
   omp_set_num_threads(1);
   loom::Simulation::set_notes(false);
   const double h = 2.0e-3;
@@ -541,7 +544,7 @@ void BM_BwSaAmgContact(benchmark::State& st) {
       sc.solver = std::make_unique<AssembledOnly>(std::move(pcg));
     else
       sc.solver = std::move(pcg);
-    loom::BaraffWitkin bw;
+    loom::BaraffWitkin bw(bo);
     bw.prepare(sc, h);
     if (bw.self_contact_matrix_free() != (mode != 0)) {
       st.SkipWithError("the springs' path is not the one asked for");
@@ -588,7 +591,7 @@ void BM_BwSaAmgContact(benchmark::State& st) {
   st.counters["amg_full_setups"] = full_setups / total;  // of the hierarchy (the rest refresh level 0's diagonal)
   st.counters["amg_factorizes"] = factorizes / total;
 }
-BENCHMARK(BM_BwSaAmgContact)->ArgsProduct({{64, 128}, {0, 1, 2}, {12}})->Iterations(1)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_BwSaAmgContact)->ArgsProduct({{64, 128}, {0, 1, 2}, {12}, {1, 0}})->Iterations(1)->Unit(benchmark::kMillisecond);
 
 // The direct solvers with self-contact springs: baraff_witkin + eigen_ldlt (second argument 0)
 // or cholmod (1, when built), one thread, from the draped state, the springs assembled into A
