@@ -518,6 +518,43 @@ class AssembledOnly final : public loom::LinearSolver {  // hides set_extra_oper
   std::unique_ptr<loom::LinearSolver> s_;
 };
 
+// What both contact benches below tally per counted step: thread CPU time of the integrator's
+// step (bw) and of it with the after-step response (step), the step's linear iterations, the
+// self-contact springs' solves, iterations and contacts, pattern growths; intersections at the
+// end (exact count).
+struct BwContactTally {
+  double step_t = 0, bw_t = 0, its = 0, spring_its = 0, solves = 0, contacts = 0, growths = 0, intersections = 0;
+  // One step of `bw` with self-collision's begin_step and resolve around it; tallied when `counted`.
+  void step(loom::Scene& sc, loom::BaraffWitkin& bw, double h, bool counted) {
+    const int g0 = bw.pattern_rebuilds();
+    const double t0 = thread_cpu_seconds();
+    sc.self_collision->begin_step(sc.state);
+    bw.step(sc, h);
+    const double t1 = thread_cpu_seconds();
+    sc.self_collision->resolve(sc.state, h);
+    const double t2 = thread_cpu_seconds();
+    if (!counted) return;
+    step_t += t2 - t0;
+    bw_t += t1 - t0;
+    const auto& c = bw.self_contact()->stats();
+    its += bw.last_step().linear_iterations;
+    spring_its += c.iterations;
+    solves += c.solves;
+    contacts += c.contacts;
+    growths += bw.pattern_rebuilds() - g0;
+  }
+  void report(benchmark::State& st, double total) const {
+    st.counters["step_ms"] = 1e3 * step_t / total;
+    st.counters["bw_ms"] = 1e3 * bw_t / total;
+    st.counters["iterations"] = its / total;
+    st.counters["spring_its"] = spring_its / total;
+    st.counters["solves"] = solves / total;
+    st.counters["contacts"] = contacts / total;
+    st.counters["pattern_growths"] = growths / total;
+    st.counters["intersections"] = intersections;
+  }
+};
+
 void BM_BwSaAmgContact(benchmark::State& st) {
   const int n = static_cast<int>(st.range(0));
   const int mode = static_cast<int>(st.range(1));
@@ -527,8 +564,8 @@ void BM_BwSaAmgContact(benchmark::State& st) {
   omp_set_num_threads(1);
   loom::Simulation::set_notes(false);
   const double h = 2.0e-3;
-  double step_t = 0, bw_t = 0, setup = 0, its = 0, spring_its = 0, solves = 0, contacts = 0, growths = 0;
-  double intersections = 0, full_setups = 0, factorizes = 0;
+  BwContactTally tally;
+  double setup = 0, full_setups = 0, factorizes = 0;
   for (auto _ : st) {
     auto sim = loom::Simulation::from_string(scene(n, "baraff_witkin", true), "bench.yaml", ".", {"threads=1"}, loader());
     omp_set_num_threads(1);
@@ -554,40 +591,19 @@ void BM_BwSaAmgContact(benchmark::State& st) {
       const double s0 = amg->amg() ? amg->amg()->timings().setup : 0.0;
       const int f0 = amg->amg() ? amg->amg()->refreshes() : 0;
       const long c0 = amg->amg() ? amg->amg()->timings().setups : 0;
-      const int g0 = bw.pattern_rebuilds();
-      const double t0 = thread_cpu_seconds();
-      sc.self_collision->begin_step(sc.state);
-      bw.step(sc, h);
-      const double t1 = thread_cpu_seconds();
-      sc.self_collision->resolve(sc.state, h);
-      const double t2 = thread_cpu_seconds();
+      tally.step(sc, bw, h, count);
       if (!count) return;
-      step_t += t2 - t0;
-      bw_t += t1 - t0;
       setup += amg->amg()->timings().setup - s0;
       full_setups += amg->amg()->refreshes() - f0;
       factorizes += static_cast<double>(amg->amg()->timings().setups - c0);
-      const auto& c = bw.self_contact()->stats();
-      its += bw.last_step().linear_iterations;
-      spring_its += c.iterations;
-      solves += c.solves;
-      contacts += c.contacts;
-      growths += bw.pattern_rebuilds() - g0;
     };
     for (int k = 0; k < 2; ++k) one(false);
     for (int k = 0; k < steps; ++k) one(true);
-    intersections = static_cast<double>(loom::count_intersecting_pairs(sc.mesh, sc.state.x));
+    tally.intersections = static_cast<double>(loom::count_intersecting_pairs(sc.mesh, sc.state.x));
   }
   const double total = static_cast<double>(st.iterations()) * steps;
-  st.counters["step_ms"] = 1e3 * step_t / total;
-  st.counters["bw_ms"] = 1e3 * bw_t / total;
+  tally.report(st, total);
   st.counters["amg_setup_ms"] = 1e3 * setup / total;
-  st.counters["iterations"] = its / total;
-  st.counters["spring_its"] = spring_its / total;
-  st.counters["solves"] = solves / total;
-  st.counters["contacts"] = contacts / total;
-  st.counters["pattern_growths"] = growths / total;
-  st.counters["intersections"] = intersections;
   st.counters["amg_full_setups"] = full_setups / total;  // of the hierarchy (the rest refresh level 0's diagonal)
   st.counters["amg_factorizes"] = factorizes / total;
 }
@@ -610,12 +626,11 @@ void BM_BwDirectContact(benchmark::State& st) {
   const int steps = static_cast<int>(st.range(3));
   // contact_max_iterations (default 1000; $LOOM_BENCH_CONTACT_MAXIT overrides it)
   const char* mi = std::getenv("LOOM_BENCH_CONTACT_MAXIT");
-  const int max_its = mi ? std::atoi(mi) : 100;
   omp_set_num_threads(1);
   loom::Simulation::set_notes(false);
   const double h = 2.0e-3;
-  double step_t = 0, bw_t = 0, its = 0, spring_its = 0, solves = 0, contacts = 0, growths = 0, facts = 0;
-  double intersections = 0, max_solve_its = 0;
+  BwContactTally tally;
+  double facts = 0, max_solve_its = 0;
   for (auto _ : st) {
     auto sim = loom::Simulation::from_string(scene(n, "baraff_witkin", true), "bench.yaml", ".", {"threads=1"}, loader());
     omp_set_num_threads(1);
@@ -625,7 +640,7 @@ void BM_BwDirectContact(benchmark::State& st) {
     if (which == 0) {
       loom::LdltOptions o;
       if (factor_pcg) o.contact_springs = "factor_preconditioned_pcg";
-      o.contact_max_iterations = max_its;
+      if (mi) o.contact_max_iterations = std::atoi(mi);
       auto s = std::make_unique<loom::EigenLdlt>(o);
       loom::EigenLdlt* p = s.get();
       count = [p] { return p->numeric_factorizations(); };
@@ -635,7 +650,7 @@ void BM_BwDirectContact(benchmark::State& st) {
       loom::CholmodOptions o;
       o.blas_threads = 1;
       if (factor_pcg) o.contact_springs = "factor_preconditioned_pcg";
-      o.contact_max_iterations = max_its;
+      if (mi) o.contact_max_iterations = std::atoi(mi);
       auto s = std::make_unique<loom::CholmodSolver>(o);
       loom::CholmodSolver* p = s.get();
       count = [p] { return p->numeric_factorizations(); };
@@ -652,40 +667,19 @@ void BM_BwDirectContact(benchmark::State& st) {
       return;
     }
     auto one = [&](bool counted) {
-      const int g0 = bw.pattern_rebuilds();
       const int f0 = count();
-      const double t0 = thread_cpu_seconds();
-      sc.self_collision->begin_step(sc.state);
-      bw.step(sc, h);
-      const double t1 = thread_cpu_seconds();
-      sc.self_collision->resolve(sc.state, h);
-      const double t2 = thread_cpu_seconds();
+      tally.step(sc, bw, h, counted);
       if (!counted) return;
-      step_t += t2 - t0;
-      bw_t += t1 - t0;
       facts += count() - f0;
       max_solve_its = std::max(max_solve_its, static_cast<double>(bw.last_step().linear_iterations));
-      const auto& c = bw.self_contact()->stats();
-      its += bw.last_step().linear_iterations;
-      spring_its += c.iterations;
-      solves += c.solves;
-      contacts += c.contacts;
-      growths += bw.pattern_rebuilds() - g0;
     };
     for (int k = 0; k < 2; ++k) one(false);
     for (int k = 0; k < steps; ++k) one(true);
-    intersections = static_cast<double>(loom::count_intersecting_pairs(sc.mesh, sc.state.x));
+    tally.intersections = static_cast<double>(loom::count_intersecting_pairs(sc.mesh, sc.state.x));
   }
   const double total = static_cast<double>(st.iterations()) * steps;
-  st.counters["step_ms"] = 1e3 * step_t / total;
-  st.counters["bw_ms"] = 1e3 * bw_t / total;
+  tally.report(st, total);
   st.counters["factorizations"] = facts / total;
-  st.counters["iterations"] = its / total;
-  st.counters["spring_its"] = spring_its / total;
-  st.counters["solves"] = solves / total;
-  st.counters["contacts"] = contacts / total;
-  st.counters["pattern_growths"] = growths / total;
-  st.counters["intersections"] = intersections;
   st.counters["max_step_its"] = max_solve_its;  // the most iterations of one step
 }
 BENCHMARK(BM_BwDirectContact)->ArgsProduct({{64, 128}, {0, 1}, {0, 1}, {12}})->Iterations(1)->Unit(benchmark::kMillisecond);

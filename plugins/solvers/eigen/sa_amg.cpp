@@ -113,40 +113,6 @@ inline void row_partial(const BlockMatrix& A, Index k0, Index k1, const double* 
     block_row_multiply3(range, A.ci.data(), val, x, 0, out);
 }
 
-// Inverse of a B x B SPD matrix by Cholesky; false when it is not (numerically) SPD.
-template <int B>
-bool spd_inverse(const double* A, double* Ainv) {
-  double L[B * B] = {};
-  for (int j = 0; j < B; ++j) {
-    double d = A[j * B + j];
-    for (int k = 0; k < j; ++k) d -= L[j * B + k] * L[j * B + k];
-    if (!(d > 0) || !std::isfinite(d)) return false;
-    const double ljj = std::sqrt(d);
-    L[j * B + j] = ljj;
-    for (int i = j + 1; i < B; ++i) {
-      double s = 0.5 * (A[i * B + j] + A[j * B + i]);
-      for (int k = 0; k < j; ++k) s -= L[i * B + k] * L[j * B + k];
-      L[i * B + j] = s / ljj;
-    }
-  }
-  // W = L^-1 (lower triangular), Ainv = W^T W.
-  double W[B * B] = {};
-  for (int c = 0; c < B; ++c) {
-    for (int i = c; i < B; ++i) {
-      double s = (i == c) ? 1.0 : 0.0;
-      for (int k = c; k < i; ++k) s -= L[i * B + k] * W[k * B + c];
-      W[i * B + c] = s / L[i * B + i];
-    }
-  }
-  for (int i = 0; i < B; ++i)
-    for (int j = 0; j < B; ++j) {
-      double s = 0;
-      for (int k = std::max(i, j); k < B; ++k) s += W[k * B + i] * W[k * B + j];
-      Ainv[i * B + j] = s;
-    }
-  return true;
-}
-
 // Lower Cholesky factor L (row-major, upper part zero) of a B x B SPD block; false when it is
 // not (numerically) positive definite.
 template <int B>
@@ -164,6 +130,29 @@ bool cholesky(const double* A, double* L) {
       L[i * B + j] = s / ljj;
     }
   }
+  return true;
+}
+
+// Inverse of a B x B SPD matrix by Cholesky; false when it is not (numerically) SPD.
+template <int B>
+bool spd_inverse(const double* A, double* Ainv) {
+  double L[B * B];
+  if (!cholesky<B>(A, L)) return false;
+  // W = L^-1 (lower triangular), Ainv = W^T W.
+  double W[B * B] = {};
+  for (int c = 0; c < B; ++c) {
+    for (int i = c; i < B; ++i) {
+      double s = (i == c) ? 1.0 : 0.0;
+      for (int k = c; k < i; ++k) s -= L[i * B + k] * W[k * B + c];
+      W[i * B + c] = s / L[i * B + i];
+    }
+  }
+  for (int i = 0; i < B; ++i)
+    for (int j = 0; j < B; ++j) {
+      double s = 0;
+      for (int k = std::max(i, j); k < B; ++k) s += W[k * B + i] * W[k * B + j];
+      Ainv[i * B + j] = s;
+    }
   return true;
 }
 
