@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "loom/factor_pcg.hpp"
 #include "loom/linear_solver.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
@@ -25,8 +26,8 @@ struct LdltOptions {
   /// solver takes E matrix-free, factors A~ alone (again only when A or S changed) and solves
   /// A + E by the filtered PCG preconditioned with that factor (loom/factor_pcg.hpp).
   std::string contact_springs = "assembled";
-  double contact_tolerance = 1e-10;  ///< that PCG's true relative residual on S (A + E)
-  int contact_max_iterations = 1000;  ///< that PCG's cap; past it the solve fails (clear message)
+  double contact_tolerance = factor_pcg::kDefaultTolerance;  ///< that PCG's true relative residual on S (A + E)
+  int contact_max_iterations = factor_pcg::kDefaultMaxIterations;  ///< that PCG's cap; past it the solve fails (clear message)
 };
 
 /// The keys of eigen_ldlt (pivot_tolerance), read by parse_ldlt_options.

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "loom/factor_pcg.hpp"
 #include "loom/linear_solver.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
@@ -24,8 +25,8 @@ struct CholmodOptions {
   /// assembled | factor_preconditioned_pcg: how an extra operator E (self-contact springs) is
   /// solved; as eigen_ldlt's key of the same name (loom/factor_pcg.hpp).
   std::string contact_springs = "assembled";
-  double contact_tolerance = 1e-10;  ///< factor_preconditioned_pcg: true relative residual on A + E
-  int contact_max_iterations = 1000;  ///< factor_preconditioned_pcg: iterations before the solve fails
+  double contact_tolerance = factor_pcg::kDefaultTolerance;  ///< factor_preconditioned_pcg: true relative residual on A + E
+  int contact_max_iterations = factor_pcg::kDefaultMaxIterations;  ///< factor_preconditioned_pcg: iterations before the solve fails
   /// The keys of cholmod, read by from_params.
   static const ParamSpec& spec();
   static CholmodOptions from_params(const Params& p);
