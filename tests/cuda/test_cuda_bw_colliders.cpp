@@ -72,25 +72,24 @@ std::unique_ptr<Scene> make_scene(const ColliderSet& cols, Cloth cloth, Index nx
 
 struct Compared {
   double err = 0;
+  std::vector<double> x;  // the device's positions at the end
   int contacts = 0;  // vertex contacts the CPU saw, summed over the steps
   int releases = 0;  // steps solved more than once (a contact released), roughly: > 1.6x the first step's iterations
 };
 
-/// The same scene on both backends, Baraff-Witkin with `o`, both solved by filtered_pcg at 1e-13.
+/// The same scene on both backends, Baraff-Witkin with `o` (its friction rule, implicit_friction,
+/// on both), both solved by filtered_pcg at 1e-13.
 Compared compare(const ColliderSet& cols, Cloth cloth, Index nx, double y0, double vy, double h, int steps,
                  const BaraffWitkinOptions& o, bool pin = false) {
   auto cpu = make_scene(cols, cloth, nx, y0, vy, pin);
   auto dev = make_scene(cols, cloth, nx, y0, vy, pin);
   loom_cuda_test::tight_pcg(*cpu, *dev);
-  // The device applies friction as the velocity correction after the solve (implicit_friction
-  // is a cpu key): compare with the cpu backend's same rule.
-  BaraffWitkinOptions oc = o;
-  oc.implicit_friction = false;
-  BaraffWitkin ci(oc);
+  BaraffWitkin ci(o);
   lc::BwOptionsD d;
   d.kang_cho_damping = o.kang_cho_damping;
   d.rayleigh_alpha = o.rayleigh_alpha;
   d.rayleigh_beta = o.rayleigh_beta;
+  d.implicit_friction = o.implicit_friction;
   auto di = lc::make_cuda_baraff_witkin(d, lc::Precision::Double);
   EXPECT_TRUE(ci.handles_contacts());
   EXPECT_TRUE(di->handles_contacts());
@@ -108,6 +107,7 @@ Compared compare(const ColliderSet& cols, Cloth cloth, Index nx, double y0, doub
   }
   EXPECT_DOUBLE_EQ(dev->state.time, cpu->state.time);
   r.err = std::max(rel_diff(dev->state.x, cpu->state.x), rel_diff(dev->state.v, cpu->state.v));
+  r.x = dev->state.x;
   // Nothing left inside a collider on the device.
   for (const Collider& c : cols.colliders()) {
     const Collider::Frame f = c.frame_at(dev->state.time);
@@ -143,10 +143,19 @@ TEST(CudaBwColliders, ShippedDrapedBallGnatvBwMatchesTheCpuBackend) {
   o.kang_cho_damping = scene.child("integrator").child("kang_cho_damping").as_double();
   const double h = scene.child("integrator").child("dt").as_double();
   const double top = -0.35 + 0.3 + 0.004;
-  const Compared r = compare(ball, Cloth::Wool, 20, top + 0.001, -0.3, h, 24, o);
-  EXPECT_LE(r.err, 1e-10);
-  EXPECT_GT(r.contacts, 40);  // vertices in contact over the run (4 at a time near the top)
-  EXPECT_GT(r.releases, 0);
+  // Both friction rules: inside the solve (the default) and the correction after it.
+  std::vector<double> x[2];
+  for (const bool implicit : {true, false}) {
+    SCOPED_TRACE(implicit ? "implicit_friction: true" : "implicit_friction: false");
+    o.implicit_friction = implicit;
+    const Compared r = compare(ball, Cloth::Wool, 20, top + 0.001, -0.3, h, 24, o);
+    EXPECT_LE(r.err, 1e-10);
+    EXPECT_GT(r.contacts, 40);  // vertices in contact over the run (4 at a time near the top)
+    EXPECT_GT(r.releases, 0);
+    x[implicit] = r.x;
+  }
+  // The device honours the choice: the two rules end in different places.
+  EXPECT_GT(rel_diff(x[0], x[1]), 1e-6);
 }
 
 // A tilting plane with friction and a sphere moving up through a pinned mass-spring cloth.
@@ -161,9 +170,16 @@ TEST(CudaBwColliders, MovingPlaneAndSphereMatchTheCpuBackend) {
   BaraffWitkinOptions o;
   o.kang_cho_damping = 0.01;
   o.rayleigh_alpha = 0.1;
-  const Compared r = compare(cols, Cloth::Springs, 12, 0.0, -0.8, 1e-3, 21, o, true);
-  EXPECT_LE(r.err, 1e-10);
-  EXPECT_GT(r.contacts, 40);
+  std::vector<double> x[2];
+  for (const bool implicit : {true, false}) {
+    SCOPED_TRACE(implicit ? "implicit_friction: true" : "implicit_friction: false");
+    o.implicit_friction = implicit;
+    const Compared r = compare(cols, Cloth::Springs, 12, 0.0, -0.8, 1e-3, 21, o, true);
+    EXPECT_LE(r.err, 1e-10);
+    EXPECT_GT(r.contacts, 40);
+    x[implicit] = r.x;
+  }
+  EXPECT_GT(rel_diff(x[0], x[1]), 1e-6);
 }
 
 // What the device still refuses, with the fix: self-collision. (Mesh colliders run on the

@@ -174,17 +174,19 @@ Outcome run_explicit(const ColliderSet& cols, const std::string& which, double y
   return r;
 }
 
-/// Baraff-Witkin on both backends, both solved by filtered_pcg at 1e-13.
-Outcome run_bw(const ColliderSet& cols, double y0, int steps) {
+/// Baraff-Witkin on both backends with the friction rule `implicit` (implicit_friction: inside
+/// the solve, or the correction after it), both solved by filtered_pcg at 1e-13.
+Outcome run_bw(const ColliderSet& cols, double y0, int steps, bool implicit) {
   auto cpu = make_scene(cols, 12, y0, -0.3, 0.1);
   auto dev = make_scene(cols, 12, y0, -0.3, 0.1);
   loom_cuda_test::tight_pcg(*cpu, *dev);
   BaraffWitkinOptions o;
   o.kang_cho_damping = 0.01;
-  o.implicit_friction = false;  // the device's friction rule: the correction after the solve
+  o.implicit_friction = implicit;
   BaraffWitkin ci(o);
   lc::BwOptionsD d;
   d.kang_cho_damping = o.kang_cho_damping;
+  d.implicit_friction = implicit;
   auto di = lc::make_cuda_baraff_witkin(d, lc::Precision::Double);
   const double h = 1e-3;
   ci.prepare(*cpu, h);
@@ -273,17 +275,20 @@ TEST_P(CudaMeshColliders, MatchesTheCpuBackend) {
   const std::string which = std::get<0>(GetParam());
   const Case& cs = kCases[std::get<1>(GetParam())];
   const ColliderSet cols = cs.colliders();
-  const Outcome r = which == "bw" ? run_bw(cols, cs.top - 0.002, 20) : run_explicit(cols, which, cs.top - 0.002, 150);
+  const bool bw = which.rfind("bw", 0) == 0;
+  const Outcome r = bw ? run_bw(cols, cs.top - 0.002, 20, which == "bw")
+                       : run_explicit(cols, which, cs.top - 0.002, 150);
   EXPECT_LE(r.err_x, 1e-10) << cs.name;
   EXPECT_LE(r.err_v, 1e-10) << cs.name;
   // Vertex contacts over the run (measured: explicit 82-6500, Baraff-Witkin 34-79).
-  EXPECT_GT(r.contacts, which == "bw" ? 20 : 50) << cs.name;
+  EXPECT_GT(r.contacts, bw ? 20 : 50) << cs.name;
   std::printf("[ measured ] %s %s: x %.2e v %.2e relative, %d vertex contacts\n", which.c_str(), cs.name, r.err_x,
               r.err_v, r.contacts);
 }
 
 INSTANTIATE_TEST_SUITE_P(IntegratorsAndMeshes, CudaMeshColliders,
-                         ::testing::Combine(::testing::Values("ho", "rk4", "se", "bw"), ::testing::Values(0, 1, 2, 3)),
+                         ::testing::Combine(::testing::Values("ho", "rk4", "se", "bw", "bw_friction_after_solve"),
+                                            ::testing::Values(0, 1, 2, 3)),
                          [](const auto& info) {
                            return std::get<0>(info.param) + "_" + kCases[std::get<1>(info.param)].name;
                          });

@@ -9,6 +9,7 @@
 #include "loom/incidence.hpp"
 #include "loom/kernels/bsr_ops.hpp"
 #include "loom/kernels/bw_assembly.hpp"
+#include "loom/kernels/friction.hpp"
 #include "loom/kernels/ho.hpp"
 #include "loom/kernels/rk4.hpp"
 #include "bw_step.hpp"
@@ -616,6 +617,48 @@ struct BwFrictionKernel {  // Coulomb friction as a velocity correction (contact
   }
 };
 
+// Coulomb friction inside the solve (the CPU's implicit_friction rule, loom/kernels/friction.hpp):
+// one thread per vertex adds, corrects or finishes the tangential damper of its contact; the
+// damper lives in the vertex's own diagonal block and right-hand side, so threads never share
+// a write.
+template <class T>
+struct BwFrictionDamperKernel {
+  int mode;  // 0 the first damper (returns 1 where one was added), 1 a correction (1 where changed), 2 the finish
+  const std::uint8_t* flag;
+  const Index* diag;
+  const T *v, *mass, *normal, *sv, *mus, *muk, *impulse;
+  T *a, *b, *dv, *hc, *len0;
+  std::uint8_t* stick;
+  LOOM_HD int operator()(Index i) const {
+    const long long o = 3LL * i;
+    kernels::ColliderFrictionState<T> fs;
+    if (mode == 0) {
+      bool any = false;
+      if (flag[i] == 1)
+        any = kernels::start_collider_friction(v + o, dv + o, sv + o, normal + o, mass[i], mus[i], muk[i], impulse[i],
+                                               a + 9LL * diag[i], b + o, fs);
+      hc[i] = fs.hc;
+      len0[i] = fs.len0;
+      stick[i] = fs.stick ? 1 : 0;
+      return any ? 1 : 0;
+    }
+    if (hc[i] == T(0)) return 0;
+    fs.hc = hc[i];
+    fs.len0 = len0[i];
+    fs.stick = stick[i] != 0;
+    if (mode == 2) {
+      kernels::finish_collider_friction(v + o, dv + o, sv + o, normal + o, fs);
+      return 0;
+    }
+    if (!kernels::correct_collider_friction(v + o, dv + o, sv + o, normal + o, mass[i], mus[i], muk[i], impulse[i],
+                                            a + 9LL * diag[i], b + o, fs))
+      return 0;
+    hc[i] = fs.hc;
+    stick[i] = fs.stick ? 1 : 0;
+    return 1;
+  }
+};
+
 template <class T>
 struct BwFinishContactsKernel {  // landed vertices stop their approach; in_contact for the next step
   const std::uint8_t* flag;
@@ -684,7 +727,7 @@ class CudaBw final : public Integrator {
     pattern_ = std::make_unique<BsrPattern>(BsrPattern::from_pairs(n, pairs));
     {  // the device arrays below, before any is allocated
       const std::size_t nb = static_cast<std::size_t>(pattern_->nnz_blocks()), nv = static_cast<std::size_t>(n);
-      const std::size_t bytes = sizeof(T) * (27 * nb + 18 * nv + 3 * nv * 12 + 8 * nv) +
+      const std::size_t bytes = sizeof(T) * (27 * nb + 18 * nv + 3 * nv * 12 + 10 * nv) +
                                 sizeof(Index) * (2 * nb + 3 * nv) + explicit_bytes<T>(scene, 0);
       require_device_memory(bytes, scene.source, "baraff_witkin (" + std::to_string(n) + " vertices, " +
                                                      std::to_string(nb) + " matrix blocks)");
@@ -722,6 +765,9 @@ class CudaBw final : public Integrator {
       cmuk_.assign(n, T(0));
       cdvn_.assign(n, T(0));
       cimpulse_.assign(n, T(0));
+      chc_.assign(n, T(0));
+      clen0_.assign(n, T(0));
+      cstick_.assign(n, 0);
       S_.resize(n);
     }
     last_ = {};
@@ -770,10 +816,19 @@ class CudaBw final : public Integrator {
     SolveReport solve() { return bw.pcg_.solve(bw.A_, bw.S_, bw.b_, bw.z_, bw.dv_); }
     void zero_dv() { fill(bw.dv_, T(0)); }
     bool release_pulling_contacts(double) { return bw.release_pulling_contacts(); }
+    // No self-contact on the device; with implicit_friction (default) the contacts' dampers join
+    // A and b and the step is solved again, up to kernels::kFrictionSolves times, as on the CPU.
     template <class F>
-    bool extra_solves(bool ok, double, F&&) { return ok; }  // no self-contact on the device
+    bool extra_solves(bool ok, double, F&& solve_once) {
+      if (!ok || contacts == 0 || !bw.opt_.implicit_friction) return ok;
+      if (bw.friction_dampers(0) == 0) return ok;
+      ok = solve_once();
+      for (int r = 1; ok && r < kernels::kFrictionSolves && bw.friction_dampers(1) > 0; ++r) ok = solve_once();
+      if (ok) bw.friction_dampers(2);
+      return ok;
+    }
     void after_solve(double) {
-      if (contacts > 0)
+      if (contacts > 0 && !bw.opt_.implicit_friction)
         parallel_for(bw.ds_.n, BwFrictionKernel<T>{raw(bw.flag_), raw(bw.ds_.v), raw(bw.ds_.w), raw(bw.cnormal_),
                                                     raw(bw.csv_), raw(bw.cmus_), raw(bw.cmuk_), raw(bw.cimpulse_),
                                                     raw(bw.dv_)});
@@ -828,6 +883,15 @@ class CudaBw final : public Integrator {
     return contacts;
   }
 
+  // The friction dampers of the contacts (BwFrictionDamperKernel's mode); the number of
+  // vertices that got or changed one.
+  int friction_dampers(int mode) {
+    return reduce_sum<int>(ds_.n, BwFrictionDamperKernel<T>{mode, raw(flag_), raw(A_.diag), raw(ds_.v), raw(ds_.mass),
+                                                            raw(cnormal_), raw(csv_), raw(cmus_), raw(cmuk_),
+                                                            raw(cimpulse_), raw(A_.values), raw(b_), raw(dv_),
+                                                            raw(chc_), raw(clen0_), raw(cstick_)});
+  }
+
   // Releases the contacts whose impulse (A dv - b).n is negative; true when any was.
   bool release_pulling_contacts() {
     const int released = reduce_sum<int>(
@@ -854,8 +918,8 @@ class CudaBw final : public Integrator {
   DevicePcg<T> pcg_;
   const ColliderSet* colliders_ = nullptr;
   DeviceMeshes meshes_;
-  DVec<std::uint8_t> pinned_, in_contact_, flag_;
-  DVec<T> cnormal_, csv_, cmus_, cmuk_, cdvn_, cimpulse_;
+  DVec<std::uint8_t> pinned_, in_contact_, flag_, cstick_;
+  DVec<T> cnormal_, csv_, cmus_, cmuk_, cdvn_, cimpulse_, chc_, clen0_;
   double t0_ = 0;  // start time of the (sub)step being solved
   StepStats last_;
 };
@@ -911,6 +975,7 @@ std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p) {
   o.halve_on_failure = c.on_failure == BaraffWitkinOptions::OnFailure::HalveStep;
   o.max_halvings = c.max_halvings;
   o.warm_start = c.warm_start;
+  o.implicit_friction = c.implicit_friction;
   o.host_sync_every = parse_sync_every(p);
   return make_cuda_baraff_witkin(o, parse_precision(p));
 }

@@ -51,6 +51,9 @@ struct BwOptionsD {
   bool halve_on_failure = false;
   int max_halvings = 3;
   bool warm_start = true;
+  /// Coulomb friction of the colliders' contacts as tangential dampers inside the solve (the
+  /// cpu plugin's rule and default); false: the velocity correction after the solve.
+  bool implicit_friction = true;
   int host_sync_every = 1;
 };
 std::unique_ptr<Integrator> make_cuda_baraff_witkin(const BwOptionsD& o, Precision precision);

@@ -33,9 +33,9 @@ const ParamSpec& baraff_witkin_spec() {
     s.flag("warm_start", d.warm_start).help("start each solve from the previous step's dv");
     s.flag("implicit_self_contact", d.implicit_self_contact).backends({"cpu"}).help(
         "self-contacts of self_collision as stiff springs inside the implicit solve (docs/CONTACT.md)");
-    s.flag("implicit_friction", d.implicit_friction).backends({"cpu"}).help(
+    s.flag("implicit_friction", d.implicit_friction).help(
         "Coulomb friction of contacts as tangential dampers inside the solve (up to 3 more solves), "
-        "instead of a velocity correction after it (docs/CONTACT.md; the cuda backend applies the correction after it)");
+        "instead of a velocity correction after it (docs/CONTACT.md; on cuda: the colliders' contacts)");
     declare_device_keys(s);
     return s;
   }();
@@ -60,10 +60,8 @@ BaraffWitkinOptions parse_baraff_witkin_options(const Params& p, const std::stri
   o.warm_start = r.flag("warm_start");
   // cpu only: a device backend leaves the key unread, so check_unused names the backend that
   // honours it instead of accepting it silently.
-  if (backend == "cpu") {
-    o.implicit_self_contact = r.flag("implicit_self_contact");
-    o.implicit_friction = r.flag("implicit_friction");
-  }
+  if (backend == "cpu") o.implicit_self_contact = r.flag("implicit_self_contact");
+  o.implicit_friction = r.flag("implicit_friction");
   return o;
 }
 
@@ -283,75 +281,38 @@ void BaraffWitkin::apply_friction(const Scene& scene) {
 // Coulomb friction inside the solve (BaraffWitkinOptions::implicit_friction): a contact vertex
 // that is not landing gets a damper on its velocity relative to the surface in the tangent
 // plane, f = -c P (v1 - v_s), P = I - n n^T: A_ii += h c P, b_i += -h c P (v0 - v_s), with h c
-// from coulomb_damping (self_contact.hpp): the normal impulse of the last solve, the tangential
-// relative speed it gave, and the vertex's mass as its response (exact for a vertex alone or
-// a sheet sliding as one). Returns whether any vertex got a damper.
+// from coulomb_damping: the normal impulse of the last solve, the tangential relative speed it
+// gave, and the vertex's mass as its response (exact for a vertex alone or a sheet sliding as
+// one). The per-vertex rules are loom/kernels/friction.hpp's, which the CUDA backend runs too.
+// Returns whether any vertex got a damper.
 bool BaraffWitkin::add_collider_friction(const Scene& scene) {
   const State& s = scene.state;
   bool any = false;
   for (Contact& ct : contacts_) {
-    ct.stick = false;
-    ct.hc = 0;
-    if (ct.landing || (ct.mu_static <= 0 && ct.mu_kinetic <= 0) || !(ct.impulse > 0)) continue;
-    ct.len0 = tangential_speed(s, ct);
-    ct.hc = coulomb_damping(ct.len0, s.mass[ct.vertex], ct.mu_static * ct.impulse, ct.mu_kinetic * ct.impulse,
-                            ct.stick);
-    add_collider_damper(s, ct, ct.hc);
-    any = true;
+    const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
+    ct.fr = {};
+    if (ct.landing) continue;
+    any |= kernels::start_collider_friction(&s.v[o], &dv_[o], ct.surface_velocity, ct.normal, s.mass[ct.vertex],
+                                            ct.mu_static, ct.mu_kinetic, ct.impulse, diagonal_block(ct.vertex),
+                                            &b_[o], ct.fr);
   }
   return any;
 }
 
-double BaraffWitkin::tangential_speed(const State& s, const Contact& ct, double* vt) const {
-  const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
-  double vrel[3];
-  for (int k = 0; k < 3; ++k) vrel[k] = s.v[o + k] + dv_[o + k] - ct.surface_velocity[k];
-  const double vn = vrel[0] * ct.normal[0] + vrel[1] * ct.normal[1] + vrel[2] * ct.normal[2];
-  double t[3];
-  for (int k = 0; k < 3; ++k) t[k] = vrel[k] - vn * ct.normal[k];
-  if (vt)
-    for (int k = 0; k < 3; ++k) vt[k] = t[k];
-  return std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
-}
+double* BaraffWitkin::diagonal_block(Index i) { return A_.block(pattern_->diag[i]); }
 
-void BaraffWitkin::add_collider_damper(const State& s, const Contact& ct, double dhc) {
-  const BsrPattern& P = *pattern_;
-  const Index i = ct.vertex;
-  const std::size_t o = 3 * static_cast<std::size_t>(i);
-  double* blk = nullptr;
-  for (Index q = P.row_ptr[i]; q < P.row_ptr[i + 1]; ++q)
-    if (P.col[q] == i) blk = A_.block(q);
-  double w0[3];
-  for (int k = 0; k < 3; ++k) w0[k] = s.v[o + k] - ct.surface_velocity[k];
-  const double w0n = w0[0] * ct.normal[0] + w0[1] * ct.normal[1] + w0[2] * ct.normal[2];
-  for (int r = 0; r < 3; ++r) {
-    b_[o + r] -= dhc * (w0[r] - w0n * ct.normal[r]);
-    for (int q = 0; q < 3; ++q) blk[3 * r + q] += dhc * ((r == q ? 1.0 : 0.0) - ct.normal[r] * ct.normal[q]);
-  }
-}
-
-// After a solve with the dampers: where a vertex's friction impulse h c |v_t(v1)| misses the
-// Coulomb bound (a held vertex above mu_s j, a sliding one off mu_k j) by more than
-// ImplicitSelfContact::kCoulombTolerance, its damper is chosen again with the response
-// D = h c |v_t(v1)| / (len0 - |v_t(v1)|) the solve showed (its neighbours' pull included).
+// After a solve with the dampers: where a vertex's friction impulse misses the Coulomb bound
+// by more than kernels::kCoulombTolerance, its damper is chosen again
+// (kernels::correct_collider_friction). Returns whether any changed (solve again).
 bool BaraffWitkin::correct_collider_friction(const Scene& scene) {
   const State& s = scene.state;
-  constexpr double tol = ImplicitSelfContact::kCoulombTolerance;
   bool changed = false;
   for (Contact& ct : contacts_) {
-    if (ct.hc == 0) continue;
-    const double l1 = tangential_speed(s, ct);
-    const double impulse = ct.hc * l1;
-    const double ms = ct.mu_static * ct.impulse, mk = ct.mu_kinetic * ct.impulse;
-    if (ct.stick ? impulse <= ms * (1 + tol) : std::abs(impulse - mk) <= tol * mk) continue;
-    const double D = ct.len0 > l1 && l1 > 0 ? impulse / (ct.len0 - l1) : s.mass[ct.vertex];
-    bool stick = false;
-    const double hc = coulomb_damping(ct.len0, D, ms, mk, stick);
-    if (ct.stick && stick) continue;
-    add_collider_damper(s, ct, hc - ct.hc);
-    ct.hc = hc;
-    ct.stick = stick;
-    changed = true;
+    const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
+    if (ct.fr.hc == 0) continue;
+    changed |= kernels::correct_collider_friction(&s.v[o], &dv_[o], ct.surface_velocity, ct.normal,
+                                                  s.mass[ct.vertex], ct.mu_static, ct.mu_kinetic, ct.impulse,
+                                                  diagonal_block(ct.vertex), &b_[o], ct.fr);
   }
   return changed;
 }
@@ -361,10 +322,8 @@ bool BaraffWitkin::correct_collider_friction(const Scene& scene) {
 void BaraffWitkin::finish_collider_friction(const Scene& scene) {
   const State& s = scene.state;
   for (const Contact& ct : contacts_) {
-    if (!ct.stick) continue;
-    double vt[3];
-    tangential_speed(s, ct, vt);
-    for (int k = 0; k < 3; ++k) dv_[3 * static_cast<std::size_t>(ct.vertex) + k] -= vt[k];
+    const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
+    kernels::finish_collider_friction(&s.v[o], &dv_[o], ct.surface_velocity, ct.normal, ct.fr);
   }
 }
 

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "loom/bsr.hpp"
+#include "loom/kernels/friction.hpp"
 #include "loom/integrator.hpp"
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
@@ -94,8 +95,7 @@ class BaraffWitkin final : public Integrator {
   bool correct_collider_friction(const Scene& scene);
   void finish_collider_friction(const Scene& scene);
   struct Contact;
-  double tangential_speed(const State& s, const Contact& ct, double* vt = nullptr) const;
-  void add_collider_damper(const State& s, const Contact& ct, double dhc);
+  double* diagonal_block(Index i);  ///< A_'s block (i, i)
   void project_positions(Scene& scene, double t);
   void record_pin_forces(Scene& scene, double h);
   void stop_landed(Scene& scene);
@@ -119,9 +119,7 @@ class BaraffWitkin final : public Integrator {
     double dvn;      // prescribed normal velocity change (z = dvn * normal)
     double impulse;  // normal constraint impulse (A dv - b).n after the solve (>= 0 when pushing)
     bool landing;    // outside the surface at the step start: lands at its end, no friction
-    bool stick;      // implicit friction: held by static friction
-    double hc;       // implicit friction: h c of the tangential damper (kg), 0 when none
-    double len0;     // implicit friction: tangential relative speed of the solve without it (m/s)
+    kernels::ColliderFrictionState<double> fr;  // implicit friction: the damper (h c 0 when none)
   };
   std::vector<Contact> contacts_;   // capacity reserved in prepare()
   std::vector<char> in_contact_;    // per vertex: constrained by a collider at the end of the last step

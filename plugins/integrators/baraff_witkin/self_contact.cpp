@@ -327,16 +327,6 @@ double tangential_speed(const ImplicitSelfContact::Contact& c, const State& s, c
 }
 }  // namespace
 
-double coulomb_damping(double len, double D, double mus_Jn, double muk_Jn, bool& stick) {
-  const double hold = ImplicitSelfContact::kStickDamping * D;
-  if (D * len <= mus_Jn) {
-    stick = true;
-    return hold;
-  }
-  stick = false;
-  return std::min(hold, muk_Jn * D / (D * len - muk_Jn));
-}
-
 bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector<double>& b,
                                        const std::vector<double>& dv, double h) {
   if (friction_ <= 0) return false;

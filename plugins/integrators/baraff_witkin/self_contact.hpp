@@ -30,6 +30,7 @@
 
 #include "loom/bsr.hpp"
 #include "loom/common.hpp"
+#include "loom/kernels/friction.hpp"
 #include "loom/linear_solver.hpp"
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
@@ -40,13 +41,9 @@ namespace loom {
 /// CPU time of the calling thread (s), for the counters of one-thread probes.
 double thread_seconds();
 
-/// h c (kg) of a Coulomb friction damper f = -c P u inside the implicit step, for a contact
-/// whose tangential speed without friction is len (m/s), answering a tangential impulse p
-/// with the speed change p / D (D in kg: the mass of a vertex alone), normal impulse Jn
-/// (N s): a contact that static friction holds (D len <= mu_s Jn) gets kStickDamping D and
-/// stick = true; a sliding one the damper with which it loses exactly mu_k Jn / D of its speed:
-/// h c = mu_k Jn D / (D len - mu_k Jn) (then the friction impulse h c |u_t(v1)| is mu_k Jn).
-double coulomb_damping(double len, double D, double mus_Jn, double muk_Jn, bool& stick);
+/// h c of a Coulomb friction damper: loom/kernels/friction.hpp (one source with the colliders'
+/// friction and the CUDA backend).
+using kernels::coulomb_damping;
 
 /// As an ExtraOperator (matrix-free, when the scene's solver supports it: filtered_pcg with
 /// any preconditioner, sa_amg included), the springs' term E = h^2 sum_c k_c (w w^T) (x) (n n^T) is
@@ -168,13 +165,12 @@ class ImplicitSelfContact final : public ExtraOperator {
   void clear_friction() {
     for (Contact& c : contacts_) c.fr = 0;
   }
-  /// h c / D of a contact held by static friction: its tangential slip within the step is
-  /// about 1/(1 + this) of the one without friction (finish_friction removes the rest).
-  static constexpr double kStickDamping = 1.0e4;
-  /// Relative miss of the Coulomb bound that makes correct_friction choose a damper again.
-  static constexpr double kCoulombTolerance = 0.01;
-  /// Solves with dampers per step, at most (the first and the corrections).
-  static constexpr int kFrictionSolves = 3;
+  /// The friction constants (loom/kernels/friction.hpp): h c / D of a held contact, the
+  /// relative miss of the Coulomb bound that makes correct_friction choose a damper again, and
+  /// the solves with dampers per step, at most.
+  static constexpr double kStickDamping = kernels::kStickDamping;
+  static constexpr double kCoulombTolerance = kernels::kCoulombTolerance;
+  static constexpr int kFrictionSolves = kernels::kFrictionSolves;
   /// After the step (x1 = x0 + h v1 has landed the approaching pairs at the thickness, with
   /// v1 still their approach velocity): make every contact inelastic, relative normal velocity
   /// >= 0, by the smallest mass-weighted velocity change (projected Gauss-Seidel on the

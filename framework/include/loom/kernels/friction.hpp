@@ -1,0 +1,130 @@
+// Coulomb friction of a collider contact inside the implicit (Baraff-Witkin) step, per vertex:
+// a damper on the vertex's velocity relative to the surface in the tangent plane,
+// f = -c P (v1 - v_s), P = I - n n^T, whose h c is chosen so that the friction impulse meets
+// Coulomb's bound (coulomb_damping), corrected after a solve where the bound is missed, and a
+// vertex held by static friction finished after the last solve (docs/CONTACT.md, "Friction
+// inside the solve"). Header-only and LOOM_HD: the CPU plugin (baraff_witkin.cpp, whose
+// self-contacts use coulomb_damping too) and the CUDA backend run this one source. Templated
+// on the scalar.
+#pragma once
+
+#include <cmath>
+
+#include "loom/common.hpp"
+
+namespace loom::kernels {
+
+/// h c / D of a contact held by static friction: its tangential slip within the step is
+/// about 1/(1 + this) of the one without friction (the finish removes the rest).
+inline constexpr double kStickDamping = 1.0e4;
+/// Relative miss of the Coulomb bound that makes a correction choose a damper again.
+inline constexpr double kCoulombTolerance = 0.01;
+/// Solves with dampers per step, at most (the first and the corrections).
+inline constexpr int kFrictionSolves = 3;
+
+/// h c (kg) of a Coulomb friction damper f = -c P u inside the implicit step, for a contact
+/// whose tangential speed without friction is len (m/s), answering a tangential impulse p
+/// with the speed change p / D (D in kg: the mass of a vertex alone), normal impulse Jn
+/// (N s): a contact that static friction holds (D len <= mu_s Jn) gets kStickDamping D and
+/// stick = true; a sliding one the damper with which it loses exactly mu_k Jn / D of its speed:
+/// h c = mu_k Jn D / (D len - mu_k Jn) (then the friction impulse h c |u_t(v1)| is mu_k Jn).
+template <class T>
+LOOM_HD inline T coulomb_damping(T len, T D, T mus_Jn, T muk_Jn, bool& stick) {
+  const T hold = static_cast<T>(kStickDamping) * D;
+  if (D * len <= mus_Jn) {
+    stick = true;
+    return hold;
+  }
+  stick = false;
+  const T slide = muk_Jn * D / (D * len - muk_Jn);
+  return slide < hold ? slide : hold;
+}
+
+/// |v + dv - vs| in the tangent plane of the unit normal n (m/s); its vector in vt when given.
+template <class T>
+LOOM_HD inline T tangential_speed(const T* v, const T* dv, const T* vs, const T* n, T* vt = nullptr) {
+  T vrel[3];
+  for (int k = 0; k < 3; ++k) vrel[k] = v[k] + dv[k] - vs[k];
+  const T vn = vrel[0] * n[0] + vrel[1] * n[1] + vrel[2] * n[2];
+  T t[3];
+  for (int k = 0; k < 3; ++k) t[k] = vrel[k] - vn * n[k];
+  if (vt)
+    for (int k = 0; k < 3; ++k) vt[k] = t[k];
+  using std::sqrt;
+  return sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
+}
+
+/// Adds the damper dhc P to the vertex's diagonal block (row-major 3x3) and its right-hand
+/// side -dhc P (v0 - vs) to b (3 values), v0 the velocity at the step start.
+template <class T>
+LOOM_HD inline void add_tangential_damper(const T* v0, const T* vs, const T* n, T dhc, T* blk, T* b) {
+  T w0[3];
+  for (int k = 0; k < 3; ++k) w0[k] = v0[k] - vs[k];
+  const T w0n = w0[0] * n[0] + w0[1] * n[1] + w0[2] * n[2];
+  for (int r = 0; r < 3; ++r) {
+    b[r] -= dhc * (w0[r] - w0n * n[r]);
+    for (int q = 0; q < 3; ++q) blk[3 * r + q] += dhc * ((r == q ? T(1) : T(0)) - n[r] * n[q]);
+  }
+}
+
+/// The friction state of one collider contact inside a step.
+template <class T>
+struct ColliderFrictionState {
+  T hc = 0;      ///< h c of the damper (kg), 0 when none
+  T len0 = 0;    ///< tangential relative speed of the solve without it (m/s)
+  bool stick = false;  ///< held by static friction
+};
+
+/// The first damper of a contact in contact (not landing) whose last solve left the normal
+/// impulse `impulse` (N s) > 0: len0 from v + dv, h c from coulomb_damping with the vertex's
+/// mass as its response; added to blk and b. Returns false (and h c = 0) when the contact
+/// gets no friction (no coefficient, or not pushing).
+template <class T>
+LOOM_HD inline bool start_collider_friction(const T* v0, const T* dv, const T* vs, const T* n, T mass, T mu_s, T mu_k,
+                                            T impulse, T* blk, T* b, ColliderFrictionState<T>& fs) {
+  fs.stick = false;
+  fs.hc = T(0);
+  if ((mu_s <= T(0) && mu_k <= T(0)) || !(impulse > T(0))) return false;
+  fs.len0 = tangential_speed(v0, dv, vs, n);
+  fs.hc = coulomb_damping(fs.len0, mass, mu_s * impulse, mu_k * impulse, fs.stick);
+  add_tangential_damper(v0, vs, n, fs.hc, blk, b);
+  return true;
+}
+
+/// After a solve with the damper: where the friction impulse h c |v_t(v1)| misses the Coulomb
+/// bound (a held vertex above mu_s J, a sliding one off mu_k J) by more than kCoulombTolerance,
+/// the damper is chosen again with the response D = h c |v_t(v1)| / (len0 - |v_t(v1)|) the
+/// solve showed (its neighbours' pull included) and blk, b change by the difference. Returns
+/// whether it changed (solve again).
+template <class T>
+LOOM_HD inline bool correct_collider_friction(const T* v0, const T* dv, const T* vs, const T* n, T mass, T mu_s,
+                                              T mu_k, T impulse_n, T* blk, T* b, ColliderFrictionState<T>& fs) {
+  if (fs.hc == T(0)) return false;
+  const T tol = static_cast<T>(kCoulombTolerance);
+  const T l1 = tangential_speed(v0, dv, vs, n);
+  const T impulse = fs.hc * l1;
+  const T ms = mu_s * impulse_n, mk = mu_k * impulse_n;
+  const T miss = impulse > mk ? impulse - mk : mk - impulse;
+  if (fs.stick ? impulse <= ms * (T(1) + tol) : miss <= tol * mk) return false;
+  const T D = fs.len0 > l1 && l1 > T(0) ? impulse / (fs.len0 - l1) : mass;
+  bool stick = false;
+  const T hc = coulomb_damping(fs.len0, D, ms, mk, stick);
+  if (fs.stick && stick) return false;
+  add_tangential_damper(v0, vs, n, hc - fs.hc, blk, b);
+  fs.hc = hc;
+  fs.stick = stick;
+  return true;
+}
+
+/// After the last solve: a vertex held by static friction loses the tangential velocity the
+/// finite damper leaves (about 1/kStickDamping of its slip without friction).
+template <class T>
+LOOM_HD inline void finish_collider_friction(const T* v0, T* dv, const T* vs, const T* n,
+                                             const ColliderFrictionState<T>& fs) {
+  if (!fs.stick) return;
+  T vt[3];
+  tangential_speed(v0, dv, vs, n, vt);
+  for (int k = 0; k < 3; ++k) dv[k] -= vt[k];
+}
+
+}  // namespace loom::kernels
