@@ -6,6 +6,7 @@ namespace loom {
 
 ThreadController::ThreadController(int initial, int max_threads, Config cfg) : cfg_(cfg) {
   cfg_.samples = std::clamp(cfg_.samples, 1, kMaxSamples);
+  cfg_.max_sample_steps = std::max(1, cfg_.max_sample_steps);
   max_threads = std::max(1, max_threads);
   initial = std::clamp(initial, 1, max_threads);
   for (const int c : {initial, 1, max_threads})
@@ -35,7 +36,7 @@ void ThreadController::record(double t) {
   if (probing_) probe_loss_ += t - baseline_;
   batch_time_ += t;
   ++batch_steps_;
-  if (batch_time_ < cfg_.sample_seconds) return;
+  if (batch_time_ < cfg_.sample_seconds || batch_steps_ < sample_steps_) return;
   const double s = batch_time_ / batch_steps_;
   const int steps = batch_steps_;
   batch_time_ = 0;
@@ -56,6 +57,7 @@ void ThreadController::on_sample(double s, int steps) {
     }
     return;
   }
+  if (lengthen_samples(s)) return;
   const int n = cfg_.samples;
   recent_[recent_pos_] = s;
   recent_pos_ = (recent_pos_ + 1) % n;
@@ -114,6 +116,31 @@ void ThreadController::on_sample(double s, int steps) {
     ++skipped_;
     if (!early) since_decision_ = 0;  // a skipped early probe keeps the first probe's time
   }
+}
+
+// Step costs that vary from step to step (contact and friction solves, self-collision list
+// rebuilds every few steps) make one-step samples of two counts incomparable: a probe of 3
+// cheap steps against a baseline of expensive ones picks the wrong count (see the top of
+// loom/thread_controller.hpp). The chosen count's last kSpreadSamples samples measure the
+// variation; while the third-largest exceeds the third-smallest by more than cost_spread,
+// samples span twice as many steps (a sample's mean over more steps varies less), up to
+// max_sample_steps, and the baseline starts again with the longer samples. Two slow steps among
+// eight (preempted steps) or two fast ones do not count as variation.
+bool ThreadController::lengthen_samples(double s) {
+  spread_[spread_pos_] = s;
+  spread_pos_ = (spread_pos_ + 1) % kSpreadSamples;
+  nspread_ = std::min(nspread_ + 1, kSpreadSamples);
+  if (nspread_ < kSpreadSamples || sample_steps_ >= cfg_.max_sample_steps) return false;
+  double a[kSpreadSamples];
+  std::copy(spread_, spread_ + kSpreadSamples, a);
+  std::sort(a, a + kSpreadSamples);
+  const double lo = a[2], hi = a[kSpreadSamples - 3];
+  if (!(hi > (1.0 + cfg_.cost_spread) * lo)) return false;
+  sample_steps_ = std::min(2 * sample_steps_, cfg_.max_sample_steps);
+  nspread_ = spread_pos_ = 0;
+  nrecent_ = recent_pos_ = 0;
+  ref_ = 0;
+  return true;
 }
 
 // The most a count below the chosen one can cost in a probe, in step times of the chosen
@@ -204,7 +231,10 @@ void ThreadController::decide() {
   }
   next_loss_ = std::max({loss, probe_loss_, 0.5 * next_loss_});
   probe_loss_total_ += probe_loss_;
-  if (cand_[w] != chosen_) ++switches_;
+  if (cand_[w] != chosen_) {
+    ++switches_;
+    nspread_ = spread_pos_ = 0;  // another count's samples
+  }
   chosen_ = current_ = cand_[w];
   ref_ = med[w];
   // The winner's probe samples seed its recent samples (drift is judged against ref_).

@@ -140,6 +140,85 @@ TEST(ThreadController, MedianIgnoresSpikesOfADescheduledStep) {
   const Trace r = drive(c, 30.0, world, [](double) { return 2; });
   EXPECT_EQ(c.chosen(), 2);
   EXPECT_GE(r.at_best / r.elapsed, 0.9);
+  // At most two spikes among any eight samples: not step-cost variation, samples stay one step.
+  EXPECT_EQ(c.sample_steps(), 1);
+}
+
+// Step costs that vary from step to step whatever the count (contact and friction solves,
+// self-collision list rebuilds): one-step samples of two counts then compare different steps.
+// Here every other step is 4x as expensive and 2 threads are 1.25x faster on every step. A probe
+// whose baseline median is an expensive step (E C E) and whose candidate median is a cheap one
+// (C C' C) picked 1 thread, and the next probe picked 2 again: before cost_spread, 84 switches
+// in 2000 steps and 43% of the time on the slower count. Samples of 2 steps hold one cheap and one
+// expensive step each, so after the 8 samples that show the spread every comparison is exact:
+// at most the early probe's wrong switch (before the spread is known) and its correction.
+TEST(ThreadController, AlternatingStepCostsDoNotFlipTheCount) {
+  for (const int start : {1, 2}) {
+    ThreadController c(start, 2);
+    long k = 0;
+    auto world = [&](int n, double) { return (n == 2 ? 0.010 : 0.0125) * (k++ % 2 ? 4.0 : 1.0); };
+    double elapsed = 0, on_two = 0;
+    for (int s = 0; s < 2000; ++s) {
+      const int n = c.threads();
+      const double t = world(n, elapsed);
+      elapsed += t;
+      if (n == 2) on_two += t;
+      c.record(t);
+    }
+    EXPECT_EQ(c.chosen(), 2) << start;
+    EXPECT_LE(c.switches(), 2) << start;
+    EXPECT_EQ(c.sample_steps(), 2) << start;
+    // The rest is the probes of 1 thread, at the 3% budget: 1 thread costs 25% more, so up to
+    // about 15% of the time may run on it.
+    EXPECT_GE(on_two / elapsed, 0.8) << start;
+  }
+}
+
+// Every third step 4x as expensive and 1 thread 1.25x faster, started on 2: with one-step samples
+// a probe of 1 thread whose first sample is an expensive step is rejected against a cheap
+// baseline median (more than 1.5x), and one whose median is an expensive step loses; the run
+// stayed on 2 threads for 94% of its time. Samples lengthen up to 16 steps (5 or 6 expensive
+// steps each: means 31/16 and 34/16 of a cheap step, 10% apart), so the 25% difference shows.
+TEST(ThreadController, PeriodicStepCostsStillFindTheFasterCount) {
+  ThreadController c(2, 2);
+  long k = 0;
+  auto world = [&](int n, double) { return (n == 1 ? 0.010 : 0.0125) * (k++ % 3 == 2 ? 4.0 : 1.0); };
+  double elapsed = 0, on_one = 0;
+  for (int s = 0; s < 2000; ++s) {
+    const int n = c.threads();
+    const double t = world(n, elapsed);
+    elapsed += t;
+    if (n == 1) on_one += t;
+    c.record(t);
+  }
+  EXPECT_EQ(c.chosen(), 1);
+  EXPECT_GE(c.sample_steps(), 4);
+  EXPECT_GE(on_one / elapsed, 0.75);
+}
+
+// The contention cell of draped_mesh_sphere_gnatv_bw (56 steps, docs/ARCHITECTURE.md "Threads:
+// measured"): about 48 free-fall steps, then the cloth reaches the ball and each step costs 6-7x
+// as much (contact, friction inside the solve). Quiet-machine shape: 2 threads 22 / 150 ms,
+// 1 thread 25 / 190 ms. A probe starts only while at least 15 steps are left after its 3
+// samples (10% of a 22 ms step over 15 steps repays 3 samples 1.5x slower), so its last sample is
+// step 41 at the latest, before the expensive tail; a probe of 1 thread costs 3 ms a sample:
+// 3 probes (after step 4, then about 0.25 s apart), 27 ms, about 1% of the run.
+TEST(ThreadController, ContactAtTheEndOfAShortRunIsNotProbed) {
+  ThreadController c(2, 2);
+  c.set_run_steps(56);
+  auto world = [](int n, int s) { return s <= 48 ? (n == 2 ? 0.022 : 0.025) : (n == 2 ? 0.150 : 0.190); };
+  double total = 0, best = 0;
+  for (int s = 1; s <= 56; ++s) {
+    if (s > 41) EXPECT_EQ(c.threads(), 2) << s;
+    const double t = world(c.threads(), s);
+    total += t;
+    best += world(2, s);
+    c.record(t);
+  }
+  EXPECT_EQ(c.chosen(), 2);
+  EXPECT_LE(c.probes(), 3);
+  EXPECT_NEAR(total - best, 0.003 * 3 * c.probes(), 1e-9);
+  EXPECT_LE((total - best) / best, 0.015);
 }
 
 TEST(ThreadController, BatchesShortSteps) {
