@@ -124,8 +124,9 @@ void ThreadController::on_sample(double s, int steps) {
 // loom/thread_controller.hpp). The chosen count's last kSpreadSamples samples measure the
 // variation; while the third-largest exceeds the third-smallest by more than cost_spread,
 // samples span twice as many steps (a sample's mean over more steps varies less), up to
-// max_sample_steps, and the baseline starts again with the longer samples. Two slow steps among
-// eight (preempted steps) or two fast ones do not count as variation.
+// max_sample_steps and max_sample_seconds, and the baseline starts again with the longer
+// samples. Two slow steps among eight (preempted steps) or two fast ones do not count as
+// variation.
 bool ThreadController::lengthen_samples(double s) {
   spread_[spread_pos_] = s;
   spread_pos_ = (spread_pos_ + 1) % kSpreadSamples;
@@ -136,6 +137,8 @@ bool ThreadController::lengthen_samples(double s) {
   std::sort(a, a + kSpreadSamples);
   const double lo = a[2], hi = a[kSpreadSamples - 3];
   if (!(hi > (1.0 + cfg_.cost_spread) * lo)) return false;
+  // (a sample is a mean step time: the longer sample lasts about twice sample_steps_ of them)
+  if (2.0 * sample_steps_ * 0.5 * (a[3] + a[4]) > cfg_.max_sample_seconds) return false;
   sample_steps_ = std::min(2 * sample_steps_, cfg_.max_sample_steps);
   nspread_ = spread_pos_ = 0;
   nrecent_ = recent_pos_ = 0;

@@ -174,6 +174,19 @@ TEST(ThreadController, AlternatingStepCostsDoNotFlipTheCount) {
   }
 }
 
+// Longer samples make the drift rule (3 samples) slower to see a competitor start, so a sample
+// lengthens only while it would last at most max_sample_seconds (0.5 s). Every other step 4x as
+// expensive: with a cheap 2-thread step of 60 ms a 2-step sample lasts 0.3 s and is taken; with
+// 120 ms it would last 0.6 s, and one-step samples stay.
+TEST(ThreadController, SamplesLengthenOnlyWhileShortEnoughToSeeACompetitor) {
+  for (const double base : {0.060, 0.120}) {
+    ThreadController c(2, 2);
+    long k = 0;
+    for (int s = 0; s < 300; ++s) c.record((c.threads() == 2 ? base : 1.25 * base) * (k++ % 2 ? 4.0 : 1.0));
+    EXPECT_EQ(c.sample_steps(), base < 0.1 ? 2 : 1) << base;
+  }
+}
+
 // Every third step 4x as expensive and 1 thread 1.25x faster, started on 2: with one-step samples
 // a probe of 1 thread whose first sample is an expensive step is rejected against a cheap
 // baseline median (more than 1.5x), and one whose median is an expensive step loses; the run

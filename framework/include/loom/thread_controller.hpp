@@ -14,7 +14,9 @@
 //   counts compare different steps, and a count "wins" on a cheap step. The chosen count's last
 //   8 samples measure it: while the third-largest is more than `cost_spread` (20%) above the
 //   third-smallest, a sample spans twice as many steps (at least; still at least 2 ms), up to
-//   `max_sample_steps` (16), and the baseline starts again with the longer samples; probes use
+//   `max_sample_steps` (16) and while the longer sample would last at most `max_sample_seconds`
+//   (0.5 s: the drift rule below needs 3 samples, so a competitor that starts still shows within
+//   a few seconds), and the baseline starts again with the longer samples; probes use
 //   the same length. Two slow (preempted) or two fast samples among the 8 do not count. Every
 //   other step 4x as expensive, 2 threads 1.25x faster: one-step samples switched 84 times in
 //   2000 steps, with 43% of the time on 1 thread; 2-step samples compare exactly (tests).
@@ -96,6 +98,7 @@ struct ThreadControllerConfig {
   double early_probe_cost = 1.5;  ///< first probe: fewer threads whose worst cost is at most this many step times go at once
   double cost_spread = 0.2;       ///< the chosen count's last 8 samples spread more than this (3rd-largest / 3rd-smallest - 1): samples twice as long
   int max_sample_steps = 16;      ///< ... up to this many steps per sample
+  double max_sample_seconds = 0.5;  ///< ... and while a sample stays this short (a competitor still shows within seconds)
 };
 
 class ThreadController {
