@@ -40,8 +40,10 @@ The goal (exit code 1 when missed): with threads: auto, a run is never more than
 than the better of threads 1 and 2, alone and loaded. OMP_NUM_THREADS is removed from the
 runs' environment (it would override `threads`). The "auto ends on" column counts the runs of
 `threads: auto` by the count they ended on; the JSON keeps every run's wall and CPU seconds
-(user + system, from wait4), each repetition's order and each auto run's whole summary (the
-count it started on, the others' load it measured at start, probes and probes held back).
+(user + system, from wait4), the integrator's ms per step from its summary line (`step_ms`:
+the steps' share of the wall, the rest being start-up and output), each repetition's order and
+each auto run's whole summary (the count it started on, the others' load it measured at start,
+probes and probes held back, the steps and step seconds on each count, the sample length).
 
 --overhead measures instead what auto costs against the fixed count it ends on: per scene and
 condition, --repeat pairs (x3 for short scenes) of auto and that fixed count back to back
@@ -150,6 +152,7 @@ class Cell:
         self.p, self.cond, self.base = plan, cond, base_reps
         self.runs = {k: [] for k in SETTINGS}
         self.cpu = {k: [] for k in SETTINGS}
+        self.step_ms = {k: [] for k in SETTINGS}  # the integrator's ms per step (summary line)
         self.orders, self.ends, self.auto_lines = [], [], []
         self.seconds = 0.0  # wall time spent on this cell
         self.stats = None
@@ -158,10 +161,11 @@ class Cell:
         order = run_order(len(self.orders))
         t0 = time.perf_counter()
         for threads in order:
-            t, _, end, line, c = run_once(a.loom, self.p["path"], os.path.join(tmp, f"{self.p['scene']}_{threads}"),
+            t, ms, end, line, c = run_once(a.loom, self.p["path"], os.path.join(tmp, f"{self.p['scene']}_{threads}"),
                                           self.p["frames"], self.p["substeps"], threads, env)
             self.runs[threads].append(t)
             self.cpu[threads].append(c)
+            self.step_ms[threads].append(ms)
             if threads == "auto" and end is not None:
                 self.ends.append(end)
                 self.auto_lines.append(line)
@@ -362,7 +366,7 @@ def main():
           f"the script took {total / 60:.1f} min")
     if a.json:
         rows = [{"scene": c.p["scene"], "condition": c.cond, "steps": c.p["steps"], "sim_time": c.p["sim_time"],
-                 "capped": c.p["capped"], "runs": c.runs, "cpu_seconds": c.cpu, "orders": c.orders,
+                 "capped": c.p["capped"], "runs": c.runs, "cpu_seconds": c.cpu, "step_ms": c.step_ms, "orders": c.orders,
                  "auto_ends_on": c.ends, "auto_summaries": c.auto_lines, "stats": c.stats} for c in cells]
         with open(a.json, "w") as f:
             json.dump({"rows": rows, "budget": a.budget, "sim": a.sim, "repeat": a.repeat,

@@ -389,10 +389,19 @@ int main(int argc, char** argv) {
       if (const auto* tc = st.thread_controller()) {
         char load[64] = "not measured (short set-up)";
         if (tc->start_load() >= 0) std::snprintf(load, sizeof load, "%.2f cores", tc->start_load());
+        // Where the step time went, per count (for comparing with a fixed count's run).
+        std::string on;
+        for (int n = 1; n <= loom::usable_cores(); ++n)
+          if (const long k = tc->steps_on(n); k > 0) {
+            char b[96];
+            std::snprintf(b, sizeof b, "%s%ld steps on %d (%.3g s)", on.empty() ? "" : ", ", k, n, tc->seconds_on(n));
+            on += b;
+          }
         std::printf("loom: threads auto: ended on %d (started on %d, others' load at start %s; %d probes, "
-                    "%d held back by load, %d by short steps, %d switches, probes cost %.3g s)\n", tc->chosen(),
-                    tc->initial(), load, tc->probes(), tc->gated_probes(), tc->small_step_holds(), tc->switches(),
-                    tc->probe_loss());
+                    "%d held back by load, %d by short steps, %d switches, probes cost %.3g s; %s; samples of "
+                    "at least %d step%s)\n", tc->chosen(), tc->initial(), load, tc->probes(), tc->gated_probes(),
+                    tc->small_step_holds(), tc->switches(), tc->probe_loss(), on.empty() ? "no steps" : on.c_str(),
+                    tc->sample_steps(), tc->sample_steps() == 1 ? "" : "s");
       }
     }
     if (args.render && loom::is_output_rank()) {

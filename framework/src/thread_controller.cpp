@@ -14,6 +14,18 @@ ThreadController::ThreadController(int initial, int max_threads, Config cfg) : c
   current_ = chosen_ = initial;
 }
 
+long ThreadController::steps_on(int count) const {
+  for (int k = 0; k < ncand_; ++k)
+    if (cand_[k] == count) return steps_on_[k];
+  return 0;
+}
+
+double ThreadController::seconds_on(int count) const {
+  for (int k = 0; k < ncand_; ++k)
+    if (cand_[k] == count) return seconds_on_[k];
+  return 0;
+}
+
 double ThreadController::median(const double* v, int n) {
   double a[kMaxSamples];
   std::copy(v, v + n, a);
@@ -22,6 +34,11 @@ double ThreadController::median(const double* v, int n) {
 }
 
 void ThreadController::record(double t) {
+  for (int k = 0; k < ncand_; ++k)
+    if (cand_[k] == current_) {
+      ++steps_on_[k];
+      seconds_on_[k] += t;
+    }
   ++steps_;
   elapsed_ += t;
   since_decision_ += t;

@@ -222,7 +222,9 @@ TEST(ThreadController, ContactAtTheEndOfAShortRunIsNotProbed) {
   auto world = [](int n, int s) { return s <= 48 ? (n == 2 ? 0.022 : 0.025) : (n == 2 ? 0.150 : 0.190); };
   double total = 0, best = 0;
   for (int s = 1; s <= 56; ++s) {
-    if (s > 41) EXPECT_EQ(c.threads(), 2) << s;
+    if (s > 41) {
+      EXPECT_EQ(c.threads(), 2) << s;
+    }
     const double t = world(c.threads(), s);
     total += t;
     best += world(2, s);
@@ -310,6 +312,12 @@ TEST(ThreadController, EarlyDownProbeLeavesAWrongStartAfterTheBaseline) {
   EXPECT_EQ(switched_at, 7);
   EXPECT_EQ(c.probes(), 1);
   EXPECT_NEAR(total, 4 * 0.370 + 36 * 0.075, 1e-9);
+  // The per-count account (loom run's summary line): steps 1-4 on 2 threads, 5-40 on 1.
+  EXPECT_EQ(c.steps_on(2), 4);
+  EXPECT_EQ(c.steps_on(1), 36);
+  EXPECT_NEAR(c.seconds_on(2), 4 * 0.370, 1e-9);
+  EXPECT_NEAR(c.seconds_on(1), 36 * 0.075, 1e-9);
+  EXPECT_EQ(c.steps_on(3), 0);
   // Without the early probe (early_probe_cost 0) the first probe waits for 10 step times:
   // steps 1-11 on 2 threads, 6.2 s instead of 4.2 s.
   loom::ThreadControllerConfig off;

@@ -138,6 +138,9 @@ class ThreadController {
   double probe_loss() const { return probe_loss_total_; }  ///< extra step time spent in probes (s), as measured
   double elapsed() const { return elapsed_; }         ///< total step time fed (s)
   int sample_steps() const { return sample_steps_; }  ///< the fewest steps a sample spans now (1, doubled by cost_spread)
+  /// Steps recorded with `count` threads, and their total time (s); 0 for a count never used.
+  long steps_on(int count) const;
+  double seconds_on(int count) const;
 
  private:
   static double median(const double* v, int n);
@@ -161,6 +164,8 @@ class ThreadController {
   double batch_time_ = 0;
   int batch_steps_ = 0;
   int sample_steps_ = 1;  // a sample spans at least this many steps (and sample_seconds)
+  long steps_on_[kMaxCandidates] = {};     // per candidate: steps recorded on it
+  double seconds_on_[kMaxCandidates] = {};  // ... and their time
   // The chosen count's last kSpreadSamples samples, for the spread (cost_spread).
   static constexpr int kSpreadSamples = 8;
   double spread_[kSpreadSamples] = {};
