@@ -13,13 +13,14 @@
 //   and friction solves, self-collision list rebuilds every few steps), one-step samples of two
 //   counts compare different steps, and a count "wins" on a cheap step. The chosen count's last
 //   8 samples measure it: while the third-largest is more than `cost_spread` (20%) above the
-//   third-smallest, a sample spans twice as many steps (at least; still at least 2 ms), up to
-//   `max_sample_steps` (16) and while the longer sample would last at most `max_sample_seconds`
-//   (0.5 s: the drift rule below needs 3 samples, so a competitor that starts still shows within
-//   a few seconds), and the baseline starts again with the longer samples; probes use
-//   the same length. Two slow (preempted) or two fast samples among the 8 do not count. Every
-//   other step 4x as expensive, 2 threads 1.25x faster: one-step samples switched 84 times in
-//   2000 steps, with 43% of the time on 1 thread; 2-step samples compare exactly (tests).
+//   third-smallest, a sample spans twice as many steps (and still at least 2 ms; never
+//   shortened again), up to `max_sample_steps` (16) and while the longer sample would last at
+//   most `max_sample_seconds` (0.5 s: the drift rule below needs 3 samples, so a competitor
+//   that starts still shows within a few seconds); the baseline then starts again with the
+//   longer samples, and probes use the same length. Two slow (preempted) or two fast samples
+//   among the 8 do not count. Every other step 4x as expensive, 2 threads 1.25x faster:
+//   one-step samples switched 84 times in 2000 steps, with 43% of the time on 1 thread;
+//   2-step samples compare exactly (tests).
 // - Probe: the current count's last samples are its baseline; each other candidate (1 and the
 //   usable cores) is then run for `samples` samples, or for one sample when that sample is more
 //   than `reject_factor` (1.5) x the baseline (a clearly worse count costs one sample, not three).
