@@ -820,6 +820,32 @@ void BM_BroadPhaseHash(benchmark::State& st) {
 }
 
 BENCHMARK(BM_BroadPhaseBvh)->Arg(64)->Arg(128)->Arg(256)->Unit(benchmark::kMillisecond);
+
+// One full rebuild of SelfCollision's candidate lists on the draped state, one thread:
+// SelfCollision::min_distance within 2 thicknesses, which is the rebuild of a step in which every
+// vertex has the smallest reach (th/2; gap th: boxes grown by th, exact distances below 2 th).
+// CPU time per rebuild; counters: the pairs it lists and the exact distances it computed.
+//   OMP_NUM_THREADS=1 LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_Rebuild
+void BM_Rebuild(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  omp_set_num_threads(1);
+  const loom::State& s = draped(n);
+  omp_set_num_threads(1);
+  const loom::Mesh mesh = loom::make_grid(n, n, 1.0, 1.0, loom::GridPlane::XZ);
+  loom::SelfCollision::Options o;
+  o.thickness = 0.25 / (n - 1);
+  loom::SelfCollision sc(o, mesh);
+  double m = 0;
+  for (auto _ : st) {
+    m = sc.min_distance(s.x, 2 * o.thickness);
+    benchmark::DoNotOptimize(m);
+  }
+  std::vector<loom::SelfCollision::Proximity> vt, ee;
+  sc.proximity_pairs(s.x.data(), 2 * o.thickness, vt, ee);
+  st.counters["pairs"] = static_cast<double>(vt.size() + ee.size());
+  st.counters["min_over_th"] = m / o.thickness;
+}
+BENCHMARK(BM_Rebuild)->Arg(64)->Arg(128)->Arg(256)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_BroadPhaseHash)->ArgsProduct({{64, 128, 256}, {1, 2}})->Unit(benchmark::kMillisecond);
 
 void args(benchmark::internal::Benchmark* b) {

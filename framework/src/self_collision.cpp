@@ -380,6 +380,9 @@ void TriangleBvh::build(const std::vector<double>& centroids) {
     }
   }
   for (std::size_t k = 0; k < leaf_nodes_.size(); ++k) nodes_[leaf_nodes_[k]].first = static_cast<Index>(k);
+  leaves_.assign(leaf_nodes_.size(), Leaf{});
+  for (std::size_t k = 0; k < leaf_nodes_.size(); ++k) leaves_[k].tri = nodes_[leaf_nodes_[k]].tri;
+  have_vertices_ = false;
   for (std::size_t i = nodes_.size(); i-- > 0;)
     if (nodes_[i].tri < 0) nodes_[i].first = nodes_[nodes_[i].left].first;
   parent_.assign(nodes_.size(), -1);
@@ -398,6 +401,12 @@ void TriangleBvh::build(const std::vector<double>& centroids) {
   }
 }
 
+void TriangleBvh::set_vertices(const std::vector<Index>& tris) {
+  for (Leaf& l : leaves_)
+    for (int k = 0; k < 3; ++k) l.v[k] = tris[3 * static_cast<std::size_t>(l.tri) + k];
+  have_vertices_ = true;
+}
+
 void TriangleBvh::mark(Index tri) {
   if (marked_.size() != nodes_.size()) marked_.assign(nodes_.size(), 0);
   for (Index i = leaf_[tri]; i >= 0 && !marked_[i]; i = parent_[i]) {
@@ -414,8 +423,8 @@ void TriangleBvh::clear_marks() {
 void TriangleBvh::update_leaf(Index tri, const double* lo, const double* hi) {
   Index i = leaf_[tri];
   for (int k = 0; k < 3; ++k) {
-    nodes_[i].lo[k] = lo[k];
-    nodes_[i].hi[k] = hi[k];
+    leaves_[nodes_[i].first].lo[k] = nodes_[i].lo[k] = lo[k];
+    leaves_[nodes_[i].first].hi[k] = nodes_[i].hi[k] = hi[k];
   }
   for (i = parent_[i]; i >= 0; i = parent_[i]) {
     Node& n = nodes_[i];
@@ -432,9 +441,10 @@ void TriangleBvh::refit(const double* tri_lo, const double* tri_hi, double pad) 
   for (std::size_t i = nodes_.size(); i-- > 0;) {
     Node& n = nodes_[i];
     if (n.tri >= 0) {
+      Leaf& l = leaves_[n.first];
       for (int k = 0; k < 3; ++k) {
-        n.lo[k] = tri_lo[3 * n.tri + k] - pad;
-        n.hi[k] = tri_hi[3 * n.tri + k] + pad;
+        l.lo[k] = n.lo[k] = tri_lo[3 * n.tri + k] - pad;
+        l.hi[k] = n.hi[k] = tri_hi[3 * n.tri + k] + pad;
       }
     } else {
       const Node& l = nodes_[n.left];
@@ -620,6 +630,7 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
     }
   }
   bvh_.build(centroids);
+  bvh_.set_vertices(tris_);
   const std::size_t n3 = 3 * static_cast<std::size_t>(nv_);
   x0_.assign(n3, 0.0);
   d_.assign(n3, 0.0);
@@ -658,8 +669,14 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
   qstack_.reserve(256);
   reach_.assign(nv_, 0.0);
   trec_.assign(nt_, TriRecord{});
+  tri_slot_.assign(nt_, 0);
+  slot_tri_.assign(nt_, 0);
+  for (Index k = 0; k < nt_; ++k) {
+    slot_tri_[k] = bvh_.leaf_triangle(k);
+    tri_slot_[slot_tri_[k]] = k;
+  }
   for (Index t = 0; t < nt_; ++t) {
-    TriRecord& R = trec_[t];
+    TriRecord& R = trec_[tri_slot_[t]];
     R.own = 0;
     for (int k = 0; k < 3; ++k) {
       R.v[k] = tris_[3 * t + k];
@@ -667,6 +684,39 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
       for (int j = 0; j < 3; ++j) {
         if (own_verts_[t][j] >= 0 && own_verts_[t][j] == R.v[k]) R.own |= 1u << k;
         if (own_edges_[t][j] >= 0 && own_edges_[t][j] == R.e[k]) R.own |= 8u << k;
+      }
+    }
+  }
+  // Element pairs of triangles that share a vertex (see nb_vt_), by owner triangle.
+  {
+    std::vector<Index> nbrs;
+    for (Index P = 0; P < nt_; ++P) {
+      const TriRecord& RP = trec_[tri_slot_[P]];
+      nbrs.clear();
+      for (int k = 0; k < 3; ++k)
+        for (Index j = vt_off_[RP.v[k]]; j < vt_off_[RP.v[k] + 1]; ++j)
+          if (vt_adj_[j] != P) nbrs.push_back(vt_adj_[j]);
+      std::sort(nbrs.begin(), nbrs.end());
+      nbrs.erase(std::unique(nbrs.begin(), nbrs.end()), nbrs.end());
+      for (const Index T : nbrs) {
+        const TriRecord& RT = trec_[tri_slot_[T]];
+        for (int k = 0; k < 3; ++k) {
+          const Index v = RP.v[k];
+          if ((RP.own >> k & 1u) && v != RT.v[0] && v != RT.v[1] && v != RT.v[2]) nb_vt_.push_back({v, T});
+        }
+        for (int ka = 0; ka < 3; ++ka) {
+          if (!(RP.own >> (3 + ka) & 1u)) continue;
+          const Index e = RP.e[ka];
+          for (int kb = 0; kb < 3; ++kb) {
+            if (!(RT.own >> (3 + kb) & 1u)) continue;
+            const Index f = RT.e[kb];
+            if (!(e < f)) continue;  // the pair once, from the lower edge's owner
+            const auto& E = edges_[e];
+            const auto& F = edges_[f];
+            if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+            nb_ee_.push_back({e, f});
+          }
+        }
       }
     }
   }
@@ -788,7 +838,7 @@ bool SelfCollision::respond(const Index idx[4], const double w[4], const double 
 }
 
 void SelfCollision::triangle_box(Index t, double gap) {
-  TriRecord& R = trec_[t];
+  TriRecord& R = trec_[tri_slot_[t]];
   const double* X = ref_x_.data();
   for (int k = 0; k < 3; ++k) {
     R.r[k] = reach_[R.v[k]];
@@ -810,7 +860,11 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
   const bool par = nv_ >= kParallelMinVertices;
   const int nth = par ? std::max(1, omp_get_max_threads()) : 1;
   bvh_.split(par ? kTraversalTasks : 1, tasks_);
-  const std::size_t ntasks = tasks_.size();
+  // A full rebuild leaves the leaf pairs of triangles sharing a vertex to the neighbour lists
+  // (nb_vt_, nb_ee_): tasks ntrav.. test their chunks. A refresh keeps them in the traversal.
+  const bool neighbours = !marked_only;
+  const std::size_t ntrav = tasks_.size();
+  const std::size_t ntasks = ntrav + (neighbours ? kNeighbourChunks : 0);
   if (task_vt_.size() < ntasks) {
     task_vt_.resize(ntasks);
     task_ee_.resize(ntasks);
@@ -821,6 +875,7 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
            blo[2] <= ahi[2];
   };
   Index exact_count = 0;
+  const double half_gap = 0.5 * gap;
 #pragma omp parallel num_threads(nth) if (nth > 1)
   {
     const int me = omp_get_thread_num();
@@ -853,8 +908,8 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
       // only the element pairs that the refresh dropped are looked at: those with a refreshed
       // vertex, triangle or edge (flags set by refresh()).
       auto emit = [&](Index A, Index B) {
-        const TriRecord& RA = trec_[A];
-        const TriRecord& RB = trec_[B];
+        const TriRecord& RA = trec_[tri_slot_[A]];
+        const TriRecord& RB = trec_[tri_slot_[B]];
         // (Triangles that share a vertex touch: the bound would not reject them.)
         const bool adjacent = RA.v[0] == RB.v[0] || RA.v[0] == RB.v[1] || RA.v[0] == RB.v[2] || RA.v[1] == RB.v[0] ||
                               RA.v[1] == RB.v[1] || RA.v[1] == RB.v[2] || RA.v[2] == RB.v[0] || RA.v[2] == RB.v[1] ||
@@ -911,7 +966,57 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
           }
         }
       };
-      bvh_.pairs_from(tasks_[q], emit, tstack_[me], marked_only);
+      if (q < ntrav) {
+        bvh_.pairs_from(tasks_[q], emit, tstack_[me], marked_only, neighbours);  // neighbours: in the lists below
+        continue;
+      }
+      // A chunk of the neighbour lists: the element tests of vert_tri and of emit's edge pairs.
+      const std::size_t c = q - ntrav;
+      const std::size_t vt0 = nb_vt_.size() * c / kNeighbourChunks, vt1 = nb_vt_.size() * (c + 1) / kNeighbourChunks;
+      const double* X = ref_x_.data();
+      for (std::size_t i = vt0; i < vt1; ++i) {
+        const Index t = nb_vt_[i][1];
+        const TriRecord& T = trec_[tri_slot_[t]];
+        const Index v = nb_vt_[i][0];
+        const double* p = &X[3 * v];
+        const double pad = reach_[v] + half_gap;
+        const double plo[3] = {p[0] - pad, p[1] - pad, p[2] - pad}, phi[3] = {p[0] + pad, p[1] + pad, p[2] + pad};
+        if (!overlap(plo, phi, T.lo, T.hi)) continue;
+        double dist = 0;
+        if (exact) {
+          const double r = gap + reach_[v] + T.tr;
+          if (selfcol::point_triangle_farther_than(p, &T.x[0], &T.x[3], &T.x[6], r)) continue;
+          ++exact_count;
+          double w[3];
+          dist = selfcol::point_triangle_distance(p, &T.x[0], &T.x[3], &T.x[6], w);
+          if (!(dist < r)) continue;
+        }
+        vt.push_back({v, t, dist});
+      }
+      const std::size_t ee0 = nb_ee_.size() * c / kNeighbourChunks, ee1 = nb_ee_.size() * (c + 1) / kNeighbourChunks;
+      for (std::size_t i = ee0; i < ee1; ++i) {
+        const Index e = nb_ee_[i][0], f = nb_ee_[i][1];
+        const double *p0 = &X[3 * edges_[e][0]], *p1 = &X[3 * edges_[e][1]];
+        const double *q0 = &X[3 * edges_[f][0]], *q1 = &X[3 * edges_[f][1]];
+        const double er = std::max(reach_[edges_[e][0]], reach_[edges_[e][1]]);
+        const double fr = std::max(reach_[edges_[f][0]], reach_[edges_[f][1]]);
+        const double epad = er + half_gap, fpad = fr + half_gap;
+        bool apart = false;
+        for (int k = 0; k < 3 && !apart; ++k)
+          apart = std::min(p0[k], p1[k]) - epad > std::max(q0[k], q1[k]) + fpad ||
+                  std::min(q0[k], q1[k]) - fpad > std::max(p0[k], p1[k]) + epad;
+        if (apart) continue;
+        double dist = 0;
+        if (exact) {
+          const double r = gap + er + fr;
+          if (selfcol::segments_farther_than(p0, p1, q0, q1, r)) continue;
+          ++exact_count;
+          double ss, tt;
+          dist = selfcol::segment_segment_distance(p0, p1, q0, q1, ss, tt);
+          if (!(dist < r)) continue;
+        }
+        ee.push_back({e, f, dist});
+      }
     }
   }
   for (std::size_t q = 0; q < ntasks; ++q) {
@@ -925,7 +1030,7 @@ void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
   const bool par = nv_ >= kParallelMinVertices;
   if (x0_in != ref_x_.data()) std::memcpy(ref_x_.data(), x0_in, ref_x_.size() * sizeof(double));
 #pragma omp parallel for schedule(static) if (par)
-  for (Index t = 0; t < nt_; ++t) triangle_box(t, gap);
+  for (Index k = 0; k < nt_; ++k) triangle_box(slot_tri_[k], gap);  // records in order
   bvh_.refit(tlo_.data(), thi_.data(), 0.0);
 
   vt_.clear();

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
@@ -627,4 +628,138 @@ TEST(SelfCollisionBvh, ReachOfAFastVertexAtARebuildGrowsUpToOneThicknessForSmall
       for (Index i = 0; i < mesh.num_vertices(); ++i)
         ASSERT_NEAR(reach[i], expected, 1e-12) << "vertex " << i << ", step " << step << ", large " << large;
     }
+}
+
+namespace {
+
+// A grid sheet (XZ plane, n x n vertices over 1 m) folded into a U along x = 0.45: flat up to
+// there, a half cylinder of radius rho, then flat again back over the first part, 2 rho above
+// it; plus a small random jitter (no exact ties). In the crease, elements of triangles that
+// share a vertex come close to each other (the pairs a rebuild takes from its neighbour lists);
+// across the layers, elements far apart in the mesh do (the pairs its traversal finds).
+std::vector<double> folded_sheet(const Mesh& mesh, double rho, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> jitter(-1e-4, 1e-4);
+  const double a = 0.45, bend = 3.14159265358979323846 * rho;
+  std::vector<double> x(mesh.positions.size());
+  for (Index v = 0; v < mesh.num_vertices(); ++v) {
+    const double u = mesh.positions[3 * v], z = mesh.positions[3 * v + 2];
+    double p[3];
+    if (u <= a) {
+      p[0] = u, p[1] = 0;
+    } else if (u <= a + bend) {
+      const double th = (u - a) / rho;
+      p[0] = a + rho * std::sin(th), p[1] = rho * (1 - std::cos(th));
+    } else {
+      p[0] = a - (u - a - bend), p[1] = 2 * rho;
+    }
+    p[2] = z;
+    for (int k = 0; k < 3; ++k) x[3 * v + k] = p[k] + jitter(rng);
+  }
+  return x;
+}
+
+}  // namespace
+
+TEST(SelfCollisionBvh, PairsOnAFoldedClothEqualABruteForceEnumeration) {
+  // Every non-adjacent vertex-triangle and edge-edge pair closer than `within` on a folded
+  // cloth, through the broad phase of a rebuild (SelfCollision::proximity_pairs: hierarchy
+  // traversal for triangles sharing no vertex, the fixed neighbour lists for triangles sharing
+  // one), against all O(n^2) pairs with this file's own distances (projection and golden-section
+  // search, not the library's). 13^2 runs on one thread, 66^2 (over kParallelMinVertices) in
+  // the parallel tasks and neighbour chunks. Pairs within 1e-9 of the cut-off are not compared.
+  for (const int n : {13, 66}) {
+    const Mesh mesh = make_grid(n, n, 1.0, 1.0, GridPlane::XZ);
+    const double edge = 1.0 / (n - 1);
+    const double within = 0.8 * edge, rho = 0.3 * edge;  // layers 0.6 edge apart: every stacked pair is near
+    const std::vector<double> x = folded_sheet(mesh, rho, 41u + static_cast<unsigned>(n));
+    SelfCollision sc({0.25 * edge, 0.0}, mesh);
+    std::vector<SelfCollision::Proximity> vt, ee;
+    sc.proximity_pairs(x.data(), within, vt, ee);
+    const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
+    const auto edges = mesh.edges();
+    // Box gap: a lower bound on the distance of two vertex sets, to skip most of the O(n^2) pairs.
+    auto box_gap = [&](std::initializer_list<Index> a, std::initializer_list<Index> b) {
+      double g = 0;
+      for (int k = 0; k < 3; ++k) {
+        double alo = 1e300, ahi = -1e300, blo = 1e300, bhi = -1e300;
+        for (Index v : a) alo = std::min(alo, x[3 * v + k]), ahi = std::max(ahi, x[3 * v + k]);
+        for (Index v : b) blo = std::min(blo, x[3 * v + k]), bhi = std::max(bhi, x[3 * v + k]);
+        g = std::max({g, blo - ahi, alo - bhi});
+      }
+      return g;
+    };
+    // Which triangles share a vertex with which (for counting the neighbour pairs in the answer).
+    std::vector<std::vector<Index>> tris_of(nv);
+    for (Index t = 0; t < nt; ++t)
+      for (int k = 0; k < 3; ++k) tris_of[mesh.triangles[3 * t + k]].push_back(t);
+    auto near_in_mesh = [&](std::initializer_list<Index> a, std::initializer_list<Index> b) {
+      for (Index va : a)
+        for (Index t : tris_of[va])
+          for (Index vb : b)
+            for (Index s : tris_of[vb])
+              if (s == t) return true;
+      return false;
+    };
+    std::size_t neighbour_pairs = 0, far_pairs = 0, ambiguous = 0;
+    // Reports the first few differences (ADD_FAILURE per pair would print thousands), counts all.
+    auto check = [&](const char* kind, const std::vector<SelfCollision::Proximity>& got,
+                     const std::vector<std::array<Index, 2>>& want, const std::vector<double>& want_dist) {
+      std::size_t i = 0, j = 0, wrong = 0;
+      auto report = [&](const std::string& what) {
+        if (++wrong <= 5) ADD_FAILURE() << kind << " pair " << what << ", n = " << n;
+      };
+      while (i < got.size() || j < want.size()) {
+        const bool take_got = j == want.size() || (i < got.size() && std::array<Index, 2>{got[i].a, got[i].b} < want[j]);
+        const bool take_want = i == got.size() || (j < want.size() && want[j] < std::array<Index, 2>{got[i].a, got[i].b});
+        if (take_got) {
+          report(std::to_string(got[i].a) + ", " + std::to_string(got[i].b) + " listed but not closer than the cut-off by brute force");
+          ++i;
+        } else if (take_want) {
+          if (std::abs(want_dist[j] - within) > 1e-9)
+            report(std::to_string(want[j][0]) + ", " + std::to_string(want[j][1]) + " at " + std::to_string(want_dist[j]) + " missing");
+          ++j;
+        } else {
+          if (std::abs(got[i].distance - want_dist[j]) > 1e-9)
+            report(std::to_string(want[j][0]) + ", " + std::to_string(want[j][1]) + ": distance " +
+                   std::to_string(got[i].distance) + " against " + std::to_string(want_dist[j]));
+          ++i, ++j;
+        }
+      }
+      EXPECT_EQ(wrong, 0u) << kind << " pairs that differ, n = " << n;
+    };
+    // Brute force: pairs below within + 1e-9 (those within 1e-9 above the cut-off may be absent).
+    std::vector<std::array<Index, 2>> bvt, bee;
+    std::vector<double> dvt, dee;
+    for (Index v = 0; v < nv; ++v)
+      for (Index t = 0; t < nt; ++t) {
+        const Index* tv = &mesh.triangles[3 * t];
+        if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
+        if (box_gap({v}, {tv[0], tv[1], tv[2]}) >= within + 1e-9) continue;
+        const double d = brute_point_triangle(&x[3 * v], &x[3 * tv[0]], &x[3 * tv[1]], &x[3 * tv[2]]);
+        if (d >= within + 1e-9) continue;
+        if (std::abs(d - within) <= 1e-9) ++ambiguous;
+        bvt.push_back({v, t});
+        dvt.push_back(d);
+        ++(near_in_mesh({v}, {tv[0], tv[1], tv[2]}) ? neighbour_pairs : far_pairs);
+      }
+    for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
+      for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
+        const auto &E = edges[e], &F = edges[f];
+        if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+        if (box_gap({E[0], E[1]}, {F[0], F[1]}) >= within + 1e-9) continue;
+        const double d = brute_segment_segment(&x[3 * E[0]], &x[3 * E[1]], &x[3 * F[0]], &x[3 * F[1]]);
+        if (d >= within + 1e-9) continue;
+        if (std::abs(d - within) <= 1e-9) ++ambiguous;
+        bee.push_back({e, f});
+        dee.push_back(d);
+        ++(near_in_mesh({E[0], E[1]}, {F[0], F[1]}) ? neighbour_pairs : far_pairs);
+      }
+    check("vertex-triangle", vt, bvt, dvt);
+    check("edge-edge", ee, bee, dee);
+    // Both sources of pairs are exercised (dropping either would fail above).
+    EXPECT_GT(neighbour_pairs, static_cast<std::size_t>(4 * n)) << n;
+    EXPECT_GT(far_pairs, static_cast<std::size_t>(20 * n)) << n;
+    EXPECT_EQ(ambiguous, 0u) << n;
+  }
 }

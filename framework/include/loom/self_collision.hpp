@@ -80,10 +80,13 @@ class TriangleBvh {
   void self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack) const;
   /// The part of self_pairs below one task: {a, a} the pairs inside node a, {a, b} the pairs
   /// between a and b. With marked_only, only the pairs with at least one marked leaf (mark()):
-  /// node pairs with no marked node below either side are skipped whole.
+  /// node pairs with no marked node below either side are skipped whole. With skip_sharing
+  /// (after set_vertices()), pairs of triangles that share a vertex are not emitted.
   template <class F>
   void pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack,
-                  bool marked_only = false) const;
+                  bool marked_only = false, bool skip_sharing = false) const;
+  /// The vertices of the triangles (3 per triangle), for pairs_from's skip_sharing.
+  void set_vertices(const std::vector<Index>& tris);
   /// Mark triangle tri's leaf and its ancestors (for pairs_from's marked_only); clear_marks()
   /// unmarks every node marked since the last clear. No allocation once grown.
   void mark(Index tri);
@@ -98,12 +101,23 @@ class TriangleBvh {
   template <class F>
   void query(const double* lo, const double* hi, F&& emit, std::vector<Index>& stack) const;
   const std::vector<Node>& nodes() const { return nodes_; }
+  /// The triangle of the k-th leaf in depth-first order (leaves close in the tree are close here).
+  Index leaf_triangle(Index k) const { return nodes_[leaf_nodes_[k]].tri; }
   /// Subtrees of at most this many leaves are paired leaf by leaf in one loop rather than by
   /// descending node pairs (fewer stack operations; the leaves of a subtree are contiguous).
   static constexpr Index kSmallSubtree = 4;
 
  private:
+  /// A leaf's box, triangle and vertices, in depth-first order (the leaves of a subtree are
+  /// contiguous: the small-subtree loops read them in order; one cache line each).
+  struct Leaf {
+    double lo[3], hi[3];
+    Index tri = -1;
+    Index v[3] = {-1, -1, -1};
+  };
   std::vector<Node> nodes_;
+  std::vector<Leaf> leaves_;       ///< in the order of leaf_nodes_, refit with the nodes
+  bool have_vertices_ = false;     ///< set_vertices() was called
   std::vector<Index> leaf_nodes_;  ///< leaf node indices in depth-first order (Node::first indexes it)
   std::vector<Index> parent_;  ///< per node (-1 for the root)
   std::vector<Index> leaf_;    ///< per triangle: its leaf node
@@ -138,10 +152,15 @@ void TriangleBvh::self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack)
 
 template <class F>
 void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack,
-                             bool marked_only) const {
-  auto overlap = [](const Node& a, const Node& b) {
+                             bool marked_only, bool skip_sharing) const {
+  auto overlap = [](const auto& a, const auto& b) {
     return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
            a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
+  };
+  skip_sharing = skip_sharing && have_vertices_;
+  auto share = [](const Leaf& a, const Leaf& b) {
+    return a.v[0] == b.v[0] || a.v[0] == b.v[1] || a.v[0] == b.v[2] || a.v[1] == b.v[0] || a.v[1] == b.v[1] ||
+           a.v[1] == b.v[2] || a.v[2] == b.v[0] || a.v[2] == b.v[1] || a.v[2] == b.v[2];
   };
   auto extent = [](const Node& a) { return (a.hi[0] - a.lo[0]) + (a.hi[1] - a.lo[1]) + (a.hi[2] - a.lo[2]); };
   stack.clear();
@@ -156,11 +175,12 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
       if (A.count <= kSmallSubtree) {
         // Inside a small subtree: every overlapping pair of its leaves, in the order the descent would find them.
         for (Index i = A.first; i < A.first + A.count; ++i) {
-          const Node& LA = nodes_[leaf_nodes_[i]];
+          const Leaf& LA = leaves_[i];
           const bool ma = marked_only && marked_[leaf_nodes_[i]];
           for (Index j = i + 1; j < A.first + A.count; ++j) {
-            const Node& LB = nodes_[leaf_nodes_[j]];
+            const Leaf& LB = leaves_[j];
             if (marked_only && !ma && !marked_[leaf_nodes_[j]]) continue;
+            if (skip_sharing && share(LA, LB)) continue;
             if (overlap(LA, LB)) emit(LA.tri, LB.tri);
           }
         }
@@ -174,15 +194,16 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
     const Node& B = nodes_[b];
     if (!overlap(A, B)) continue;
     if (A.tri >= 0 && B.tri >= 0) {
-      emit(A.tri, B.tri);
+      if (!(skip_sharing && share(leaves_[A.first], leaves_[B.first]))) emit(A.tri, B.tri);
     } else if (A.count <= kSmallSubtree && B.count <= kSmallSubtree) {
       // Two small subtrees: every overlapping pair of their leaves (the same pairs the descent finds).
       for (Index i = A.first; i < A.first + A.count; ++i) {
-        const Node& LA = nodes_[leaf_nodes_[i]];
+        const Leaf& LA = leaves_[i];
         const bool ma = marked_only && marked_[leaf_nodes_[i]];
         for (Index j = B.first; j < B.first + B.count; ++j) {
-          const Node& LB = nodes_[leaf_nodes_[j]];
+          const Leaf& LB = leaves_[j];
           if (marked_only && !ma && !marked_[leaf_nodes_[j]]) continue;
+          if (skip_sharing && share(LA, LB)) continue;
           if (overlap(LA, LB)) emit(LA.tri, LB.tri);
         }
       }
@@ -368,7 +389,16 @@ class SelfCollision {
     Index v[3], e[3];     ///< vertex indices; edge k's index into edges_
     std::uint32_t own;    ///< bit k: owns vertex k; bit 3 + k: owns edge k
   };
-  std::vector<TriRecord> trec_;
+  std::vector<TriRecord> trec_;                  ///< in the hierarchy's leaf order (slot), not by triangle index:
+                                                 ///< the traversal meets the records of nearby leaves together
+  std::vector<Index> tri_slot_, slot_tri_;       ///< triangle -> its record's slot, and back
+  /// The element pairs that a rebuild's traversal would test in leaf pairs of triangles sharing
+  /// a vertex (fixed by the mesh: every non-adjacent vertex-triangle pair whose vertex's owner
+  /// shares a vertex with the triangle, and edge-edge pair (e < f) whose owners share one). A full
+  /// rebuild skips such leaf pairs in the traversal and tests these lists instead, in a plain
+  /// loop over kNeighbourChunks fixed chunks (same pairs; half a rebuild's leaf pairs at 128^2).
+  std::vector<std::array<Index, 2>> nb_vt_, nb_ee_;
+  static constexpr std::size_t kNeighbourChunks = 16;
   std::vector<double> ref_x_;                    ///< start positions at the last broad phase
   std::vector<double> moved_;                    ///< per vertex |x0 - ref_x| this step
   std::vector<double> step_len_;                 ///< per vertex |d| this step
