@@ -495,7 +495,8 @@ BENCHMARK(BM_BwStepSplit)->Args({64, 40})->Args({128, 12})->Args({256, 2})->Iter
 // step_ms (thread CPU time of the integrator's step and the after-step response), bw_ms (the
 // integrator's step), amg_setup_ms (hierarchy set-ups and level-0 refreshes; amg_factorizes of
 // them per step, amg_full_setups of the whole hierarchy), iterations (every solve of the step),
-// spring_its (those of the solves with springs), solves (with springs), contacts, pattern_growths;
+// spring_its (those of the solves after the springs were found, friction's included), solves
+// (with springs, before the friction dampers), friction_solves (with dampers), contacts, pattern_growths;
 // intersections at the end (exact count). Last argument: implicit_friction (1, the default:
 // friction inside the solve, up to 3 more solves per step; 0: the correction after it).
 //   OMP_NUM_THREADS=1 LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_BwSaAmgContact
@@ -520,13 +521,15 @@ class AssembledOnly final : public loom::LinearSolver {  // hides set_extra_oper
 
 // What both contact benches below tally per counted step: thread CPU time of the integrator's
 // step (bw) and of it with the after-step response (step), the step's linear iterations, the
-// self-contact springs' solves, iterations and contacts, pattern growths; intersections at the
-// end (exact count).
+// self-contact springs' solves, iterations and contacts, the solves with friction dampers,
+// pattern growths; intersections at the end (exact count).
 struct BwContactTally {
-  double step_t = 0, bw_t = 0, its = 0, spring_its = 0, solves = 0, contacts = 0, growths = 0, intersections = 0;
+  double step_t = 0, bw_t = 0, its = 0, spring_its = 0, solves = 0, friction_solves = 0, contacts = 0, growths = 0,
+         intersections = 0;
   // One step of `bw` with self-collision's begin_step and resolve around it; tallied when `counted`.
   void step(loom::Scene& sc, loom::BaraffWitkin& bw, double h, bool counted) {
     const int g0 = bw.pattern_rebuilds();
+    const long long f0 = bw.friction_solves();
     const double t0 = thread_cpu_seconds();
     sc.self_collision->begin_step(sc.state);
     bw.step(sc, h);
@@ -540,6 +543,7 @@ struct BwContactTally {
     its += bw.last_step().linear_iterations;
     spring_its += c.iterations;
     solves += c.solves;
+    friction_solves += static_cast<double>(bw.friction_solves() - f0);
     contacts += c.contacts;
     growths += bw.pattern_rebuilds() - g0;
   }
@@ -549,6 +553,7 @@ struct BwContactTally {
     st.counters["iterations"] = its / total;
     st.counters["spring_its"] = spring_its / total;
     st.counters["solves"] = solves / total;
+    st.counters["friction_solves"] = friction_solves / total;
     st.counters["contacts"] = contacts / total;
     st.counters["pattern_growths"] = growths / total;
     st.counters["intersections"] = intersections;

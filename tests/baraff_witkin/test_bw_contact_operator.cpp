@@ -16,6 +16,7 @@
 #include <cstdlib>
 #include <memory>
 #include <random>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -129,8 +130,8 @@ TEST(BwContactOperator, MatrixFreeTermEqualsTheAssembledBlocksOnAFoldedCloth) {
 
 // One step from the same folded state, solved matrix-free by filtered_pcg (tolerance 1e-12) and
 // with the terms assembled into A by eigen_ldlt (a direct solve): the same springs and releases
-// (the PCG's release solves at a looser tolerance, 1e-9, then one more at 1e-12),
-// and the same end positions and velocities to 1e-9 relative. The contact-free solve that picks
+// (the PCG's release solves at a looser tolerance, 1e-9, then one more at 1e-12; the same for
+// its friction solves), and the same end positions to 1e-9 relative and velocities to 1e-8. The contact-free solve that picks
 // the springs differs between the two solvers only by the PCG's tolerance.
 TEST(BwContactOperator, AStepSolvedMatrixFreeEqualsTheAssembledDirectSolve) {
   Fold pcg(kPcg), ldlt("{type: eigen_ldlt}");
@@ -144,6 +145,7 @@ TEST(BwContactOperator, AStepSolvedMatrixFreeEqualsTheAssembledDirectSolve) {
   fold_until_contacts(a, bw_a, 40, bw_a.pattern().nnz_blocks());
   b.state = a.state;
   bw_b.set_restart_state(bw_a.restart_state());  // the collider contacts of the last step
+  const long long fa0 = bw_a.friction_solves(), fb0 = bw_b.friction_solves();
   bw_a.step(a, kH);
   bw_b.step(b, kH);
   const auto& sa = bw_a.self_contact()->stats();
@@ -152,8 +154,14 @@ TEST(BwContactOperator, AStepSolvedMatrixFreeEqualsTheAssembledDirectSolve) {
   EXPECT_EQ(sa.contacts, sb.contacts);
   EXPECT_EQ(sa.released, sb.released);
   // The PCG decides the releases at ImplicitSelfContact::kReleaseToleranceScale times its
-  // tolerance and ends with one solve at its own: one solve more than the direct solver.
+  // tolerance and ends with one solve at its own: one solve more than the direct solver. It
+  // sizes the friction dampers at kFrictionToleranceScale times its tolerance and ends with a
+  // solve at its own: one friction solve more than the direct solver, unless the direct
+  // solver took all kFrictionSolves (then the PCG's last is the one at its tolerance).
   EXPECT_EQ(sa.solves, sb.solves + 1);
+  const long long fa = bw_a.friction_solves() - fa0, fb = bw_b.friction_solves() - fb0;
+  ASSERT_GT(fb, 0);  // the fold holds contacts with friction
+  EXPECT_EQ(fa, fb < loom::ImplicitSelfContact::kFrictionSolves ? fb + 1 : fb);
   EXPECT_GE(bw_b.pattern_rebuilds(), 1);  // the assembled path had to extend its pattern
   EXPECT_EQ(bw_a.pattern_rebuilds(), 0);
   double dx = 0, xs = 0, dv = 0, vs = 0;
@@ -167,7 +175,101 @@ TEST(BwContactOperator, AStepSolvedMatrixFreeEqualsTheAssembledDirectSolve) {
     std::printf("springs %d (released %d, solves %d): max |dx| %.3g m, max |dv| %.3g m/s (max |v| %.3g)\n",
                 static_cast<int>(sa.contacts), static_cast<int>(sa.released), sa.solves, dx, dv, vs);
   EXPECT_LE(dx, 1e-9 * xs);
-  EXPECT_LE(dv, 1e-9 * std::max(vs, 1.0));
+  // The friction dampers' corrections are sized from the PCG's solves at kFrictionToleranceScale
+  // times 1e-12 (1e-9 relative residual): the velocities agree to about that (10 times it).
+  EXPECT_LE(dv, 10 * loom::ImplicitSelfContact::kFrictionToleranceScale * 1e-12 * std::max(vs, 1.0));
+}
+
+namespace {
+// filtered_pcg with a record of every solve: the tolerance scale it ran at, whether the
+// matrix-free springs were applied, and its iterations.
+class RecordingSolver final : public loom::LinearSolver {
+ public:
+  struct Solve {
+    double scale;
+    bool extra;
+    int iterations;
+  };
+  explicit RecordingSolver(std::unique_ptr<loom::LinearSolver> s) : s_(std::move(s)) {}
+  std::string name() const override { return s_->name(); }
+  void analyze_pattern(const loom::BsrMatrix& A, const loom::Filter& S) override { s_->analyze_pattern(A, S); }
+  bool factorize(const loom::BsrMatrix& A, const loom::Filter& S, loom::SolveReport& r) override {
+    return s_->factorize(A, S, r);
+  }
+  loom::SolveReport solve(const loom::BsrMatrix& A, const loom::Filter& S, std::span<const double> b,
+                          std::span<const double> z, std::span<double> dv) override {
+    const loom::SolveReport r = s_->solve(A, S, b, z, dv);
+    solves.push_back({scale_, extra_ != nullptr, r.iterations});
+    return r;
+  }
+  void set_coordinates(std::span<const double> x) override { s_->set_coordinates(x); }
+  bool supports_extra_operator() const override { return s_->supports_extra_operator(); }
+  void set_extra_operator(const loom::ExtraOperator* E) override {
+    extra_ = E;
+    s_->set_extra_operator(E);
+  }
+  bool set_tolerance_scale(double t) override {
+    scale_ = t;
+    return s_->set_tolerance_scale(t);
+  }
+  std::vector<Solve> solves;
+
+ private:
+  std::unique_ptr<loom::LinearSolver> s_;
+  double scale_ = 1.0;
+  const loom::ExtraOperator* extra_ = nullptr;
+};
+}  // namespace
+
+// Friction inside the solve with an iterative solver (issue 12): on the folded cloth (collider
+// friction 0.8 on the plane, self friction 0.3), the solves with friction dampers that a
+// correction may still follow run at ImplicitSelfContact::kFrictionToleranceScale times the
+// tolerance, the step's last solve runs at the scene's tolerance with the springs applied,
+// and the springs' last solve (whose normal impulses bound the dampers) at the scene's
+// tolerance too, the ones before it at kReleaseToleranceScale times it. (The end state equals
+// eigen_ldlt's, a direct solve of the assembled terms: AStepSolvedMatrixFreeEquals... above.)
+TEST(BwContactOperator, FrictionSolvesSizeTheDampersLooselyAndEndAtTheScenesTolerance) {
+  Fold f("{type: filtered_pcg, filtered_pcg: {tolerance: 1.0e-8, max_iterations: 5000}}");
+  Scene& sc = f.scene();
+  auto rec = std::make_unique<RecordingSolver>(std::move(sc.solver));
+  RecordingSolver* r = rec.get();
+  sc.solver = std::move(rec);
+  BaraffWitkin bw;
+  bw.prepare(sc, kH);
+  ASSERT_TRUE(bw.self_contact_matrix_free());
+  fold_until_contacts(sc, bw, 40, bw.pattern().nnz_blocks());
+  if (HasFatalFailure()) return;
+  int checked = 0;
+  for (int step = 0; step < 5; ++step) {
+    r->solves.clear();
+    const long long f0 = bw.friction_solves();
+    full_step(sc, bw);
+    const long long fs = bw.friction_solves() - f0;
+    const auto& st = bw.self_contact()->stats();
+    ASSERT_FALSE(r->solves.empty());
+    const RecordingSolver::Solve& last = r->solves.back();
+    EXPECT_EQ(last.scale, 1.0) << "step " << step;  // the step ends at the scene's tolerance
+    if (st.contacts == 0 || fs == 0) continue;
+    ++checked;
+    EXPECT_TRUE(last.extra) << "step " << step;     // with the springs
+    // The solves: the contact-free one(s) at scale 1, the springs' (st.solves: all loose but
+    // the last), then fs with dampers (all loose but the last).
+    const std::size_t ns = r->solves.size(), nf = static_cast<std::size_t>(fs);
+    const std::size_t nsp = static_cast<std::size_t>(st.solves);
+    ASSERT_GE(ns, nsp + nf);
+    ASSERT_GE(nsp, 2u) << "a loose spring solve and the one at the tolerance";
+    ASSERT_GE(nf, 2u) << "a loose friction solve and the one at the tolerance";
+    EXPECT_LE(fs, loom::ImplicitSelfContact::kFrictionSolves + 1);
+    for (std::size_t k = ns - nf; k + 1 < ns; ++k)
+      EXPECT_EQ(r->solves[k].scale, loom::ImplicitSelfContact::kFrictionToleranceScale) << "step " << step << " solve " << k;
+    EXPECT_EQ(r->solves[ns - nf - 1].scale, 1.0) << "step " << step;  // the springs' last
+    for (std::size_t k = ns - nf - nsp; k + 1 < ns - nf; ++k)
+      EXPECT_EQ(r->solves[k].scale, loom::ImplicitSelfContact::kReleaseToleranceScale) << "step " << step << " solve " << k;
+    if (verbose())
+      std::printf("step %d: springs %d, %d spring solves, %lld friction solves, last %d iterations\n", step,
+                  static_cast<int>(st.contacts), st.solves, fs, last.iterations);
+  }
+  EXPECT_GT(checked, 0) << "no step had springs and friction dampers";
 }
 
 // The folding cloth for 0.5 s (250 steps) under baraff_witkin with filtered_pcg (the springs
