@@ -106,14 +106,21 @@ struct Case {
   const char* name;
   ColliderSet (*colliders)();
   double top;  // height of the collider's offset surface under the cloth's centre at t = 0
+  /// Baraff-Witkin steps compared. The contact rule is discontinuous at distance 0 (a vertex
+  /// projected onto the surface by the previous step is in contact when its distance rounds to
+  /// <= 0), so where the backends' states differ by rounding (~1e-13) such a tie can go either
+  /// way and the runs part by a whole contact (test_cuda_bw_colliders.cpp, "The horizon"). The
+  /// keyframed case meets its first one at step 15 (with the same iteration counts on both
+  /// backends, the 15th step's velocities part by 0.27 m/s at one vertex), so it stops before.
+  int bw_steps;
 };
 // Tops: the icosphere's pole vertex (radius 0.3 at y) + thickness; the quad at the centre line;
 // icosphere1's top vertex (0.25) + thickness.
 const Case kCases[] = {
-    {"static_ball", static_mesh_ball, -0.35 + 0.3 + 0.004},
-    {"open_quad", open_quad, -0.02 + 0.002},
-    {"spinning_ball", shipped_mesh_ball, -0.35 + 0.3 + 0.004},
-    {"keyframed", keyframed_mesh, -0.3 + 0.25 + 0.003},
+    {"static_ball", static_mesh_ball, -0.35 + 0.3 + 0.004, 20},
+    {"open_quad", open_quad, -0.02 + 0.002, 20},
+    {"spinning_ball", shipped_mesh_ball, -0.35 + 0.3 + 0.004, 20},
+    {"keyframed", keyframed_mesh, -0.3 + 0.25 + 0.003, 14},
 };
 
 enum class Cloth { Explicit, Implicit };
@@ -276,12 +283,12 @@ TEST_P(CudaMeshColliders, MatchesTheCpuBackend) {
   const Case& cs = kCases[std::get<1>(GetParam())];
   const ColliderSet cols = cs.colliders();
   const bool bw = which.rfind("bw", 0) == 0;
-  const Outcome r = bw ? run_bw(cols, cs.top - 0.002, 20, which == "bw")
+  const Outcome r = bw ? run_bw(cols, cs.top - 0.002, cs.bw_steps, which == "bw")
                        : run_explicit(cols, which, cs.top - 0.002, 150);
   EXPECT_LE(r.err_x, 1e-10) << cs.name;
   EXPECT_LE(r.err_v, 1e-10) << cs.name;
-  // Vertex contacts over the run (measured: explicit 82-6500, Baraff-Witkin 34-79).
-  EXPECT_GT(r.contacts, bw ? 20 : 50) << cs.name;
+  // Vertex contacts over the run (measured: explicit 82-6500, Baraff-Witkin 17-79).
+  EXPECT_GT(r.contacts, bw ? 12 : 50) << cs.name;
   std::printf("[ measured ] %s %s: x %.2e v %.2e relative, %d vertex contacts\n", which.c_str(), cs.name, r.err_x,
               r.err_v, r.contacts);
 }

@@ -817,15 +817,19 @@ class CudaBw final : public Integrator {
     void zero_dv() { fill(bw.dv_, T(0)); }
     bool release_pulling_contacts(double) { return bw.release_pulling_contacts(); }
     // No self-contact on the device; with implicit_friction (default) the contacts' dampers join
-    // A and b and the step is solved again, up to kernels::kFrictionSolves times, as on the CPU.
+    // A and b and bw::friction_solves solves, corrects and solves again, as on the CPU.
     template <class F>
     bool extra_solves(bool ok, double, F&& solve_once) {
       if (!ok || contacts == 0 || !bw.opt_.implicit_friction) return ok;
       if (bw.friction_dampers(0) == 0) return ok;
-      ok = solve_once();
-      for (int r = 1; ok && r < kernels::kFrictionSolves && bw.friction_dampers(1) > 0; ++r) ok = solve_once();
-      if (ok) bw.friction_dampers(2);
-      return ok;
+      long long solves = 0;
+      return bw::friction_solves(
+          solve_once, [&] { return bw.friction_dampers(1) > 0; }, [&] { bw.friction_dampers(2); },
+          [&](double k) {
+            bw.pcg_.set_tolerance_scale(k);
+            return true;
+          },
+          solves);
     }
     void after_solve(double) {
       if (contacts > 0 && !bw.opt_.implicit_friction)

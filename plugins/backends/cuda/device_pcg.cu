@@ -1,5 +1,6 @@
 #include "device_pcg.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -305,7 +306,7 @@ SolveReport DevicePcg<T>::solve(const DeviceBsr<T>& A, const DeviceFilter<T>& S,
   DevicePcgOps<T> ops{A, S, b, z, pinv_, n_};
   static_assert(pcg::FilteredPcgOps<DevicePcgOps<T>>);
   pcg::Settings set;
-  set.tolerance = opt_.tolerance;
+  set.tolerance = std::min(0.5, opt_.tolerance * tolerance_scale_);  // as the CPU filtered_pcg
   set.max_iterations = opt_.max_iterations;
   set.name = name_.c_str();
   SolveReport rep = pcg::solve(ops, set, dv, r_, c_, q_, s_);

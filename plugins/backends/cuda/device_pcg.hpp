@@ -60,9 +60,12 @@ class DevicePcg {
                     DVec<T>& dv);
   /// Prefix of the messages (the plugin's name).
   void set_name(std::string name) { name_ = std::move(name); }
+  /// The next solves run at s times the tolerance (1 restores it), as LinearSolver::set_tolerance_scale.
+  void set_tolerance_scale(double s) { tolerance_scale_ = s; }
 
  private:
   PcgOptions opt_;
+  double tolerance_scale_ = 1.0;
   std::string name_ = "filtered_pcg";
   Index n_ = 0;
   DVec<T> pinv_, r_, c_, q_, s_;

@@ -468,13 +468,10 @@ struct BaraffWitkin::StepOps {
     return ok;
   }
   // Friction inside the solve: the contacts' tangential dampers join A and b (the springs of
-  // the self-contacts stay) and the step is solved once more, and again (at most
-  // kFrictionSolves solves with dampers) where a damper's impulse missed the Coulomb bound.
-  // With an iterative solver the solves that a correction may still follow only size the
-  // dampers: they run at kFrictionToleranceScale times its tolerance, and the step ends with a
-  // solve at the scene's tolerance, warm-started from them: the last correction's, or one
-  // more when the dampers already met the bound. The normal impulses that bound the dampers
-  // come from the springs' (and the collider contacts') solves at the scene's tolerance.
+  // the self-contacts stay) and bw::friction_solves solves the step with them, corrects them
+  // and solves again (bw_step.hpp, one source with the CUDA backend). The normal impulses that
+  // bound the dampers come from the springs' (and the collider contacts') solves at the
+  // scene's tolerance.
   template <class F>
   bool friction_solve(double h, F&& solve_once) {
     State& s = scene.state;
@@ -484,31 +481,19 @@ struct BaraffWitkin::StepOps {
     if (!col && !self) return true;
     const bool mf = bw.self_contact_ && bw.self_contact_->matrix_free() && !bw.self_contact_->contacts().empty();
     if (mf) scene.solver->set_extra_operator(bw.self_contact_.get());
-    bool loose = scene.solver->set_tolerance_scale(ImplicitSelfContact::kFrictionToleranceScale);
-    bool ok = solve_once();
-    ++bw.friction_solves_;
-    for (int r = 1; ok && r < ImplicitSelfContact::kFrictionSolves; ++r) {
-      // (both corrected before the next solve: no short-circuit)
-      const bool c1 = col && bw.correct_collider_friction(scene);
-      const bool c2 = self && bw.self_contact_->correct_friction(s, bw.A_, bw.b_, bw.dv_);
-      if (!c1 && !c2) break;
-      if (loose && r + 1 == ImplicitSelfContact::kFrictionSolves) {  // no correction follows this solve
-        scene.solver->set_tolerance_scale(1.0);
-        loose = false;
-      }
-      ok = solve_once();
-      ++bw.friction_solves_;
-    }
-    if (loose) {
-      scene.solver->set_tolerance_scale(1.0);
-      if (ok) {
-        ok = solve_once();
-        ++bw.friction_solves_;
-      }
-    }
+    const bool ok = bw::friction_solves(
+        solve_once,
+        [&] {  // both corrected before the next solve: no short-circuit
+          const bool c1 = col && bw.correct_collider_friction(scene);
+          const bool c2 = self && bw.self_contact_->correct_friction(s, bw.A_, bw.b_, bw.dv_);
+          return c1 || c2;
+        },
+        [&] {
+          if (col) bw.finish_collider_friction(scene);
+          if (self) bw.self_contact_->finish_friction(s, bw.dv_);
+        },
+        [&](double k) { return scene.solver->set_tolerance_scale(k); }, bw.friction_solves_);
     if (mf) scene.solver->set_extra_operator(nullptr);
-    if (ok && col) bw.finish_collider_friction(scene);
-    if (ok && self) bw.self_contact_->finish_friction(s, bw.dv_);
     return ok;
   }
   void after_solve(double h) {

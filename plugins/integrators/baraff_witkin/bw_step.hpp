@@ -27,12 +27,48 @@
 #include "loom/clock.hpp"
 #include "loom/common.hpp"
 #include "loom/integrator.hpp"
+#include "loom/kernels/friction.hpp"
 #include "loom/linear_solver.hpp"
 
 namespace loom::bw {
 
 /// At most this many rounds of releasing the pulling contacts and solving again per step.
 inline constexpr int kMaxReleaseRounds = 16;
+
+/// Friction inside the solve (implicit_friction), once the contacts' dampers have joined A and
+/// b: the step is solved with them, and again where a correction changed a damper
+/// (`correct()`: true when any did), at most kernels::kFrictionSolves solves with dampers; then
+/// `finish()` (held contacts). With an iterative solver (`set_tolerance_scale(s)` returns true)
+/// the solves that a correction may still follow only size the dampers: they run at
+/// kernels::kFrictionToleranceScale times its tolerance, and the step ends with a solve at the
+/// scene's tolerance, warm-started from them: the last correction's, or one more when the
+/// dampers already met the bound. `solves` counts the solves. Returns whether every solve
+/// converged.
+template <class Solve, class Correct, class Finish, class Scale>
+bool friction_solves(Solve&& solve_once, Correct&& correct, Finish&& finish, Scale&& set_tolerance_scale,
+                     long long& solves) {
+  bool loose = set_tolerance_scale(kernels::kFrictionToleranceScale);
+  bool ok = solve_once();
+  ++solves;
+  for (int r = 1; ok && r < kernels::kFrictionSolves; ++r) {
+    if (!correct()) break;
+    if (loose && r + 1 == kernels::kFrictionSolves) {  // no correction follows this solve
+      set_tolerance_scale(1.0);
+      loose = false;
+    }
+    ok = solve_once();
+    ++solves;
+  }
+  if (loose) {
+    set_tolerance_scale(1.0);
+    if (ok) {
+      ok = solve_once();
+      ++solves;
+    }
+  }
+  if (ok) finish();
+  return ok;
+}
 
 /// One attempt of a step of size h from the state at start_time(); false when a solve failed
 /// (dv is then zeroed: no warm start from a failed solve).

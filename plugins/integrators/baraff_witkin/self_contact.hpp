@@ -171,14 +171,8 @@ class ImplicitSelfContact final : public ExtraOperator {
   static constexpr double kStickDamping = kernels::kStickDamping;
   static constexpr double kCoulombTolerance = kernels::kCoulombTolerance;
   static constexpr int kFrictionSolves = kernels::kFrictionSolves;
-  /// With an iterative solver, the solves with dampers that a correction may still follow
-  /// run at this many times the scene's tolerance (they only size the dampers), and one solve
-  /// at the scene's tolerance ends the step (BaraffWitkin's friction_solve). Not looser: the
-  /// corrections read the small slip of held contacts from those solves, and at 1000 times the
-  /// default tolerance the step's solve error on the wool drape (BwTolerance.DefaultTolerance...)
-  /// was 400 times its bound; at 300 and 100 within it. The bench's draped cloth
-  /// (BM_BwSaAmgContact, sa_amg): docs/CONTACT.md, "Friction inside the solve".
-  static constexpr double kFrictionToleranceScale = 100.0;
+  /// The friction solves' tolerance scale with an iterative solver (loom/kernels/friction.hpp).
+  static constexpr double kFrictionToleranceScale = kernels::kFrictionToleranceScale;
   /// After the step (x1 = x0 + h v1 has landed the approaching pairs at the thickness, with
   /// v1 still their approach velocity): make every contact inelastic, relative normal velocity
   /// >= 0, by the smallest mass-weighted velocity change (projected Gauss-Seidel on the
