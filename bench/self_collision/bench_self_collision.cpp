@@ -55,6 +55,7 @@
 #ifdef LOOM_BENCH_CHOLMOD
 #include "cholmod_solver.hpp"
 #endif
+#include "loom/forwarding_solver.hpp"
 #include "loom/intersection_check.hpp"
 #include "loom/mesh.hpp"
 #include "loom/self_collision.hpp"
@@ -500,23 +501,11 @@ BENCHMARK(BM_BwStepSplit)->Args({64, 40})->Args({128, 12})->Args({256, 2})->Iter
 // intersections at the end (exact count). Last argument: implicit_friction (1, the default:
 // friction inside the solve, up to 3 more solves per step; 0: the correction after it).
 //   OMP_NUM_THREADS=1 LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape build/bin/bench_self_collision --benchmark_filter=BM_BwSaAmgContact
-class AssembledOnly final : public loom::LinearSolver {  // hides set_extra_operator: the integrator assembles
+class AssembledOnly final : public loom::ForwardingSolver {  // hides set_extra_operator: the integrator assembles
  public:
-  explicit AssembledOnly(std::unique_ptr<loom::LinearSolver> s) : s_(std::move(s)) {}
-  std::string name() const override { return s_->name(); }
-  void analyze_pattern(const loom::BsrMatrix& A, const loom::Filter& S) override { s_->analyze_pattern(A, S); }
-  bool factorize(const loom::BsrMatrix& A, const loom::Filter& S, loom::SolveReport& r) override {
-    return s_->factorize(A, S, r);
-  }
-  loom::SolveReport solve(const loom::BsrMatrix& A, const loom::Filter& S, std::span<const double> b,
-                          std::span<const double> z, std::span<double> dv) override {
-    return s_->solve(A, S, b, z, dv);
-  }
-  void set_coordinates(std::span<const double> x) override { s_->set_coordinates(x); }
-  bool set_tolerance_scale(double t) override { return s_->set_tolerance_scale(t); }
-
- private:
-  std::unique_ptr<loom::LinearSolver> s_;
+  using ForwardingSolver::ForwardingSolver;
+  bool supports_extra_operator() const override { return false; }
+  void set_extra_operator(const loom::ExtraOperator*) override {}
 };
 
 // What both contact benches below tally per counted step: thread CPU time of the integrator's

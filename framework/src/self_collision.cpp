@@ -885,17 +885,16 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
       std::vector<Pair>& ee = task_ee_[q];
       vt.clear();
       ee.clear();
-      // Vertex k of record P against triangle t (record T).
-      auto vert_tri = [&](const TriRecord& P, int k, Index t, const TriRecord& T) {
-        const Index v = P.v[k];
-        if (v == T.v[0] || v == T.v[1] || v == T.v[2]) return;
-        const double* p = &P.x[3 * k];
-        const double pad = P.r[k] + 0.5 * gap;
+      // The element tests, for the traversal's leaf pairs and the neighbour lists alike: vertex
+      // v at p (reach rv) against triangle t (record T): its padded box against T's, then with
+      // `exact` the distance below gap + the reaches; listed when it passes.
+      auto test_vt = [&](Index v, const double* p, double rv, Index t, const TriRecord& T) {
+        const double pad = rv + half_gap;
         const double plo[3] = {p[0] - pad, p[1] - pad, p[2] - pad}, phi[3] = {p[0] + pad, p[1] + pad, p[2] + pad};
         if (!overlap(plo, phi, T.lo, T.hi)) return;
         double dist = 0;
         if (exact) {
-          const double r = gap + P.r[k] + T.tr;
+          const double r = gap + rv + T.tr;
           if (selfcol::point_triangle_farther_than(p, &T.x[0], &T.x[3], &T.x[6], r)) return;
           ++exact_count;
           double w[3];
@@ -903,6 +902,36 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
           if (!(dist < r)) return;
         }
         vt.push_back({v, t, dist});
+      };
+      // The box of segment p0 p1 grown by pad.
+      auto edge_box = [](const double* p0, const double* p1, double pad, double* lo, double* hi) {
+        for (int c = 0; c < 3; ++c) {
+          lo[c] = std::min(p0[c], p1[c]) - pad;
+          hi[c] = std::max(p0[c], p1[c]) + pad;
+        }
+      };
+      // Edge e (p0 p1, reach er, padded box elo / ehi) against edge f (q0 q1, reach fr).
+      auto test_ee = [&](Index e, const double* p0, const double* p1, double er, const double* elo,
+                         const double* ehi, Index f, const double* q0, const double* q1, double fr) {
+        double flo[3], fhi[3];
+        edge_box(q0, q1, fr + half_gap, flo, fhi);
+        if (!overlap(elo, ehi, flo, fhi)) return;
+        double dist = 0;
+        if (exact) {
+          const double r = gap + er + fr;
+          if (selfcol::segments_farther_than(p0, p1, q0, q1, r)) return;
+          ++exact_count;
+          double ss, tt;
+          dist = selfcol::segment_segment_distance(p0, p1, q0, q1, ss, tt);
+          if (!(dist < r)) return;
+        }
+        ee.push_back({std::min(e, f), std::max(e, f), dist});
+      };
+      // Vertex k of record P against triangle t (record T).
+      auto vert_tri = [&](const TriRecord& P, int k, Index t, const TriRecord& T) {
+        const Index v = P.v[k];
+        if (v == T.v[0] || v == T.v[1] || v == T.v[2]) return;
+        test_vt(v, &P.x[3 * k], P.r[k], t, T);
       };
       // With marked_only (a refresh), a leaf pair has at least one refreshed triangle, and
       // only the element pairs that the refresh dropped are looked at: those with a refreshed
@@ -929,12 +958,8 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
           int a0 = ka, a1 = (ka + 1) % 3;
           if (RA.v[a1] < RA.v[a0]) std::swap(a0, a1);
           const double *p0 = &RA.x[3 * a0], *p1 = &RA.x[3 * a1];
-          const double epad = RA.er[ka] + 0.5 * gap;
           double elo[3], ehi[3];
-          for (int c = 0; c < 3; ++c) {
-            elo[c] = std::min(p0[c], p1[c]) - epad;
-            ehi[c] = std::max(p0[c], p1[c]) + epad;
-          }
+          edge_box(p0, p1, RA.er[ka] + half_gap, elo, ehi);
           // B's box holds its edges' boxes: an edge of A clear of it meets none of them.
           if (!overlap(elo, ehi, RB.lo, RB.hi)) continue;
           const bool all_f = !marked_only || eflag_[e];
@@ -945,24 +970,7 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
             int b0 = kb, b1 = (kb + 1) % 3;
             if (RB.v[b1] < RB.v[b0]) std::swap(b0, b1);
             if (RA.v[a0] == RB.v[b0] || RA.v[a0] == RB.v[b1] || RA.v[a1] == RB.v[b0] || RA.v[a1] == RB.v[b1]) continue;
-            const double *q0 = &RB.x[3 * b0], *q1 = &RB.x[3 * b1];
-            const double fpad = RB.er[kb] + 0.5 * gap;
-            double flo[3], fhi[3];
-            for (int c = 0; c < 3; ++c) {
-              flo[c] = std::min(q0[c], q1[c]) - fpad;
-              fhi[c] = std::max(q0[c], q1[c]) + fpad;
-            }
-            if (!overlap(elo, ehi, flo, fhi)) continue;
-            double dist = 0;
-            if (exact) {
-              const double r = gap + RA.er[ka] + RB.er[kb];
-              if (selfcol::segments_farther_than(p0, p1, q0, q1, r)) continue;
-              ++exact_count;
-              double ss, tt;
-              dist = selfcol::segment_segment_distance(p0, p1, q0, q1, ss, tt);
-              if (!(dist < r)) continue;
-            }
-            ee.push_back({std::min(e, f), std::max(e, f), dist});
+            test_ee(e, p0, p1, RA.er[ka], elo, ehi, f, &RB.x[3 * b0], &RB.x[3 * b1], RB.er[kb]);
           }
         }
       };
@@ -975,47 +983,18 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
       const std::size_t vt0 = nb_vt_.size() * c / kNeighbourChunks, vt1 = nb_vt_.size() * (c + 1) / kNeighbourChunks;
       const double* X = ref_x_.data();
       for (std::size_t i = vt0; i < vt1; ++i) {
-        const Index t = nb_vt_[i][1];
-        const TriRecord& T = trec_[tri_slot_[t]];
-        const Index v = nb_vt_[i][0];
-        const double* p = &X[3 * v];
-        const double pad = reach_[v] + half_gap;
-        const double plo[3] = {p[0] - pad, p[1] - pad, p[2] - pad}, phi[3] = {p[0] + pad, p[1] + pad, p[2] + pad};
-        if (!overlap(plo, phi, T.lo, T.hi)) continue;
-        double dist = 0;
-        if (exact) {
-          const double r = gap + reach_[v] + T.tr;
-          if (selfcol::point_triangle_farther_than(p, &T.x[0], &T.x[3], &T.x[6], r)) continue;
-          ++exact_count;
-          double w[3];
-          dist = selfcol::point_triangle_distance(p, &T.x[0], &T.x[3], &T.x[6], w);
-          if (!(dist < r)) continue;
-        }
-        vt.push_back({v, t, dist});
+        const Index v = nb_vt_[i][0], t = nb_vt_[i][1];
+        test_vt(v, &X[3 * v], reach_[v], t, trec_[tri_slot_[t]]);
       }
       const std::size_t ee0 = nb_ee_.size() * c / kNeighbourChunks, ee1 = nb_ee_.size() * (c + 1) / kNeighbourChunks;
       for (std::size_t i = ee0; i < ee1; ++i) {
         const Index e = nb_ee_[i][0], f = nb_ee_[i][1];
         const double *p0 = &X[3 * edges_[e][0]], *p1 = &X[3 * edges_[e][1]];
-        const double *q0 = &X[3 * edges_[f][0]], *q1 = &X[3 * edges_[f][1]];
         const double er = std::max(reach_[edges_[e][0]], reach_[edges_[e][1]]);
-        const double fr = std::max(reach_[edges_[f][0]], reach_[edges_[f][1]]);
-        const double epad = er + half_gap, fpad = fr + half_gap;
-        bool apart = false;
-        for (int k = 0; k < 3 && !apart; ++k)
-          apart = std::min(p0[k], p1[k]) - epad > std::max(q0[k], q1[k]) + fpad ||
-                  std::min(q0[k], q1[k]) - fpad > std::max(p0[k], p1[k]) + epad;
-        if (apart) continue;
-        double dist = 0;
-        if (exact) {
-          const double r = gap + er + fr;
-          if (selfcol::segments_farther_than(p0, p1, q0, q1, r)) continue;
-          ++exact_count;
-          double ss, tt;
-          dist = selfcol::segment_segment_distance(p0, p1, q0, q1, ss, tt);
-          if (!(dist < r)) continue;
-        }
-        ee.push_back({e, f, dist});
+        double elo[3], ehi[3];
+        edge_box(p0, p1, er + half_gap, elo, ehi);
+        test_ee(e, p0, p1, er, elo, ehi, f, &X[3 * edges_[f][0]], &X[3 * edges_[f][1]],
+                std::max(reach_[edges_[f][0]], reach_[edges_[f][1]]));
       }
     }
   }

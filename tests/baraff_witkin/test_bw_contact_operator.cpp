@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "baraff_witkin.hpp"
+#include "loom/forwarding_solver.hpp"
 #include "loom/intersection_check.hpp"
 #include "loom/registry.hpp"
 #include "loom/scene.hpp"
@@ -184,39 +185,31 @@ TEST(BwContactOperator, AStepSolvedMatrixFreeEqualsTheAssembledDirectSolve) {
 namespace {
 // filtered_pcg with a record of every solve: the tolerance scale it ran at, whether the
 // matrix-free springs were applied, and its iterations.
-class RecordingSolver final : public loom::LinearSolver {
+class RecordingSolver final : public loom::ForwardingSolver {
  public:
   struct Solve {
     double scale;
     bool extra;
     int iterations;
   };
-  explicit RecordingSolver(std::unique_ptr<loom::LinearSolver> s) : s_(std::move(s)) {}
-  std::string name() const override { return s_->name(); }
-  void analyze_pattern(const loom::BsrMatrix& A, const loom::Filter& S) override { s_->analyze_pattern(A, S); }
-  bool factorize(const loom::BsrMatrix& A, const loom::Filter& S, loom::SolveReport& r) override {
-    return s_->factorize(A, S, r);
-  }
+  using ForwardingSolver::ForwardingSolver;
   loom::SolveReport solve(const loom::BsrMatrix& A, const loom::Filter& S, std::span<const double> b,
                           std::span<const double> z, std::span<double> dv) override {
-    const loom::SolveReport r = s_->solve(A, S, b, z, dv);
+    const loom::SolveReport r = ForwardingSolver::solve(A, S, b, z, dv);
     solves.push_back({scale_, extra_ != nullptr, r.iterations});
     return r;
   }
-  void set_coordinates(std::span<const double> x) override { s_->set_coordinates(x); }
-  bool supports_extra_operator() const override { return s_->supports_extra_operator(); }
   void set_extra_operator(const loom::ExtraOperator* E) override {
     extra_ = E;
-    s_->set_extra_operator(E);
+    ForwardingSolver::set_extra_operator(E);
   }
   bool set_tolerance_scale(double t) override {
     scale_ = t;
-    return s_->set_tolerance_scale(t);
+    return ForwardingSolver::set_tolerance_scale(t);
   }
   std::vector<Solve> solves;
 
  private:
-  std::unique_ptr<loom::LinearSolver> s_;
   double scale_ = 1.0;
   const loom::ExtraOperator* extra_ = nullptr;
 };
