@@ -17,6 +17,7 @@
 #include <memory>
 #include <random>
 #include <span>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -271,3 +272,89 @@ TEST(BwContactOperator, FrictionSolvesSizeTheDampersLooselyAndEndAtTheScenesTole
 // layers at least half the thickness apart, no vertex under the ground plane, and the pattern
 // never extended (fold_scene.hpp).
 TEST(BwContactOperator, FoldingClothMatrixFreeNeverIntersects) { loom_test::fold_run_never_intersects("{type: filtered_pcg}"); }
+
+// A correction rule that settles on coupled contacts (issue 12): two free vertices of a 2 x 2
+// grid (0.1 m, springs k = 400 N/m along its edges and both diagonals, the two vertices at
+// x = 0 pinned) rest on a rough plane (mu 0.5, h = 5 ms); S, the far corner, is thrown at
+// v0 = 0.06 m/s along the diagonal d away from the pinned corner, H, its neighbour on the
+// plane, starts at rest. Analysis: H is held (the pull of the S-H spring, h^2 k |v_S . z|,
+// stays below mu m_H g h; asserted below), so S slides against its three springs with the
+// pinned vertices and H fixed; along d its stiffness is 2 k (x x^T + z z^T + d d^T has the
+// eigenvalue 2 along d) and
+//   v_S = (m_S v0 - mu m_S g h) / (m_S + 2 h^2 k)   (along d),  v_H = 0.
+// S's first damper is sized with its mass alone, and its response along d is m_S + 2 h^2 k,
+// 4 times that: it misses the bound. The correction that reads S's response from its row of
+// A, with H as solved (held), meets it at once, so the step takes 2 solves with dampers (a
+// direct solver: the first and the corrected one). The rule before (the response from the
+// frictionless solve, where H moved too) took all 3 and left S's friction 2 % above the bound.
+// The bound is checked by each vertex's momentum balance, independent of the dampers: the
+// friction impulse is m dv - h f(x1) in the tangent plane, f the springs' force linear about
+// the rest state (k (e.u) e per spring, e its unit direction, u the relative displacement;
+// no force at rest), and the normal impulse m g h (the vertices stay on the plane).
+TEST(BwContactOperator, CollidersFrictionCorrectionSettlesOnCoupledContacts) {
+  const double h = 0.005, k = 400.0, mu = 0.5, v0 = 0.06, g = 9.81, w = 0.1;
+  loom::Registry registry;
+  loom::PluginLoader loader{registry};
+  loom::Simulation::set_notes(false);
+  std::ostringstream y;
+  y << "mesh: {grid: {nx: 2, ny: 2, width: " << w << ", height: " << w << ", plane: xz}}\n"
+    << "material: {type: mass_spring, stencil: structural_shear_bend, stiffness: " << k << ", density: 2.0}\n"
+    << "integrator: {type: baraff_witkin, dt: " << h << "}\n"
+    << "solver: {type: eigen_ldlt}\n"
+    << "threads: 1\n"
+    << "gravity: [0, " << -g << ", 0]\n"
+    << "pins: [{name: left, box: {min: [-1, -1, -1], max: [0.01, 1, 1]}}]\n"
+    << "colliders: [{type: plane, point: [0, -0.002, 0], normal: [0, 1, 0], thickness: 0.002, friction: " << mu
+    << "}]\n";
+  auto sim = loom::Simulation::from_string(y.str(), "coupled.yaml", LOOM_SOURCE_DIR, {}, loader);
+  Scene& sc = sim->scene();
+  loom::State& s = sc.state;
+  ASSERT_EQ(s.size(), 4);
+  Index S = -1, H = -1;
+  for (Index i = 0; i < 4; ++i) {
+    if (s.pinned[i]) continue;
+    if (std::abs(s.x[3 * i + 2] + w) < 1e-12) S = i;  // the grid spans z in [-w, 0]
+    if (std::abs(s.x[3 * i + 2]) < 1e-12) H = i;
+  }
+  ASSERT_GE(S, 0);
+  ASSERT_GE(H, 0);
+  ASSERT_NEAR(s.x[3 * S], w, 1e-12);
+  const double d[3] = {1 / std::sqrt(2.0), 0, -1 / std::sqrt(2.0)};
+  for (int c = 0; c < 3; ++c) s.v[3 * S + c] = v0 * d[c];
+  const std::vector<double> x0 = s.x, vstart = s.v;
+  BaraffWitkin bw;
+  bw.prepare(sc, h);
+  const long long f0 = bw.friction_solves();
+  bw.step(sc, h);
+  EXPECT_EQ(bw.friction_solves() - f0, 2) << "solves with dampers";
+  const double mS = s.mass[S], mH = s.mass[H];
+  const double vS = (mS * v0 - mu * mS * g * h) / (mS + 2 * h * h * k);
+  ASSERT_LE(h * h * k * vS / std::sqrt(2.0), mu * mH * g * h) << "H is held (the analysis above)";
+  // The friction impulse of each free vertex: m dv - h f(x1), in the plane (y = 0).
+  auto friction = [&](Index i, double* p) {
+    for (int c = 0; c < 3; ++c) p[c] = s.mass[i] * (s.v[3 * i + c] - vstart[3 * i + c]);
+    for (Index j = 0; j < 4; ++j) {
+      if (j == i) continue;
+      double e[3], u[3], el = 0;
+      for (int c = 0; c < 3; ++c) {
+        e[c] = x0[3 * j + c] - x0[3 * i + c];
+        u[c] = (s.x[3 * j + c] - x0[3 * j + c]) - (s.x[3 * i + c] - x0[3 * i + c]);
+        el += e[c] * e[c];
+      }
+      el = std::sqrt(el);
+      double eu = 0;
+      for (int c = 0; c < 3; ++c) eu += e[c] / el * u[c];
+      for (int c = 0; c < 3; ++c) p[c] -= h * k * eu * e[c] / el;  // spring force on i: k (e.u) e
+    }
+  };
+  double pS[3], pH[3];
+  friction(S, pS);
+  friction(H, pH);
+  const double tolS = loom::kernels::kCoulombTolerance * mu * mS * g * h;
+  EXPECT_NEAR(std::hypot(pS[0], pS[2]), mu * mS * g * h, tolS) << "S slides with the kinetic bound";
+  EXPECT_LE(std::hypot(pH[0], pH[2]), mu * mH * g * h * (1 + loom::kernels::kCoulombTolerance)) << "H within the static bound";
+  for (int c = 0; c < 3; ++c) EXPECT_NEAR(s.v[3 * S + c], vS * d[c], tolS / mS) << c;
+  EXPECT_NEAR(std::hypot(s.v[3 * H], s.v[3 * H + 2]), 0.0, 1e-6 * vS) << "H held";
+  EXPECT_NEAR(s.v[3 * S + 1], 0.0, 1e-9);
+  EXPECT_NEAR(s.v[3 * H + 1], 0.0, 1e-9);
+}

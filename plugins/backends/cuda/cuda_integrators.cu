@@ -628,7 +628,7 @@ struct BwFrictionDamperKernel {
   const Index* diag;
   const T *v, *mass, *normal, *sv, *mus, *muk, *impulse;
   T *a, *b, *dv, *hc, *len0;
-  std::uint8_t* stick;
+  std::uint8_t* stick;  // 1 held, 0 sliding, 2 sliding after being let go (ColliderFrictionState::released)
   LOOM_HD int operator()(Index i) const {
     const long long o = 3LL * i;
     kernels::ColliderFrictionState<T> fs;
@@ -645,7 +645,8 @@ struct BwFrictionDamperKernel {
     if (hc[i] == T(0)) return 0;
     fs.hc = hc[i];
     fs.len0 = len0[i];
-    fs.stick = stick[i] != 0;
+    fs.stick = stick[i] == 1;
+    fs.released = stick[i] == 2;
     if (mode == 2) {
       kernels::finish_collider_friction(v + o, dv + o, sv + o, normal + o, fs);
       return 0;
@@ -654,7 +655,7 @@ struct BwFrictionDamperKernel {
                                             a + 9LL * diag[i], b + o, fs))
       return 0;
     hc[i] = fs.hc;
-    stick[i] = fs.stick ? 1 : 0;
+    stick[i] = fs.stick ? 1 : (fs.released ? 2 : 0);
     return 1;
   }
 };

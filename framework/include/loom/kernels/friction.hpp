@@ -1,8 +1,9 @@
 // Coulomb friction of a collider contact inside the implicit (Baraff-Witkin) step, per vertex:
 // a damper on the vertex's velocity relative to the surface in the tangent plane,
 // f = -c P (v1 - v_s), P = I - n n^T, whose h c is chosen so that the friction impulse meets
-// Coulomb's bound (coulomb_damping), corrected after a solve where the bound is missed, and a
-// vertex held by static friction finished after the last solve (docs/CONTACT.md, "Friction
+// Coulomb's bound (coulomb_damping), corrected after a solve where the bound is missed (the
+// vertex's response read from its row of A, its neighbours as solved: a block-Jacobi step), and
+// a vertex held by static friction finished after the last solve (docs/CONTACT.md, "Friction
 // inside the solve"). Header-only and LOOM_HD: the CPU plugin (baraff_witkin.cpp, whose
 // self-contacts use coulomb_damping too) and the CUDA backend run this one source. Templated
 // on the scalar.
@@ -80,6 +81,7 @@ struct ColliderFrictionState {
   T hc = 0;      ///< h c of the damper (kg), 0 when none
   T len0 = 0;    ///< tangential relative speed of the solve without it (m/s)
   bool stick = false;  ///< held by static friction
+  bool released = false;  ///< held earlier in this step and let go: slides until the step ends
 };
 
 /// The first damper of a contact in contact (not landing) whose last solve left the normal
@@ -90,6 +92,7 @@ template <class T>
 LOOM_HD inline bool start_collider_friction(const T* v0, const T* dv, const T* vs, const T* n, T mass, T mu_s, T mu_k,
                                             T impulse, T* blk, T* b, ColliderFrictionState<T>& fs) {
   fs.stick = false;
+  fs.released = false;
   fs.hc = T(0);
   if ((mu_s <= T(0) && mu_k <= T(0)) || !(impulse > T(0))) return false;
   fs.len0 = tangential_speed(v0, dv, vs, n);
@@ -98,26 +101,54 @@ LOOM_HD inline bool start_collider_friction(const T* v0, const T* dv, const T* v
   return true;
 }
 
-/// After a solve with the damper: where the friction impulse h c |v_t(v1)| misses the Coulomb
-/// bound (a held vertex above mu_s J, a sliding one off mu_k J) by more than kCoulombTolerance,
-/// the damper is chosen again with the response D = h c |v_t(v1)| / (len0 - |v_t(v1)|) the
-/// solve showed (its neighbours' pull included) and blk, b change by the difference. Returns
-/// whether it changed (solve again).
+/// After a solve with the damper: where the friction impulse p = h c |v_t(v1)| misses the
+/// Coulomb bound (a held vertex above mu_s J, a sliding one off mu_k J) by more than
+/// kCoulombTolerance, the damper is chosen again for the vertex as that solve left its
+/// neighbours (one block-Jacobi step of the contacts): its response along its slip direction t
+/// is read from its row of A, D = t^T A_ii t / |t|^2 - h c (its mass and its stiffness to
+/// neighbours that stay as solved; at least its mass), its slip without its own damper is
+/// f = |v_t(v1)| + p / D, and coulomb_damping(f, D) holds it (D f <= mu_s J) or gives the damper
+/// that leaves it mu_k J. A contact let go (held -> sliding) slides for the rest of the step:
+/// it is not held again (no cycling). blk, b change by the difference. Returns whether it
+/// changed (solve again).
+///
+/// (The rule before 2026-11-30 took D = p / (len0 - |v_t(v1)|), the response from the solve
+/// without friction, where the neighbours moved freely: with the neighbours held it
+/// underestimated the response, and the held/sliding split swung from solve to solve without
+/// settling; docs/CONTACT.md.)
 template <class T>
 LOOM_HD inline bool correct_collider_friction(const T* v0, const T* dv, const T* vs, const T* n, T mass, T mu_s,
                                               T mu_k, T impulse_n, T* blk, T* b, ColliderFrictionState<T>& fs) {
   if (fs.hc == T(0)) return false;
   const T tol = static_cast<T>(kCoulombTolerance);
-  const T l1 = tangential_speed(v0, dv, vs, n);
+  T vt[3];
+  const T l1 = tangential_speed(v0, dv, vs, n, vt);
   const T impulse = fs.hc * l1;
   const T ms = mu_s * impulse_n, mk = mu_k * impulse_n;
   const T miss = impulse > mk ? impulse - mk : mk - impulse;
   if (fs.stick ? impulse <= ms * (T(1) + tol) : miss <= tol * mk) return false;
-  const T D = fs.len0 > l1 && l1 > T(0) ? impulse / (fs.len0 - l1) : mass;
-  bool stick = false;
-  const T hc = coulomb_damping(fs.len0, D, ms, mk, stick);
+  T D = mass;
+  if (l1 > T(0)) {
+    T q = 0;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) q += vt[r] * blk[3 * r + c] * vt[c];
+    const T d = q / (l1 * l1) - fs.hc;
+    if (d > D) D = d;
+  }
+  const T f = l1 + impulse / D;
+  const T hold = static_cast<T>(kStickDamping) * D;
+  const bool stick = D * f <= ms && !fs.released;
   if (fs.stick && stick) return false;
+  T hc = hold;
+  if (!stick && D * f > mk) {
+    const T slide = mk * D / (D * f - mk);
+    if (slide < hold) hc = slide;
+  }
+  // Let go but too slow to slide (D f <= mu_k J): kept at the stiffest damper; once there, no
+  // further solve for it.
+  if (!stick && !fs.stick && hc == hold && fs.hc >= hold * (T(1) - tol)) return false;
   add_tangential_damper(v0, vs, n, hc - fs.hc, blk, b);
+  if (fs.stick && !stick) fs.released = true;
   fs.hc = hc;
   fs.stick = stick;
   return true;
