@@ -23,6 +23,7 @@
 
 #include <dlfcn.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -230,6 +231,17 @@ std::vector<SolverVariant> variants() {
     v.push_back({std::string("eigen_pcg_sa_amg_rigid_refresh10_drop") + d, false, amg});
   }
   amg.amg.coarse_drop_tolerance = 0;
+  // Block SOR smoothing (issue 15): the default weight 1.5 against Gauss-Seidel (`_gs`, the
+  // previous default) and other weights, on every level or (coarse1) level 0 only.
+  for (const char* w : {"1.0", "1.3", "1.6", "1.7"}) {
+    amg.amg.smoothing_relaxation = std::stod(w);
+    v.push_back({std::string("eigen_pcg_sa_amg_rigid_refresh10_") + (w[2] == '0' ? std::string("gs") : "sor" + std::string(w)),
+                 false, amg});
+  }
+  amg.amg.smoothing_relaxation = loom::amg::SaAmgOptions{}.smoothing_relaxation;
+  amg.amg.coarse_smoothing_relaxation = 1.0;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_coarse1", false, amg});
+  amg.amg.coarse_smoothing_relaxation = 0;
   // Probes of the existing knobs (issue 15): prolongator damping and the strength threshold.
   for (const char* d : {"1.0", "1.6"}) {
     amg.amg.prolongator_damping = std::stod(d);
@@ -261,6 +273,10 @@ std::vector<SolverVariant> variants() {
   amg.amg.float_storage = false;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_double", false, amg});
   amg.amg.float_storage = true;
+  // The hierarchy's arrays on 4 KiB pages instead of advised 2 MiB ones (A/B of huge_pages).
+  amg.amg.huge_pages = false;
+  v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_smallpages", false, amg});
+  amg.amg.huge_pages = true;
   amg.amg.prolongator_refresh_steps = 1;
   amg.amg.hierarchy_refresh_steps = 10;
   v.push_back({"eigen_pcg_sa_amg_rigid_hierarchy10", false, amg});
@@ -474,6 +490,69 @@ const bool registered_wool_solvers = [] {
       }
   return true;
 }();
+
+// sa_amg's huge_pages A/B on the V-cycle alone (issue 15): two wool hangs at n^2, one with
+// the hierarchy's arrays advised as 2 MiB pages (the default) and one on 4 KiB pages, each
+// stepped twice; then `pairs` V-cycles on each, alternated (huge, small, huge, ...) on the
+// same random vector, each timed on its own (third argument 1: the small-page run is built
+// and timed first). The minimum and the median of each are robust
+// to the other load of a shared machine in a way that a whole step's mean is not; counters
+// in ms per V-cycle and small/huge ratios.
+void BM_VCyclePages(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  const int pairs = static_cast<int>(st.range(1));
+  const bool small_first = st.range(2) != 0;  // the control: the same pair built in the other order
+  struct Run {
+    std::unique_ptr<loom::Scene> sc;
+    std::unique_ptr<loom::BaraffWitkin> bw;
+    loom::amg::SaAmg* amg = nullptr;
+    std::vector<double> ms;
+  };
+  Run runs[2];
+  for (int k = 0; k < 2; ++k) {
+    Run& r = runs[k];
+    r.sc = wool_scene(n, false);
+    loom::PcgOptions o;
+    o.tolerance = 1e-5;
+    o.max_iterations = 100000;
+    o.preconditioner = loom::PcgPreconditioner::SaAmg;
+    o.amg.huge_pages = (k == 0) != small_first;
+    auto pcg = std::make_unique<loom::EigenPcg>(o);
+    loom::EigenPcg* p = pcg.get();
+    r.sc->solver = std::move(pcg);
+    loom::BaraffWitkinOptions bo;
+    bo.kang_cho_damping = 0.01;
+    r.bw = std::make_unique<loom::BaraffWitkin>(bo);
+    r.bw->prepare(*r.sc, 0.01);
+    for (int s = 0; s < 2; ++s) r.bw->step(*r.sc, 0.01);
+    r.amg = p->amg();
+  }
+  const std::size_t N = 3 * static_cast<std::size_t>(n) * n;
+  std::vector<double> rv(N), z(N);
+  for (std::size_t k = 0; k < N; ++k) rv[k] = std::sin(0.37 * static_cast<double>(k) + 0.1);
+  for (auto _ : st) {
+    for (int q = 0; q < pairs; ++q)
+      for (Run& r : runs) {
+        const auto t0 = std::chrono::steady_clock::now();
+        r.amg->apply(rv.data(), z.data());
+        r.ms.push_back(1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        benchmark::DoNotOptimize(z.data());
+      }
+  }
+  if (small_first) std::swap(runs[0].ms, runs[1].ms);  // runs[0]: huge pages
+  auto stat = [](std::vector<double> v, bool median) {
+    std::sort(v.begin(), v.end());
+    return median ? v[v.size() / 2] : v.front();
+  };
+  st.counters["huge_min_ms"] = stat(runs[0].ms, false);
+  st.counters["small_min_ms"] = stat(runs[1].ms, false);
+  st.counters["huge_med_ms"] = stat(runs[0].ms, true);
+  st.counters["small_med_ms"] = stat(runs[1].ms, true);
+  st.counters["small_over_huge_min"] = stat(runs[1].ms, false) / stat(runs[0].ms, false);
+  st.counters["small_over_huge_med"] = stat(runs[1].ms, true) / stat(runs[0].ms, true);
+}
+BENCHMARK(BM_VCyclePages)->Name("bw_vcycle_pages/wool256")->ArgsProduct({{256}, {60}, {0, 1}})->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_VCyclePages)->Name("bw_vcycle_pages/wool512")->ArgsProduct({{512}, {20}, {0, 1}})->Iterations(1)->Unit(benchmark::kSecond);
 
 // What the PCG tolerance costs in accuracy (counters, not timings): the wool hang at n^2 run
 // for `steps` steps of h = 0.01 with sa_amg PCG at tolerance 10^-range(1), against the same

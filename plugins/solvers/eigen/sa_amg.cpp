@@ -641,8 +641,8 @@ double SaAmg::lambda_max(std::size_t l) {
   const Index n = L.A.rows;
   const int b = L.A.br;
   const std::size_t N = static_cast<std::size_t>(n) * b;
-  std::vector<double>& v = L.ev;
-  std::vector<double>& w = L.r;
+  HugeVector<double>& v = L.ev;
+  HugeVector<double>& w = L.r;
   int iterations = 3;
   if (v.size() != N) {
     v.resize(N);
@@ -994,6 +994,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
   ++refreshes_;
   ++t_.setups;
   const ScopeTimer timer{t_.setup};
+  const HugePageScope pages(o_.huge_pages);  // every allocation of the hierarchy happens in setup()
   if (rebuild) {
     built_ = false;
     pattern_ = &A.pattern();
@@ -1007,7 +1008,7 @@ bool SaAmg::setup(const BsrMatrix& A, const Filter& S, std::span<const double> x
     L0.A.rows = L0.A.cols = P.n;
     L0.A.br = L0.A.bc = 3;
     L0.A.rp = P.row_ptr;
-    L0.A.ci = P.col;
+    L0.A.ci.assign(P.col.begin(), P.col.end());
     L0.A.v.assign(9 * static_cast<std::size_t>(P.nnz_blocks()), 0.0);
     L0.diag = P.diag;
     L0.x.assign(3 * static_cast<std::size_t>(P.n), 0.0);
@@ -1119,12 +1120,13 @@ namespace {
 template <int B, class T, class D>
 void gs_sweep(const BlockMatrix& A, const D* dinv, const std::vector<Index>& cp,
               const std::vector<Index>& cr, const std::vector<Index>& pp, const std::vector<Index>& pr,
-              const double* b, double* x, bool forward, bool par) {
+              const double* b, double* x, bool forward, bool par, double omega) {
   const int nc = static_cast<int>(cp.size()) - 1;
   const int np = static_cast<int>(pp.size()) - 1;
   auto update = [&](Index i) {
     double acc[B];
     row_residual<B, T>(A, b, x, i, acc);
+    for (int a = 0; a < B; ++a) acc[a] *= omega;  // SOR (1: Gauss-Seidel, the same bits)
     gemv_add<B, B>(dinv + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
   };
 #pragma omp parallel if (par)
@@ -1161,7 +1163,7 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
                                        const D* dinv, const std::vector<std::uint8_t>& clean,
                                        const std::vector<Index>& cp, const std::vector<Index>& cr,
                                        const std::vector<Index>& pp, const std::vector<Index>& pr, const double* b,
-                                       double* x, double* r, bool par, bool with_residual = true) {
+                                       double* x, double* r, bool par, bool with_residual, double omega) {
   const int nc = static_cast<int>(cp.size()) - 1;
   const int np = static_cast<int>(pp.size()) - 1;
   const Index n = A.rows;
@@ -1181,8 +1183,12 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
         double lo[B];
         row_partial<B, T>(A, A.rp[i], diag[i], x, lo);
         double* acc = r + static_cast<std::size_t>(B) * i;
-        for (int a = 0; a < B; ++a) acc[a] = b[static_cast<std::size_t>(B) * i + a] - lo[a];
-        gemv_set<B, B>(dinv + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
+        double w[B];
+        for (int a = 0; a < B; ++a) {
+          acc[a] = b[static_cast<std::size_t>(B) * i + a] - lo[a];
+          w[a] = omega * acc[a];  // acc stays the partial residual
+        }
+        gemv_set<B, B>(dinv + static_cast<std::size_t>(B * B) * i, w, x + static_cast<std::size_t>(B) * i);
       }
     for (int c = 0; c < nc; ++c) {
 #pragma omp for schedule(static)
@@ -1190,6 +1196,7 @@ void gs_forward_from_zero_and_residual(const BlockMatrix& A, const std::vector<I
         const Index i = cr[t];
         double acc[B];
         row_residual<B, T>(A, b, x, i, acc);
+        for (int a = 0; a < B; ++a) acc[a] *= omega;
         gemv_add<B, B>(dinv + static_cast<std::size_t>(B * B) * i, acc, x + static_cast<std::size_t>(B) * i);
       }
     }
@@ -1218,6 +1225,9 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
   const int bs = L.A.br;
   const std::size_t N = static_cast<std::size_t>(n) * bs;
   const bool par = parallel(L);
+  // SOR relaxation of the smoother (smoothing_relaxation, coarse_smoothing_relaxation).
+  const double omega = l == 0 || o_.coarse_smoothing_relaxation == 0 ? o_.smoothing_relaxation
+                                                                    : o_.coarse_smoothing_relaxation;
   const D* Dv;  // the smoother's diagonal inverses: double, or their symmetrised float copy
   if constexpr (std::is_same_v<D, float>)
     Dv = L.dinv_f.data();
@@ -1234,8 +1244,8 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       with_size(bs, [&](auto Bc) {
         constexpr int B = decltype(Bc)::value;
         for (int s = 0; s < 2; ++s) {
-          gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
-          gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+          gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par, omega);
+          gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par, omega);
         }
       });
     }
@@ -1265,9 +1275,9 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
     const bool fused = sweeps == 1 && from_zero;
     if (from_zero)
       gs_forward_from_zero_and_residual<B, T>(L.A, L.diag, Dv, L.clean, L.colour_ptr, L.colour_rows, L.part_ptr,
-                                              L.part_rows, b, x, r, par, fused);
+                                              L.part_rows, b, x, r, par, fused, omega);
     for (int s = from_zero ? 1 : 0; s < sweeps; ++s)
-      gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par);
+      gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, true, par, omega);
     lap(t_.apply_fine_smooth);
 #pragma omp parallel if (par)
     {
@@ -1311,7 +1321,8 @@ void SaAmg::cycle(std::size_t l, const double* b, double* x) {
       }
     }
     lap(t_.apply_fine_transfer);
-    for (int s = 0; s < sweeps; ++s) gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par);
+    for (int s = 0; s < sweeps; ++s)
+      gs_sweep<B, T>(L.A, Dv, L.colour_ptr, L.colour_rows, L.part_ptr, L.part_rows, b, x, false, par, omega);
     lap(t_.apply_fine_smooth);
   });
 }

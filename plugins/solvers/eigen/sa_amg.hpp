@@ -4,7 +4,8 @@
 // The hierarchy is built for the prefiltered matrix A~ = S A S + (I - S) (Tamstorf, Jones &
 // McCormick 2015), so constrained DOFs are decoupled, with the rigid-body near-null space
 // (3 translations + 3 rotations about the aggregate centroid, filtered by S) per aggregate.
-// One V-cycle: block Gauss-Seidel forward sweeps before the coarse correction (the rows are
+// One V-cycle: block Gauss-Seidel (over-relaxed: block SOR, smoothing_relaxation) forward
+// sweeps before the coarse correction (the rows are
 // split into contiguous parts: the interior rows of the parts are swept lexicographically,
 // the parts in parallel, then the rows coupled to another part by colour), the same sweeps
 // in exactly the reverse order after it (so the cycle is symmetric), a dense Cholesky solve
@@ -27,6 +28,7 @@
 #include "loom/bsr.hpp"
 #include "loom/common.hpp"
 #include "half.hpp"
+#include "huge_pages.hpp"
 
 namespace loom::amg {
 
@@ -38,6 +40,15 @@ struct SaAmgOptions {
   /// levels of the rigid-body hierarchy are 6x6-block and denser than level 0, so a second
   /// sweep there costs about as much as one on level 0 (NUMERICS.md 3.6).
   int coarse_smoothing_sweeps = 0;
+  /// Relaxation weight w of the block Gauss-Seidel smoother: x_i += w D_i^-1 (b - A x)_i,
+  /// i.e. block SOR, in both sweeps (the backward sweep stays the adjoint of the forward one).
+  /// The V-cycle stays SPD for 0 < w < 2 (W + W^T - W^T A W = W^T (2/w - 1) D W > 0 with
+  /// W = (D/w + L)^-1; NUMERICS.md 3.6). 1: Gauss-Seidel (the same bits as without it). 1.5
+  /// cut the wool hang's iterations by a fifth at every size (40 -> 32 at 512^2) for the
+  /// same bytes per iteration.
+  double smoothing_relaxation = 1.5;
+  /// The same on the levels below the finest; 0 = smoothing_relaxation.
+  double coarse_smoothing_relaxation = 0;
   Index coarse_dofs = 300;        ///< levels are added until a level has at most this many DOFs
   int max_levels = 10;
   /// Rebuild T, P every k refreshes (the Galerkin product always): measured, rebuilding every
@@ -92,16 +103,23 @@ struct SaAmgOptions {
   /// blocks are dropped is decided on the first set-up of a pattern (later refreshes keep
   /// the pattern and recompute the values and the scaling). 0: off.
   double coarse_drop_tolerance = 0;
+  /// The hierarchy's arrays of 2 MiB and more (level matrices and their float and half
+  /// copies, column indices, diagonal inverses, work vectors) are 2 MiB-aligned and advised
+  /// as transparent huge pages (madvise, Linux; huge_pages.hpp): the V-cycle streams them
+  /// from memory at 256^2 and up, and with 4 KiB pages each 4 KiB costs a TLB miss. Values
+  /// and results are the same either way (NUMERICS.md 3.6, "Huge pages").
+  bool huge_pages = true;
 };
 
 /// Block-sparse matrix with BR x BC blocks (row-major, 9 or 18 or 36 doubles per block).
 struct BlockMatrix {
   Index rows = 0, cols = 0;
   int br = 3, bc = 3;
-  std::vector<Index> rp, ci;
-  std::vector<double> v;
-  std::vector<float> f;  ///< float copy of v read by the V-cycle (SaAmgOptions::float_storage)
-  std::vector<Half> h;   ///< half copy of v (level 0's P and R with SaAmgOptions::half_transfers)
+  std::vector<Index> rp;
+  HugeVector<Index> ci;  ///< (the large arrays: HugePageAllocator, SaAmgOptions::huge_pages)
+  HugeVector<double> v;
+  HugeVector<float> f;  ///< float copy of v read by the V-cycle (SaAmgOptions::float_storage)
+  HugeVector<Half> h;   ///< half copy of v (level 0's P and R with SaAmgOptions::half_transfers)
   std::size_t bsize() const { return static_cast<std::size_t>(br) * bc; }
   Index nnz() const { return static_cast<Index>(ci.size()); }
   double* block(Index k) { return v.data() + bsize() * static_cast<std::size_t>(k); }
@@ -184,8 +202,8 @@ class SaAmg {
   struct Level {
     BlockMatrix A;                    // b x b blocks
     std::vector<Index> diag;          // position of (i, i)
-    std::vector<double> dinv;         // b*b per row: inverse of the diagonal block
-    std::vector<float> dinv_f;        // float storage: dinv symmetrised and rounded (the V-cycle's)
+    HugeVector<double> dinv;          // b*b per row: inverse of the diagonal block
+    HugeVector<float> dinv_f;         // float storage: dinv symmetrised and rounded (the V-cycle's)
     std::vector<Index> colour_ptr, colour_rows;  // boundary rows (coupled to another part) by colour
     std::vector<Index> part_ptr, part_rows;      // interior rows of each part, increasing
     std::vector<std::uint8_t> clean;  // interior row with no boundary neighbour (fused residual)
@@ -197,8 +215,8 @@ class SaAmg {
     BlockMatrix P, R, AP;             // to/from the next level: P (b x m), R = P^T, A P
     std::vector<Index> r_from_p;      // block of P transposed into each block of R
     std::vector<Index> trans;         // position of the transposed block (j, i) of each block (i, j) of A
-    std::vector<double> x, b, r;      // work vectors
-    std::vector<double> ev;           // last power-iteration vector of D^-1 A (warm start)
+    HugeVector<double> x, b, r;       // work vectors
+    HugeVector<double> ev;            // last power-iteration vector of D^-1 A (warm start)
     // coarse_drop_tolerance: G is the full Galerkin product, A its copy without the dropped
     // blocks (decided once per pattern) and with the diagonal blocks scaled.
     BlockMatrix G;
