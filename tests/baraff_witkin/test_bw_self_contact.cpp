@@ -330,6 +330,136 @@ TEST(BwSelfContact, FrictionSlowsASlidingLayerByMuGhPerStepAndNotALandingOneMatr
   g_matrix_free = false;
 }
 
+// The self-contact pairs' friction correction on coupled pairs (ImplicitSelfContact::correct_friction):
+// a 2 x 2 sheet (structural and shear springs k, vertex mass m, its x = 0 side pinned) resting
+// 0.999 thickness above one large pinned triangle (no edge of it under the sheet: the only
+// pairs are the free vertices against it), under gravity. S, the free corner, is thrown along
+// the diagonal d = (1, 0, -1)/sqrt(2), away from the pinned corner; its neighbour H (at rest)
+// is held by static friction. With the pinned vertices and H fixed, S's stiffness along d is
+// 2 k (x x^T + z z^T from its structural springs, d d^T from its shear one), so it slides
+// with v = (m v0 - mu J) / (m + 2 h^2 k) along d, J its pair's normal impulse. The block-Jacobi
+// correction reads that response from A (D = m + 2 h^2 k for S alone in its pair), so the step
+// takes 2 solves with dampers (eigen_ldlt) and S's friction impulse meets mu J within 1 % (here
+// within 0.01 %). (The rule before, D = p / (len0 - |u_t(v1)|) from the solve without friction,
+// where H moved freely, took 3 and left S 1.9 % above mu J, both forms.)
+static void self_friction_correction_settles_on_coupled_pairs() {
+  const double h = 0.005, k = 400.0, mu = 0.5, v0 = 0.06, g = 9.81, w = 0.1, m = 0.005;
+  const loom::Mesh gu = loom::make_grid(2, 2, w, w, loom::GridPlane::XZ);
+  loom::Mesh mesh;
+  mesh.positions = {-1.0, 0.0, 1.0, 2.0, 0.0, 1.0, -1.0, 0.0, -2.0};  // covers x in [0, w], z in [-w, w]
+  mesh.triangles = {0, 1, 2};
+  for (Index i = 0; i < 4; ++i) {
+    mesh.positions.push_back(gu.positions[3 * i]);
+    mesh.positions.push_back(0.999 * kThick);
+    mesh.positions.push_back(gu.positions[3 * i + 2]);
+  }
+  for (Index t : gu.triangles) mesh.triangles.push_back(t + 3);
+  mesh.source = "sheet on a triangle";
+  std::vector<loom::testing::SpringMaterial::Spring> springs;
+  for (auto sp : loom::testing::grid_springs(2, 2, w, k)) {
+    sp.i += 3;
+    sp.j += 3;
+    springs.push_back(sp);  // the grid's rest lengths: w and w sqrt(2)
+  }
+  Scene sc;
+  sc.mesh = mesh;
+  loom::testing::init_scene(sc, mesh.positions,
+                            std::make_unique<loom::testing::SpringMaterial>(std::vector<double>(7, m), springs, true));
+  loom::State& s = sc.state;
+  Index S = -1, H = -1;
+  for (Index i = 0; i < 7; ++i) {
+    const double x = s.x[3 * i], z = s.x[3 * i + 2];
+    if (i < 3 || std::abs(x) < 1e-12) s.pin(i);
+    else if (std::abs(z) < 1e-12) H = i;
+    else S = i;
+  }
+  s.update_inverse_masses();
+  ASSERT_GE(S, 0);
+  ASSERT_GE(H, 0);
+  ASSERT_NEAR(s.x[3 * S], w, 1e-12);
+  ASSERT_NEAR(std::abs(s.x[3 * S + 2]), w, 1e-12);
+  ASSERT_NEAR(s.x[3 * H], w, 1e-12);
+  // d points away from the pinned corner diagonal to S: along +x and away from H in z.
+  const double sz = s.x[3 * S + 2] > 0 ? 1.0 : -1.0;
+  const double d[3] = {1 / std::sqrt(2.0), 0, sz / std::sqrt(2.0)};
+  for (int c = 0; c < 3; ++c) s.v[3 * S + c] = v0 * d[c];
+  sc.gravity = {0, -g, 0};
+  if (g_matrix_free) {
+    loom::PcgOptions po;
+    po.tolerance = 1e-12;
+    po.max_iterations = 10000;
+    sc.solver = std::make_unique<loom::EigenPcg>(po);
+  } else {
+    sc.solver = std::make_unique<loom::EigenLdlt>();
+  }
+  loom::SelfCollision::Options o;
+  o.thickness = kThick;
+  o.friction = mu;
+  sc.self_collision = std::make_unique<loom::SelfCollision>(o, sc.mesh);
+  const std::vector<double> x0 = s.x, vstart = s.v;
+  BaraffWitkin bw;
+  bw.prepare(sc, h);
+  ASSERT_EQ(bw.self_contact_matrix_free(), g_matrix_free);
+  const long long f0 = bw.friction_solves();
+  sc.self_collision->begin_step(s);
+  bw.step(sc, h);
+  ASSERT_EQ(bw.self_contact()->contacts().size(), 2u) << "S and H against the triangle";
+  // With eigen_ldlt the corrected dampers' solve ends the step; filtered_pcg runs the solves a
+  // correction may follow at a looser tolerance, and one at the scene's ends it (bw_step.hpp).
+  EXPECT_EQ(bw.friction_solves() - f0, g_matrix_free ? 3 : 2) << "solves with dampers";
+  // The pairs' normal impulse (the springs' solve, before the dampers): the vertex's vertical
+  // velocity change is -g h / (1 + kappa) (kappa = kStiffness; the springs in the sheet's plane
+  // have no vertical stiffness at rest), so J = m g h kappa / (1 + kappa); stop_approach takes the
+  // rest of the approach velocity after the step.
+  const double kappa = loom::ImplicitSelfContact::kStiffness, J = m * g * h * kappa / (1 + kappa);
+  for (const auto& c : bw.self_contact()->contacts()) EXPECT_NEAR(c.jn, J, 1e-6 * J);
+  // The contact impulse on a free vertex: m dv - h f(x1) - h m g, f the springs linearised at
+  // their rest lengths (k (e.u) e); its y part is the normal impulse, its xz part the friction.
+  auto impulse = [&](Index i, double* p) {
+    for (int c = 0; c < 3; ++c) p[c] = m * (s.v[3 * i + c] - vstart[3 * i + c]);
+    p[1] += m * g * h;
+    for (const auto& sp : springs) {
+      if (sp.i != i && sp.j != i) continue;
+      const Index j = sp.i == i ? sp.j : sp.i;
+      double e[3], u[3], el = 0;
+      for (int c = 0; c < 3; ++c) {
+        e[c] = x0[3 * j + c] - x0[3 * i + c];
+        u[c] = (s.x[3 * j + c] - x0[3 * j + c]) - (s.x[3 * i + c] - x0[3 * i + c]);
+        el += e[c] * e[c];
+      }
+      el = std::sqrt(el);
+      double eu = 0;
+      for (int c = 0; c < 3; ++c) eu += e[c] / el * u[c];
+      for (int c = 0; c < 3; ++c) p[c] -= h * k * eu * e[c] / el;
+    }
+  };
+  double pS[3], pH[3];
+  impulse(S, pS);
+  impulse(H, pH);
+  EXPECT_NEAR(pS[1], m * g * h, 1e-6 * J) << "S's weight: the spring and stop_approach";
+  EXPECT_NEAR(pH[1], m * g * h, 1e-6 * J) << "H's weight: the spring and stop_approach";
+  const double vS = (m * v0 - mu * J) / (m + 2 * h * h * k);
+  ASSERT_LE(h * h * k * vS / std::sqrt(2.0), mu * J) << "H is held (the analysis above)";
+  const double tolS = loom::kernels::kCoulombTolerance * mu * J;
+  EXPECT_NEAR(std::hypot(pS[0], pS[2]), mu * J, tolS) << "S slides with the kinetic bound";
+  EXPECT_LE(std::hypot(pH[0], pH[2]), mu * J * (1 + loom::kernels::kCoulombTolerance)) << "H within the bound";
+  for (int c : {0, 2}) EXPECT_NEAR(s.v[3 * S + c], vS * d[c], tolS / m) << c;
+  EXPECT_NEAR(std::hypot(s.v[3 * H], s.v[3 * H + 2]), 0.0, 1e-6 * vS) << "H held";
+  if (verbose())
+    std::printf("S: friction %.6e bound %.6e, v (%.6e, %.6e) expected %.6e; H: %.6e / %.6e; solves %lld\n",
+                std::hypot(pS[0], pS[2]), mu * J, s.v[3 * S], s.v[3 * S + 2], vS, std::hypot(pH[0], pH[2]), mu * J,
+                bw.friction_solves() - f0);
+}
+
+TEST(BwSelfContact, FrictionCorrectionSettlesOnCoupledPairs) { self_friction_correction_settles_on_coupled_pairs(); }
+// The same with filtered_pcg: the springs and dampers applied matrix-free (A's diagonal blocks
+// hold no self-contact term).
+TEST(BwSelfContact, FrictionCorrectionSettlesOnCoupledPairsMatrixFree) {
+  g_matrix_free = true;
+  self_friction_correction_settles_on_coupled_pairs();
+  g_matrix_free = false;
+}
+
 // A steady contact state makes no allocation in a step after warm-up: the contact blocks that
 // the first steps add to the pattern (the upper layer's vertices against the lower layer's, with
 // their one-rings) cover every later contact, so the pattern object, its block count and the

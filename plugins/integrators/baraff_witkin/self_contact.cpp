@@ -37,7 +37,9 @@ void ImplicitSelfContact::prepare(const Mesh& mesh, double thickness, double fri
     ring_[fill[e[0]]++] = e[1];
     ring_[fill[e[1]]++] = e[0];
   }
-  d_.assign(3 * static_cast<std::size_t>(n), 0.0);
+  // find(): the predicted displacement (3 per vertex); correct_friction, matrix-free: the
+  // self-contact terms' diagonal blocks (9 per vertex).
+  d_.assign(9 * static_cast<std::size_t>(n), 0.0);
   pairs_.reserve(4 * static_cast<std::size_t>(n));
   contacts_.reserve(4 * static_cast<std::size_t>(n));
   reserve_.clear();
@@ -83,6 +85,7 @@ bool ImplicitSelfContact::find(SelfCollision& sc, const State& s, const std::vec
     c.c1 = 0;
     c.touching = p.distance < th * (1 + kTouchingTolerance);
     c.stick = false;
+    c.released = false;
     c.fr = 0;
     c.len0 = 0;
     c.jn = 0;
@@ -325,6 +328,30 @@ double tangential_speed(const ImplicitSelfContact::Contact& c, const State& s, c
     for (int k = 0; k < 3; ++k) ut[k] = t[k];
   return std::sqrt(dot3(t, t));
 }
+// The pair's response to a tangential impulse along ut (|ut| = l1) with its other vertices as
+// solved: D = 1 / sum_a w_a^2 / K_a, K_a = ut^T (A_aa + E_aa) ut / l1^2 less the pair's own
+// damper (h c w_a^2, P ut = ut), at least m_a; pinned vertices do not move. E: the self-contact
+// terms' diagonal blocks when they are matrix-free (9 per vertex), else null (they are in A).
+double pair_response(const ImplicitSelfContact::Contact& c, const State& s, const BsrMatrix& A, const double* E,
+                     const double* ut, double l1) {
+  double sum = 0;
+  for (int a = 0; a < 4; ++a) {
+    const double im = s.inv_mass[c.v[a]];
+    if (!(im > 0)) continue;
+    double K = 1.0 / im;
+    if (l1 > 0 && A.has_pattern()) {
+      const double* blk = A.block(A.pattern().diag[c.v[a]]);
+      const double* e = E ? E + 9 * static_cast<std::size_t>(c.v[a]) : nullptr;
+      double q = 0;
+      for (int r = 0; r < 3; ++r)
+        for (int p = 0; p < 3; ++p) q += ut[r] * (blk[3 * r + p] + (e ? e[3 * r + p] : 0.0)) * ut[p];
+      q = q / (l1 * l1) - c.fr * c.w[a] * c.w[a];
+      K = std::max(K, q);
+    }
+    sum += c.w[a] * c.w[a] / K;
+  }
+  return sum > 0 ? 1.0 / sum : 1.0 / c.W;
+}
 }  // namespace
 
 bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector<double>& b,
@@ -334,6 +361,7 @@ bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector
   for (Contact& c : contacts_) {
     c.fr = 0;
     c.stick = false;
+    c.released = false;
     double u1[3] = {0, 0, 0};
     for (int a = 0; a < 4; ++a) {
       const std::size_t o = 3 * static_cast<std::size_t>(c.v[a]);
@@ -355,19 +383,42 @@ bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector
 bool ImplicitSelfContact::correct_friction(const State& s, BsrMatrix& A, std::vector<double>& b,
                                            const std::vector<double>& dv) {
   bool changed = false;
+  // Matrix-free, A holds no self-contact term: their diagonal blocks (add_diagonal) beside it,
+  // so that both forms read the same response.
+  double* E = matrix_free_ ? d_.data() : nullptr;
+  if (E) {
+    for (const Contact& c : contacts_)
+      for (int a = 0; a < 4; ++a) std::fill_n(E + 9 * static_cast<std::size_t>(c.v[a]), 9, 0.0);
+    add_diagonal(E);
+  }
   for (Contact& c : contacts_) {
     if (c.fr == 0) continue;
-    const double l1 = tangential_speed(c, s, dv);
+    double ut[3];
+    const double l1 = tangential_speed(c, s, dv, ut);
     const double mj = friction_ * c.jn;
     const double impulse = c.fr * l1;  // the damper's friction impulse (N s)
     // Within the bound: a held pair (static friction may take any impulse up to mu J), or a
     // sliding one at mu J.
     if (c.stick ? impulse <= mj * (1 + kCoulombTolerance) : std::abs(impulse - mj) <= kCoulombTolerance * mj) continue;
-    const double D = c.len0 > l1 && l1 > 0 ? impulse / (c.len0 - l1) : 1.0 / c.W;
-    bool stick = false;
-    const double fr = coulomb_damping(c.len0, D, mj, mj, stick);
-    if (c.stick && stick) continue;  // (the estimate disagrees with the first: keep holding)
+    const double D = pair_response(c, s, A, E, ut, l1);
+    const double f = l1 + impulse / D;  // the slip without this pair's damper
+    const double hold = kStickDamping * D;
+    const bool stick = D * f <= mj && !c.released;
+    if (c.stick && stick) continue;
+    double fr = hold;
+    if (!stick && D * f > mj) fr = std::min(hold, mj * D / (D * f - mj));
+    // Let go but too slow to slide (D f <= mu J): kept at the stiffest damper; once there, no
+    // further solve for it.
+    if (!stick && !c.stick && fr == hold && c.fr >= hold * (1 - kCoulombTolerance)) continue;
     add_damper(c, fr - c.fr, s, A, b, matrix_free_);
+    if (E)  // as add_damper changes A_aa when assembled
+      for (int a = 0; a < 4; ++a) {
+        double* e = E + 9 * static_cast<std::size_t>(c.v[a]);
+        const double q = (fr - c.fr) * c.w[a] * c.w[a];
+        for (int r = 0; r < 3; ++r)
+          for (int p = 0; p < 3; ++p) e[3 * r + p] += q * ((r == p ? 1.0 : 0.0) - c.n[r] * c.n[p]);
+      }
+    if (c.stick && !stick) c.released = true;
     c.fr = fr;
     c.stick = stick;
     changed = true;

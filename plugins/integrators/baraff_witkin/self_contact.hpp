@@ -75,6 +75,7 @@ class ImplicitSelfContact final : public ExtraOperator {
     double lambda;     ///< accumulated impulse of stop_approach (N s)
     bool touching;     ///< within (1 + kTouchingTolerance) thickness at the step start: friction acts
     bool stick;        ///< implicit friction: held by static friction (add_friction)
+    bool released;     ///< implicit friction: held earlier in this step and let go: slides until it ends
     double fr;         ///< implicit friction: h c of the tangential damper (kg), 0 when none
     double len0;       ///< implicit friction: |u_t| of the solve without the damper (m/s)
     double jn;         ///< implicit friction: the spring's normal impulse h k (-C(x1)) (N s)
@@ -153,10 +154,18 @@ class ImplicitSelfContact final : public ExtraOperator {
   /// of the step, and the cloth around the pair sees the friction in the same solve. Returns
   /// whether any pair got a damper.
   bool add_friction(const State& s, BsrMatrix& A, std::vector<double>& b, const std::vector<double>& dv, double h);
-  /// After a solve with the dampers: each pair's friction impulse h c |u_t(v1)| against the
-  /// Coulomb bound; where it misses it by more than kCoulombTolerance, h c is chosen again from
-  /// the response D = h c |u_t(v1)| / (len0 - |u_t(v1)|) the solve showed (coulomb_damping),
-  /// and A, b changed by the difference. Returns whether any damper changed (solve again).
+  /// After a solve with the dampers: each pair's friction impulse p = h c |u_t(v1)| against the
+  /// Coulomb bound; where it misses it by more than kCoulombTolerance, h c is chosen again for
+  /// the pair as that solve left the other vertices (a block-Jacobi step, as
+  /// kernels::correct_collider_friction): a tangential impulse p along t moves vertex a by
+  /// w_a p t / K_a, K_a = t^T A_aa t / |t|^2 less the pair's own damper's share h c w_a^2 (at
+  /// least the vertex's mass; matrix-free, A_aa plus the self-contact terms' diagonal blocks,
+  /// add_diagonal), so the pair's response is D = 1 / sum_a w_a^2 / K_a (pinned vertices: no term); its
+  /// slip without its own damper f = |u_t(v1)| + p / D; held when D f <= mu J and not let go
+  /// earlier in the step, else the damper that leaves mu J. A pair let go (held -> sliding)
+  /// slides for the rest of the step. A, b changed by the difference. Returns whether any
+  /// damper changed (solve again). (Before 2026-11-30: D = p / (len0 - |u_t(v1)|), the response
+  /// of the solve without friction; docs/CONTACT.md, "A correction that converges".)
   bool correct_friction(const State& s, BsrMatrix& A, std::vector<double>& b, const std::vector<double>& dv);
   /// After the last solve: the pairs held by static friction lose the relative tangential
   /// velocity the finite damper leaves (about 1/kStickDamping of it), within mu J W.
