@@ -37,9 +37,8 @@ void ImplicitSelfContact::prepare(const Mesh& mesh, double thickness, double fri
     ring_[fill[e[0]]++] = e[1];
     ring_[fill[e[1]]++] = e[0];
   }
-  // find(): the predicted displacement (3 per vertex); correct_friction, matrix-free: the
-  // self-contact terms' diagonal blocks (9 per vertex).
-  d_.assign(9 * static_cast<std::size_t>(n), 0.0);
+  d_.assign(3 * static_cast<std::size_t>(n), 0.0);
+  diag_.assign(9 * static_cast<std::size_t>(n), 0.0);
   pairs_.reserve(4 * static_cast<std::size_t>(n));
   contacts_.reserve(4 * static_cast<std::size_t>(n));
   reserve_.clear();
@@ -385,7 +384,7 @@ bool ImplicitSelfContact::correct_friction(const State& s, BsrMatrix& A, std::ve
   bool changed = false;
   // Matrix-free, A holds no self-contact term: their diagonal blocks (add_diagonal) beside it,
   // so that both forms read the same response.
-  double* E = matrix_free_ ? d_.data() : nullptr;
+  double* E = matrix_free_ ? diag_.data() : nullptr;
   if (E) {
     for (const Contact& c : contacts_)
       for (int a = 0; a < 4; ++a) std::fill_n(E + 9 * static_cast<std::size_t>(c.v[a]), 9, 0.0);

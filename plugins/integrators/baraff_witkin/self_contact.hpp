@@ -205,6 +205,7 @@ class ImplicitSelfContact final : public ExtraOperator {
   std::vector<Index> ring_ptr_, ring_;        ///< vertex one-rings (CSR, the vertex included)
   std::vector<ProximityPair> pairs_;
   std::vector<double> d_;                     ///< predicted displacement
+  std::vector<double> diag_;                  ///< correct_friction, matrix-free: the self-contact terms' diagonal blocks (9 per vertex)
   std::vector<Contact> contacts_;
   std::vector<std::array<Index, 2>> reserve_, fresh_;
   std::vector<std::array<Index, 3>> extra_;   ///< (block position, row, column) of non-material blocks
