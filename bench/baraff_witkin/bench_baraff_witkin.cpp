@@ -231,16 +231,17 @@ std::vector<SolverVariant> variants() {
     v.push_back({std::string("eigen_pcg_sa_amg_rigid_refresh10_drop") + d, false, amg});
   }
   amg.amg.coarse_drop_tolerance = 0;
-  // Block SOR smoothing (issue 15): the default weight 1.5 against Gauss-Seidel (`_gs`, the
-  // previous default) and other weights, on every level or (coarse1) level 0 only.
-  for (const char* w : {"1.0", "1.3", "1.6", "1.7"}) {
+  // Block SOR smoothing (issue 15): weights against Gauss-Seidel (the default; `_gs` names it
+  // explicitly), on every level or (coarse1: weight 1.5) level 0 only.
+  for (const char* w : {"1.0", "1.3", "1.5", "1.6", "1.7"}) {
     amg.amg.smoothing_relaxation = std::stod(w);
     v.push_back({std::string("eigen_pcg_sa_amg_rigid_refresh10_") + (w[2] == '0' ? std::string("gs") : "sor" + std::string(w)),
                  false, amg});
   }
-  amg.amg.smoothing_relaxation = loom::amg::SaAmgOptions{}.smoothing_relaxation;
+  amg.amg.smoothing_relaxation = 1.5;
   amg.amg.coarse_smoothing_relaxation = 1.0;
   v.push_back({"eigen_pcg_sa_amg_rigid_refresh10_coarse1", false, amg});
+  amg.amg.smoothing_relaxation = loom::amg::SaAmgOptions{}.smoothing_relaxation;
   amg.amg.coarse_smoothing_relaxation = 0;
   // Probes of the existing knobs (issue 15): prolongator damping and the strength threshold.
   for (const char* d : {"1.0", "1.6"}) {
