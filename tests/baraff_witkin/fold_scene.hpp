@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -24,6 +25,24 @@
 namespace loom_test {
 
 inline bool verbose() { return std::getenv("LOOM_TEST_VERBOSE") != nullptr; }
+
+/// Subtracts from p (3 values) the impulse h f over a step of a linear spring of stiffness k
+/// between vertices i and j, linearised about the start positions x0: f = k (e.u) e on i, e the
+/// unit direction x0_j - x0_i and u the displacement of j relative to i over the step (x - x0).
+/// The friction tests read a vertex's friction impulse from its momentum balance with this.
+inline void subtract_linear_spring_impulse(const std::vector<double>& x0, const std::vector<double>& x, loom::Index i,
+                                           loom::Index j, double h, double k, double* p) {
+  double e[3], u[3], el = 0;
+  for (int c = 0; c < 3; ++c) {
+    e[c] = x0[3 * j + c] - x0[3 * i + c];
+    u[c] = (x[3 * j + c] - x0[3 * j + c]) - (x[3 * i + c] - x0[3 * i + c]);
+    el += e[c] * e[c];
+  }
+  el = std::sqrt(el);
+  double eu = 0;
+  for (int c = 0; c < 3; ++c) eu += e[c] / el * u[c];
+  for (int c = 0; c < 3; ++c) p[c] -= h * k * eu * e[c] / el;
+}
 
 struct Fold {
   loom::Registry registry;

@@ -335,16 +335,7 @@ TEST(BwContactOperator, CollidersFrictionCorrectionSettlesOnCoupledContacts) {
     for (int c = 0; c < 3; ++c) p[c] = s.mass[i] * (s.v[3 * i + c] - vstart[3 * i + c]);
     for (Index j = 0; j < 4; ++j) {
       if (j == i) continue;
-      double e[3], u[3], el = 0;
-      for (int c = 0; c < 3; ++c) {
-        e[c] = x0[3 * j + c] - x0[3 * i + c];
-        u[c] = (s.x[3 * j + c] - x0[3 * j + c]) - (s.x[3 * i + c] - x0[3 * i + c]);
-        el += e[c] * e[c];
-      }
-      el = std::sqrt(el);
-      double eu = 0;
-      for (int c = 0; c < 3; ++c) eu += e[c] / el * u[c];
-      for (int c = 0; c < 3; ++c) p[c] -= h * k * eu * e[c] / el;  // spring force on i: k (e.u) e
+      loom_test::subtract_linear_spring_impulse(x0, s.x, i, j, h, k, p);
     }
   };
   double pS[3], pH[3];

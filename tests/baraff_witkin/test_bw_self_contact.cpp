@@ -46,6 +46,23 @@ constexpr double kThick = 0.01;  // self-collision thickness (m)
 // 1e-12 (the springs applied matrix-free, test_bw_contact_operator.cpp).
 bool g_matrix_free = false;
 
+// The test's solver (tight PCG when g_matrix_free, whose self-contacts then stay matrix-free;
+// else LDLT) and self-collision with the thickness kThick and friction mu.
+void use_solver_and_self_collision(loom::Scene& sc, double mu) {
+  if (g_matrix_free) {
+    loom::PcgOptions po;
+    po.tolerance = 1e-12;
+    po.max_iterations = 10000;
+    sc.solver = std::make_unique<loom::EigenPcg>(po);
+  } else {
+    sc.solver = std::make_unique<loom::EigenLdlt>();
+  }
+  loom::SelfCollision::Options o;
+  o.thickness = kThick;
+  o.friction = mu;
+  sc.self_collision = std::make_unique<loom::SelfCollision>(o, sc.mesh);
+}
+
 // Two horizontal kN x kN layers (xz plane): the lower at y = 0, the upper at y = gap, shifted
 // sideways by a fraction of a cell so that no vertex lies over an edge. Structural and shear
 // springs in each layer (both diagonals: every triangle edge is a spring).
@@ -87,18 +104,7 @@ void two_layers(Scene& sc, double gap, double mu, std::uint32_t seed = 0, double
                             std::make_unique<loom::testing::SpringMaterial>(std::vector<double>(nv + nu, 0.01),
                                                                             springs, true));
   sc.gravity = {0, 0, 0};
-  if (g_matrix_free) {
-    loom::PcgOptions po;
-    po.tolerance = 1e-12;
-    po.max_iterations = 10000;
-    sc.solver = std::make_unique<loom::EigenPcg>(po);
-  } else {
-    sc.solver = std::make_unique<loom::EigenLdlt>();
-  }
-  loom::SelfCollision::Options o;
-  o.thickness = kThick;
-  o.friction = mu;
-  sc.self_collision = std::make_unique<loom::SelfCollision>(o, sc.mesh);
+  use_solver_and_self_collision(sc, mu);
 }
 
 // One step as Simulation::step takes it: the integrator, then the after-step response.
@@ -384,18 +390,7 @@ static void self_friction_correction_settles_on_coupled_pairs() {
   const double d[3] = {1 / std::sqrt(2.0), 0, sz / std::sqrt(2.0)};
   for (int c = 0; c < 3; ++c) s.v[3 * S + c] = v0 * d[c];
   sc.gravity = {0, -g, 0};
-  if (g_matrix_free) {
-    loom::PcgOptions po;
-    po.tolerance = 1e-12;
-    po.max_iterations = 10000;
-    sc.solver = std::make_unique<loom::EigenPcg>(po);
-  } else {
-    sc.solver = std::make_unique<loom::EigenLdlt>();
-  }
-  loom::SelfCollision::Options o;
-  o.thickness = kThick;
-  o.friction = mu;
-  sc.self_collision = std::make_unique<loom::SelfCollision>(o, sc.mesh);
+  use_solver_and_self_collision(sc, mu);
   const std::vector<double> x0 = s.x, vstart = s.v;
   BaraffWitkin bw;
   bw.prepare(sc, h);
@@ -421,16 +416,7 @@ static void self_friction_correction_settles_on_coupled_pairs() {
     for (const auto& sp : springs) {
       if (sp.i != i && sp.j != i) continue;
       const Index j = sp.i == i ? sp.j : sp.i;
-      double e[3], u[3], el = 0;
-      for (int c = 0; c < 3; ++c) {
-        e[c] = x0[3 * j + c] - x0[3 * i + c];
-        u[c] = (s.x[3 * j + c] - x0[3 * j + c]) - (s.x[3 * i + c] - x0[3 * i + c]);
-        el += e[c] * e[c];
-      }
-      el = std::sqrt(el);
-      double eu = 0;
-      for (int c = 0; c < 3; ++c) eu += e[c] / el * u[c];
-      for (int c = 0; c < 3; ++c) p[c] -= h * k * eu * e[c] / el;
+      loom_test::subtract_linear_spring_impulse(x0, s.x, i, j, h, k, p);
     }
   };
   double pS[3], pH[3];

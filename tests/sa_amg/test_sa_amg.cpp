@@ -405,6 +405,35 @@ int wool_iterations(int n, loom::PcgPreconditioner pc, int steps = 1, const SaAm
   return it;
 }
 
+// PCG with the V-cycle of o, capped at k = 1, 2, ... iterations: the A-norm error of the
+// iterates never grows, and the converged answer is the dense projected solution.
+void expect_monotone_and_exact(const ts::System& s, const SaAmgOptions& o, const std::string& what) {
+  const Eigen::VectorXd ref = ts::dense_solution(s);
+  const Eigen::MatrixXd At = ts::projected_matrix(s);
+  double prev = INFINITY;
+  bool converged = false;
+  for (int k = 1; k <= 60 && !converged; ++k) {
+    loom::PcgOptions po = amg_pcg(1e-10, 6, k);
+    po.amg = o;
+    loom::EigenPcg p(po);
+    p.set_coordinates(s.x);
+    p.analyze_pattern(s.A, s.S);
+    loom::SolveReport f;
+    ASSERT_TRUE(p.factorize(s.A, s.S, f)) << f.message;
+    std::vector<double> dv(3 * s.n, 0.0);
+    const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
+    const Eigen::VectorXd e = Eigen::Map<const Eigen::VectorXd>(dv.data(), ref.size()) - ref;
+    const double ea = std::sqrt(std::max(0.0, e.dot(At * e)));
+    EXPECT_LE(ea, prev * (1 + 1e-9) + 1e-14) << "iteration " << k << " " << what;
+    prev = ea;
+    converged = rep.converged;
+    if (converged) {
+      EXPECT_LT(ts::rel_diff(dv, ref), 1e-7) << what;
+    }
+  }
+  EXPECT_TRUE(converged) << what;
+}
+
 }  // namespace
 
 // Serial: on the shared 2-core machine every OpenMP barrier of a loaded run can cost a
@@ -645,30 +674,7 @@ TEST(SaAmg, SweepCountsPerLevelStaySpdMonotoneAndExact) {
         // (on the 8-part schedule, on a random network and on the cloth with contacts; the
         // others are covered by the dense check above).
         if (min_dofs != 0 || (si != 0 && si != 3)) continue;
-        const Eigen::VectorXd ref = ts::dense_solution(s);
-        const Eigen::MatrixXd At = ts::projected_matrix(s);
-        double prev = INFINITY;
-        bool converged = false;
-        for (int k = 1; k <= 60 && !converged; ++k) {
-          loom::PcgOptions po = amg_pcg(1e-10, 6, k);
-          po.amg = o;
-          loom::EigenPcg p(po);
-          p.set_coordinates(s.x);
-          p.analyze_pattern(s.A, s.S);
-          loom::SolveReport f;
-          ASSERT_TRUE(p.factorize(s.A, s.S, f)) << f.message;
-          std::vector<double> dv(3 * s.n, 0.0);
-          const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
-          const Eigen::VectorXd e = Eigen::Map<const Eigen::VectorXd>(dv.data(), ref.size()) - ref;
-          const double ea = std::sqrt(std::max(0.0, e.dot(At * e)));
-          EXPECT_LE(ea, prev * (1 + 1e-9) + 1e-14) << "iteration " << k << " n " << s.n;
-          prev = ea;
-          converged = rep.converged;
-          if (converged) {
-            EXPECT_LT(ts::rel_diff(dv, ref), 1e-7) << "n " << s.n;
-          }
-        }
-        EXPECT_TRUE(converged) << "sweeps " << fine << "/" << coarse << " n " << s.n;
+        expect_monotone_and_exact(s, o, "sweeps " + std::to_string(fine) + "/" + std::to_string(coarse) + " n " + std::to_string(s.n));
       }
     }
   }
@@ -1035,30 +1041,7 @@ TEST(SaAmg, SorSmoothingStaysSpdMonotoneAndExact) {
         EXPECT_GT((D - Dg).cwiseAbs().maxCoeff(), 1e-3 * Dg.cwiseAbs().maxCoeff()) << what;
       }
       if (c.sweeps != 1 || c.min_dofs != 0 || (si != 0 && si != 3)) continue;
-      const Eigen::VectorXd ref = ts::dense_solution(s);
-      const Eigen::MatrixXd At = ts::projected_matrix(s);
-      double prev = INFINITY;
-      bool converged = false;
-      for (int k = 1; k <= 60 && !converged; ++k) {
-        loom::PcgOptions po = amg_pcg(1e-10, 6, k);
-        po.amg = o;
-        loom::EigenPcg p(po);
-        p.set_coordinates(s.x);
-        p.analyze_pattern(s.A, s.S);
-        loom::SolveReport f;
-        ASSERT_TRUE(p.factorize(s.A, s.S, f)) << f.message;
-        std::vector<double> dv(3 * s.n, 0.0);
-        const loom::SolveReport rep = p.solve(s.A, s.S, s.b, s.z, dv);
-        const Eigen::VectorXd e = Eigen::Map<const Eigen::VectorXd>(dv.data(), ref.size()) - ref;
-        const double ea = std::sqrt(std::max(0.0, e.dot(At * e)));
-        EXPECT_LE(ea, prev * (1 + 1e-9) + 1e-14) << "iteration " << k << " " << what;
-        prev = ea;
-        converged = rep.converged;
-        if (converged) {
-          EXPECT_LT(ts::rel_diff(dv, ref), 1e-7) << what;
-        }
-      }
-      EXPECT_TRUE(converged) << what;
+      expect_monotone_and_exact(s, o, what);
     }
   }
   // Beyond the SPD range: some test system loses positive definiteness.
