@@ -400,15 +400,9 @@ bool ImplicitSelfContact::correct_friction(const State& s, BsrMatrix& A, std::ve
     // sliding one at mu J.
     if (c.stick ? impulse <= mj * (1 + kCoulombTolerance) : std::abs(impulse - mj) <= kCoulombTolerance * mj) continue;
     const double D = pair_response(c, s, A, E, ut, l1);
-    const double f = l1 + impulse / D;  // the slip without this pair's damper
-    const double hold = kStickDamping * D;
-    const bool stick = D * f <= mj && !c.released;
-    if (c.stick && stick) continue;
-    double fr = hold;
-    if (!stick && D * f > mj) fr = std::min(hold, mj * D / (D * f - mj));
-    // Let go but too slow to slide (D f <= mu J): kept at the stiffest damper; once there, no
-    // further solve for it.
-    if (!stick && !c.stick && fr == hold && c.fr >= hold * (1 - kCoulombTolerance)) continue;
+    double fr;  // l1 + impulse / D: the slip without this pair's damper
+    bool stick;
+    if (!loom::kernels::resize_damper(D, l1 + impulse / D, mj, mj, c.released, c.stick, c.fr, fr, stick)) continue;
     add_damper(c, fr - c.fr, s, A, b, matrix_free_);
     if (E)  // as add_damper changes A_aa when assembled
       for (int a = 0; a < 4; ++a) {

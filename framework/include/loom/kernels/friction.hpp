@@ -48,6 +48,26 @@ LOOM_HD inline T coulomb_damping(T len, T D, T mus_Jn, T muk_Jn, bool& stick) {
   return slide < hold ? slide : hold;
 }
 
+/// The correction's new damper for a contact (a collider contact or a self-contact pair) that
+/// missed its Coulomb bound, given its response D (kg) with its neighbours as solved and its slip
+/// f (m/s) without its own damper: held (kStickDamping D) when D f <= mu_s J and it was not
+/// released in this step, else the damper that leaves it mu_k J (at most the held one). Returns
+/// false when nothing changes: it stays held, or it was let go but is too slow to slide (D f <=
+/// mu_k J) and already has the stiffest damper (no further solve for it).
+template <class T>
+LOOM_HD inline bool resize_damper(T D, T f, T mus_Jn, T muk_Jn, bool released, bool was_stick, T hc_now, T& hc,
+                                  bool& stick) {
+  const T hold = static_cast<T>(kStickDamping) * D;
+  stick = D * f <= mus_Jn && !released;
+  if (was_stick && stick) return false;
+  hc = hold;
+  if (!stick && D * f > muk_Jn) {
+    const T slide = muk_Jn * D / (D * f - muk_Jn);
+    if (slide < hold) hc = slide;
+  }
+  return !(!stick && !was_stick && hc == hold && hc_now >= hold * (T(1) - static_cast<T>(kCoulombTolerance)));
+}
+
 /// |v + dv - vs| in the tangent plane of the unit normal n (m/s); its vector in vt when given.
 template <class T>
 LOOM_HD inline T tangential_speed(const T* v, const T* dv, const T* vs, const T* n, T* vt = nullptr) {
@@ -135,18 +155,9 @@ LOOM_HD inline bool correct_collider_friction(const T* v0, const T* dv, const T*
     const T d = q / (l1 * l1) - fs.hc;
     if (d > D) D = d;
   }
-  const T f = l1 + impulse / D;
-  const T hold = static_cast<T>(kStickDamping) * D;
-  const bool stick = D * f <= ms && !fs.released;
-  if (fs.stick && stick) return false;
-  T hc = hold;
-  if (!stick && D * f > mk) {
-    const T slide = mk * D / (D * f - mk);
-    if (slide < hold) hc = slide;
-  }
-  // Let go but too slow to slide (D f <= mu_k J): kept at the stiffest damper; once there, no
-  // further solve for it.
-  if (!stick && !fs.stick && hc == hold && fs.hc >= hold * (T(1) - tol)) return false;
+  T hc;
+  bool stick;
+  if (!resize_damper(D, l1 + impulse / D, ms, mk, fs.released, fs.stick, fs.hc, hc, stick)) return false;
   add_tangential_damper(v0, vs, n, hc - fs.hc, blk, b);
   if (fs.stick && !stick) fs.released = true;
   fs.hc = hc;
