@@ -244,7 +244,7 @@ void BM_HoStep_double_table(benchmark::State& st) {
 // step without pins and clock), window on (the default) and off (the plain grouped sweep, what
 // the step ran before). Same springs, same cloth, interleave them with --benchmark_repetitions.
 // blk >= 0: the springs grouped with blocks of kGroupBlocks[blk] vertices.
-void ho_window_bench(benchmark::State& st, bool window, int blk = -1) {
+void ho_window_bench(benchmark::State& st, bool window, int blk = -1, bool fuse = true) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -253,14 +253,18 @@ void ho_window_bench(benchmark::State& st, bool window, int blk = -1) {
   HoSprings<double> s = blk >= 0 ? c.ho_blk[blk] : c.ho.springs();
   const SpringLayout& layout = blk >= 0 ? c.ho_blk_layout[blk] : c.ho.layout();
   if (!window) s.win_cap = 0;
+  s.fuse = fuse;
   st.counters["window"] = static_cast<double>(s.win_cap);
   // the grouped structure: segments, springs left over after whole groups of 4 (the vector
   // loops' scalar remainders), segments with stride 2, and segments without one shared id
-  double tail = 0, step2 = 0, mixed = 0;
+  // and the unit-stride segments with disjoint lower and upper ranges (one pass when fused)
+  double tail = 0, step2 = 0, mixed = 0, disjoint = 0;
   for (std::size_t g = 0; g < s.segs.size(); ++g) {
     tail += static_cast<double>(s.segs[g].len % 4);
     step2 += s.segs[g].step == 2 ? 1 : 0;
+    disjoint += s.segs[g].step == 1 && s.segs[g].off >= s.segs[g].len ? 1 : 0;
   }
+  st.counters["disjoint_segs"] = disjoint;
   st.counters["segs"] = static_cast<double>(s.segs.size());
   st.counters["tail_springs"] = tail;
   st.counters["step2_segs"] = step2;
@@ -297,6 +301,8 @@ void BM_HoStep_double_nowindow(benchmark::State& st) { ho_window_bench(st, false
 void BM_HoStep_double_block64(benchmark::State& st) { ho_window_bench(st, true, 0); }
 void BM_HoStep_double_block128(benchmark::State& st) { ho_window_bench(st, true, 1); }
 void BM_HoStep_double_block256(benchmark::State& st) { ho_window_bench(st, true, 2); }
+// The windowed sweep with two passes (impulses, then scatter) for every segment (issue 16's A/B).
+void BM_HoStep_double_unfused(benchmark::State& st) { ho_window_bench(st, true, -1, false); }
 
 void BM_HoStep_float(benchmark::State& st) {
   const Row& r = rows()[st.range(0)];
@@ -363,7 +369,8 @@ void BM_Rk4Step_float(benchmark::State& st) {
 
 // kind 0: the default sweep (grouped and windowed, loom/spring_groups.hpp), 1: plain (one spring
 // at a time, what the step ran before), 2: blocked (plain order, forces of 128 springs by one loop),
-// 3 + b: grouped and windowed with blocks of kGroupBlocks[b] vertices.
+// 3 + b: grouped and windowed with blocks of kGroupBlocks[b] vertices; 6: the default sweep with
+// two passes (forces, then scatter) for every segment (SpringSweep::fuse = false).
 template <class T>
 void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const Row& r = rows()[st.range(0)];
@@ -377,12 +384,14 @@ void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const T g[3] = {T(0), T(-9.81), T(0)};
   SpringSweep<T>* sw = nullptr;
   if constexpr (std::is_same_v<T, float>) sw = kind == 0 ? &c.fsweep : &c.fsweep_plain;
-  else sw = kind == 0 ? &c.sweep : (kind >= 3 ? &c.sweep_blk[kind - 3] : &c.sweep_plain);
+  else sw = kind == 0 || kind == 6 ? &c.sweep : (kind >= 3 ? &c.sweep_blk[kind - 3] : &c.sweep_plain);
   sw->blocked = kind == 2;
+  sw->fuse = kind != 6;
   st.counters["window"] = static_cast<double>(sw->win_cap);
   st.counters["segs"] = static_cast<double>(sw->segs.size());
   for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
   sw->blocked = false;
+  sw->fuse = true;
   benchmark::DoNotOptimize(x.data());
   set_counters(st, r, threads, se_bytes(*sw));
 }
@@ -396,6 +405,7 @@ void BM_SeStep_float_blocked(benchmark::State& st) { se_bench<float>(st, true, 2
 void BM_SeStep_double_block64(benchmark::State& st) { se_bench<double>(st, false, 3); }
 void BM_SeStep_double_block128(benchmark::State& st) { se_bench<double>(st, false, 4); }
 void BM_SeStep_double_block256(benchmark::State& st) { se_bench<double>(st, false, 5); }
+void BM_SeStep_double_unfused(benchmark::State& st) { se_bench<double>(st, false, 6); }
 
 template <class T>
 void rk4_fused_bench(benchmark::State& st, bool /*is_float*/, bool plain = false) {
@@ -529,6 +539,7 @@ BENCHMARK(BM_HoStep_double_nowindow)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_block64)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_block128)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_block256)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_unfused)->Apply(rows_args);
 BENCHMARK(BM_HoStep_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_float)->Apply(rows_args);
@@ -541,6 +552,7 @@ BENCHMARK(BM_SeStep_float_blocked)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_block64)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_block128)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_block256)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_unfused)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double_plain)->Apply(rows_args);

@@ -71,6 +71,43 @@ inline void sweep_segment_forces(Index len, Index a, Index off, const T* __restr
   }
 }
 
+/// sweep_segment_forces and the unit-stride window_segment_scatter in one pass (issue 16), for a
+/// segment whose lower and upper slot ranges [a, a + len) and [a + off, a + off + len) are
+/// disjoint (off >= len): each slot of FX, FY, FZ gets exactly one addition from the segment, so
+/// the sums are the two passes' bit for bit. F still receives the forces: a product that is also
+/// stored is never contracted into the scatter's addition (see ho_window_impulses_scatter).
+template <class T, bool Damped, Index Bk>
+inline void sweep_segment_forces_scatter(Index len, Index a, Index off, const T* __restrict K,
+                                         const T* __restrict L0, const T* __restrict C, const T* __restrict X,
+                                         const T* __restrict Y, const T* __restrict Z, const T* __restrict VX,
+                                         const T* __restrict VY, const T* __restrict VZ, T* __restrict F,
+                                         T* __restrict FX, T* __restrict FY, T* __restrict FZ) {
+  const T tiny = std::numeric_limits<T>::min();
+#pragma omp simd
+  for (Index r = 0; r < len; ++r) {
+    const Index p = a + r, q = p + off;
+    const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
+    const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+    using std::sqrt;
+    const T il = T(1) / sqrt(l2 + tiny);
+    T sc = K[r] * (T(1) - L0[r] * il);
+    if constexpr (Damped) {
+      const T du = d0 * (VX[q] - VX[p]) + d1 * (VY[q] - VY[p]) + d2 * (VZ[q] - VZ[p]);
+      sc += C[r] * du * il * il;
+    }
+    const T f0 = sc * d0, f1 = sc * d1, f2 = sc * d2;
+    F[r] = f0;
+    F[Bk + r] = f1;
+    F[2 * Bk + r] = f2;
+    FX[p] += f0;
+    FY[p] += f1;
+    FZ[p] += f2;
+    FX[q] -= f0;
+    FY[q] -= f1;
+    FZ[q] -= f2;
+  }
+}
+
 template <class T>
 struct SpringSweep {
   SpringLayout layout;
@@ -96,6 +133,10 @@ struct SpringSweep {
   /// Per part: x, y, z, the three force sums, and vx, vy, vz (damped only), win_cap each.
   static constexpr int kWinArrays = 9;
   mutable std::vector<T> win;
+  /// Grouped sweep: forces and scatter in one pass for unit-stride segments whose lower and
+  /// upper ranges are disjoint (sweep_segment_forces_scatter; the same bits). false: two passes
+  /// for every segment (table1's SeStep_double_unfused row).
+  bool fuse = true;
 
   Index size() const { return static_cast<Index>(i.size()); }
   bool damped() const { return !c.empty(); }
@@ -154,6 +195,7 @@ struct SpringSweep {
     win_span = o.win_span;
     win_cap = o.win_cap;
     win.assign(o.win.size(), T(0));
+    fuse = o.fuse;
   }
 
   /// Spring forces at (x, v) accumulated into f, with fin(q, f + 3q) per completed vertex
@@ -241,7 +283,10 @@ struct SpringSweep {
           const SpringSegment& G = segs[sg];
           const Index a = G.i0 - ws;
           const T* Cg = Damped ? C + G.begin : nullptr;
-          if (G.step == 1) {
+          if (G.step == 1 && fuse && G.off >= G.len) {   // disjoint ranges: one pass
+            sweep_segment_forces_scatter<T, Damped, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX,
+                                                        VY, VZ, F, FX, FY, FZ);
+          } else if (G.step == 1) {
             sweep_segment_forces<T, Damped, 1, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX, VY,
                                                    VZ, F);
             window_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F);

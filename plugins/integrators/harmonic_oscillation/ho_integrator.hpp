@@ -83,6 +83,10 @@ struct HoSprings {
   Index win_span = 0;             ///< the most vertices live at once (plan_ho_window)
   Index win_cap = 0;
   mutable std::vector<T> win;
+  /// Windowed sweep: impulses and scatter in one pass for unit-stride segments whose lower and
+  /// upper ranges are disjoint (ho_window_impulses_scatter; the same bits). false: two passes
+  /// for every segment (table1's HoStep_double_unfused row).
+  bool fuse = true;
 
   Index size() const { return static_cast<Index>(i.size()); }
 };
@@ -116,6 +120,7 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
   out.win_span = in.win_span;
   out.win_cap = in.win_cap;
   out.win.assign(in.win.size(), T(0));
+  out.fuse = in.fuse;
   out.l0.assign(in.l0.begin(), in.l0.end());
   out.k.assign(in.k.begin(), in.k.end());
   out.c.assign(in.c.begin(), in.c.end());
@@ -511,6 +516,14 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
         const T* kx = P.kx + off;
         const T* kv = P.kv + off;
         // One run with its stride (1 or 2) as a template argument.
+        // unit stride, lower and upper ranges disjoint: impulses and scatter in one pass
+        if constexpr (!kPos) {
+          if (s.fuse && G.step == 1 && G.off >= G.len) {
+            ho_window_impulses_scatter<T, Vi, Table, Bk>(G.len, a, G.off, id, l0, kx, kv, X, Y, Z, VX, VY, VZ, Gb,
+                                                         DX, DY, DZ);
+            continue;
+          }
+        }
         const auto run = [&]<int Step>() {
           ho_window_impulses<T, Vi, Table, Step, Bk>(G.len, a, G.off, id, l0, kx, kv, ex, ev, X, Y, Z, VX, VY, VZ,
                                                      Gb, Qb);

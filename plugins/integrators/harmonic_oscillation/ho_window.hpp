@@ -99,6 +99,54 @@ inline void ho_window_impulses(Index len, Index a, Index off, const std::uint16_
   }
 }
 
+/// ho_window_impulses and the unit-stride window_segment_scatter in one pass (issue 16), for a
+/// segment whose lower and upper slot ranges [a, a + len) and [a + off, a + off + len) are
+/// disjoint (off >= len). Each slot of DX, DY, DZ then gets exactly one addition from the
+/// segment, so the sums are the two passes' bit for bit (the same additions, per slot in the
+/// same order); the loop has no dependence between iterations, hence `omp simd`. G still
+/// receives the impulses: a product that is also stored is never contracted into the scatter's
+/// addition (GCC's -ffp-contract=fast fuses a product whose only uses are additions, and an FMA
+/// would round differently from the two passes). Velocity and kang_cho_2011 variants.
+template <class T, int V, bool Table, Index Bk>
+inline void ho_window_impulses_scatter(Index len, Index a, Index off, const std::uint16_t* __restrict ID,
+                                       const T* __restrict L0, const T* __restrict KX, const T* __restrict KV,
+                                       const T* __restrict X, const T* __restrict Y, const T* __restrict Z,
+                                       const T* __restrict VX, const T* __restrict VY, const T* __restrict VZ,
+                                       T* __restrict G, T* __restrict DX, T* __restrict DY, T* __restrict DZ) {
+  static_assert(V != 1, "analytic_position keeps the two passes");
+  constexpr bool kKc = V == 2;   // HoVariant::KangCho2011
+  const T tiny = std::numeric_limits<T>::min();
+#pragma omp simd
+  for (Index r = 0; r < len; ++r) {
+    const Index p = a + r, q = p + off;
+    const std::size_t c = Table ? static_cast<std::size_t>(ID[r]) : static_cast<std::size_t>(r);
+    using std::sqrt;
+    using std::abs;
+    const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
+    const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+    const T l = sqrt(l2);
+    const T inv = T(1) / (l + tiny);
+    const T n0 = d0 * inv, n1 = d1 * inv, n2 = d2 * inv;
+    const T delta = l - L0[c];
+    const T ddot = n0 * (VX[q] - VX[p]) + n1 * (VY[q] - VY[p]) + n2 * (VZ[q] - VZ[p]);
+    T sv;
+    if constexpr (kKc)
+      sv = KX[c] * delta + KV[c] * abs(ddot);
+    else
+      sv = KX[c] * delta + KV[c] * ddot;
+    const T g0 = sv * n0, g1 = sv * n1, g2 = sv * n2;
+    G[r] = g0;
+    G[Bk + r] = g1;
+    G[2 * Bk + r] = g2;
+    DX[p] += g0;
+    DY[p] += g1;
+    DZ[p] += g2;
+    DX[q] -= g0;
+    DY[q] -= g1;
+    DZ[q] -= g2;
+  }
+}
+
 #if defined(LOOM_HO_FINALISE_AVX2)
 /// Vertices [from, from + 4 m) of a block finalised 4 at a time (velocity and kang_cho_2011
 /// variants, double): kernels::ho_finalise_vertex on w_q (DX, DY, DZ)[l], operation for
