@@ -134,8 +134,9 @@ struct SpringSweep {
   static constexpr int kWinArrays = 9;
   mutable std::vector<T> win;
   /// Grouped sweep: forces and scatter in one pass for unit-stride segments whose lower and
-  /// upper ranges are disjoint (sweep_segment_forces_scatter; the same bits). false: two passes
-  /// for every segment (table1's SeStep_double_unfused row).
+  /// upper ranges are disjoint (sweep_segment_forces_scatter), and one scatter pass for those
+  /// whose ranges overlap (window_segment_scatter_overlap); the same bits. false: forces, then
+  /// two scatter passes for every segment (table1's SeStep_double_unfused row).
   bool fuse = true;
 
   Index size() const { return static_cast<Index>(i.size()); }
@@ -289,7 +290,10 @@ struct SpringSweep {
           } else if (G.step == 1) {
             sweep_segment_forces<T, Damped, 1, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX, VY,
                                                    VZ, F);
-            window_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+            if (fuse && G.off > 0)   // overlapping ranges: one scatter pass
+              window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+            else
+              window_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F);
           } else {
             sweep_segment_forces<T, Damped, 2, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX, VY,
                                                    VZ, F);

@@ -280,6 +280,24 @@ inline void window_segment_scatter(Index len, Index a, Index off, T* __restrict 
   window_segment_scatter_from<T, Step, Bk>(0, len, a, off, FX, FY, FZ, F);
 }
 
+/// The unit-stride scatter of a segment whose lower and upper ranges overlap (0 < off < len) in
+/// one pass over the slots [a, a + off + len) instead of two (issue 16): a slot in both ranges
+/// gets (S + F[r]) - F[r - off], the two passes' additions in their order, so the same bits;
+/// the slots in one range get their one addition. Saves a load and a store per shared slot and
+/// the second pass's reloads of slots the first just stored.
+template <class T, Index Bk>
+inline void window_segment_scatter_overlap(Index len, Index a, Index off, T* __restrict FX, T* __restrict FY,
+                                           T* __restrict FZ, const T* __restrict F) {
+  T* const S[3] = {FX + a, FY + a, FZ + a};
+  for (int e = 0; e < 3; ++e) {
+    T* __restrict D = S[e];
+    const T* __restrict G = F + e * Bk;
+    for (Index r = 0; r < off; ++r) D[r] += G[r];
+    for (Index r = off; r < len; ++r) D[r] = (D[r] + G[r]) - G[r - off];
+    for (Index r = len; r < len + off; ++r) D[r] -= G[r - off];
+  }
+}
+
 /// Before a block that reads vertices up to need - 1: when need lies beyond the window
 /// [ws, ws + cap), move the live vertices [qfin, fill) of the narr arrays A to the start (ws = qfin).
 template <class T>

@@ -84,8 +84,9 @@ struct HoSprings {
   Index win_cap = 0;
   mutable std::vector<T> win;
   /// Windowed sweep: impulses and scatter in one pass for unit-stride segments whose lower and
-  /// upper ranges are disjoint (ho_window_impulses_scatter; the same bits). false: two passes
-  /// for every segment (table1's HoStep_double_unfused row).
+  /// upper ranges are disjoint (ho_window_impulses_scatter), and one scatter pass for those whose
+  /// ranges overlap (window_segment_scatter_overlap); the same bits. false: impulses, then two
+  /// scatter passes for every segment (table1's HoStep_double_unfused row).
   bool fuse = true;
 
   Index size() const { return static_cast<Index>(i.size()); }
@@ -527,6 +528,12 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
         const auto run = [&]<int Step>() {
           ho_window_impulses<T, Vi, Table, Step, Bk>(G.len, a, G.off, id, l0, kx, kv, ex, ev, X, Y, Z, VX, VY, VZ,
                                                      Gb, Qb);
+          if constexpr (Step == 1 && !kPos) {
+            if (s.fuse && G.off > 0) {   // off < len here: overlapping ranges, one scatter pass
+              window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, DX, DY, DZ, Gb);
+              return;
+            }
+          }
           window_segment_scatter<T, Step, Bk>(G.len, a, G.off, DX, DY, DZ, Gb);
           if constexpr (kPos) window_segment_scatter<T, Step, Bk>(G.len, a, G.off, PX, PY, PZ, Qb);
         };
