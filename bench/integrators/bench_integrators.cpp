@@ -34,6 +34,7 @@
 #include "loom/explicit_springs.hpp"
 #include "loom/vertex_order.hpp"
 #include "loom/kernels/spring.hpp"
+#include "loom/kernels/sqrt_recip_avx512.hpp"
 #include "loom/mesh.hpp"
 #include "loom/params.hpp"
 #include "mass_spring.hpp"
@@ -528,6 +529,53 @@ void rows_args(benchmark::internal::Benchmark* b) {
 }
 
 }  // namespace
+
+#if defined(__AVX512F__)
+// Issue 16, candidate 2 (docs/benchmarks/ho.md): HO's l = sqrt(l2), 1 / (l + min) on 4096
+// squared lengths of the Table 1 range (L1 resident), one thread's CPU time; kind 0: the divider
+// (vsqrtpd, vdivpd through an `omp simd` loop), 1: kernels::sqrt_recip_cr_pd (the same bits,
+// FMAs and an exact rounding test; lanes out of its range by the divider). Time / 4096 = ns
+// per spring of that part of the impulse loop, in isolation.
+void sqrt_recip_bench(benchmark::State& st, int kind) {
+  constexpr std::size_t n = 4096;
+  std::vector<double> a(n), s(n), q(n);
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> U(0.5, 2.0);
+  for (double& e : a) e = 9e-6 * U(rng);
+  const double tiny = std::numeric_limits<double>::min();
+  for (auto _ : st) {
+    if (kind == 0) {
+#pragma omp simd
+      for (std::size_t i = 0; i < n; ++i) {
+        const double l = std::sqrt(a[i]);
+        s[i] = l;
+        q[i] = 1.0 / (l + tiny);
+      }
+    } else {
+      for (std::size_t i = 0; i < n; i += 8) {
+        __m512d sv, qv;
+        const __mmask8 left = kernels::sqrt_recip_cr_pd(_mm512_loadu_pd(a.data() + i), sv, qv);
+        _mm512_storeu_pd(s.data() + i, sv);
+        _mm512_storeu_pd(q.data() + i, qv);
+        if (left)
+          for (int l = 0; l < 8; ++l)
+            if (left >> l & 1) {
+              s[i + l] = std::sqrt(a[i + l]);
+              q[i + l] = 1.0 / (s[i + l] + tiny);
+            }
+      }
+    }
+    benchmark::DoNotOptimize(s.data());
+    benchmark::DoNotOptimize(q.data());
+    benchmark::ClobberMemory();
+  }
+  st.SetItemsProcessed(static_cast<std::int64_t>(st.iterations()) * static_cast<std::int64_t>(n));
+}
+void BM_SqrtRecip_divider(benchmark::State& st) { sqrt_recip_bench(st, 0); }
+void BM_SqrtRecip_cr(benchmark::State& st) { sqrt_recip_bench(st, 1); }
+BENCHMARK(BM_SqrtRecip_divider)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_SqrtRecip_cr)->Unit(benchmark::kMicrosecond);
+#endif
 
 BENCHMARK(BM_Triad)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_HoStep_double)->Apply(rows_args);

@@ -164,3 +164,102 @@ TEST(SpringKernels, HoBlockFinalisationEqualsScalarBitwise) {
 #endif
 
 }  // namespace
+
+#include <cfloat>
+#include <cstdio>
+#include <limits>
+
+#include "loom/kernels/sqrt_recip_avx512.hpp"
+
+namespace {
+
+#if defined(__AVX512F__)
+// loom::kernels::sqrt_recip_cr_pd against std::sqrt and the IEEE division (both correctly rounded), bit
+// for bit, and against long double: random squared lengths over the whole range and over the
+// steps' (1e-12 to 1e2), roots and reciprocals constructed to lie within about 2^-60 ulp of a
+// rounding midpoint, powers of two and their neighbours, mantissas of all ones, the range's ends;
+// lanes below kSqrtRecipMin (0, the min guard DBL_MIN, denormals) and above kSqrtRecipMax must
+// come back in the mask. The largest error against long double is printed (it must be at most
+// 0.5 ulp: correctly rounded).
+TEST(SpringKernels, SqrtRecipAvx512IsCorrectlyRounded) {
+  static_assert(std::numeric_limits<long double>::digits >= 64, "needs x87 long double");
+  std::mt19937_64 rng(5);
+  std::vector<double> in;
+  auto mant = [&]() { return 1.0 + static_cast<double>(rng() >> 12) * 0x1p-52; };   // [1, 2)
+  std::uniform_int_distribution<int> ex(-950, 950);
+  for (int q = 0; q < 400000; ++q) in.push_back(std::ldexp(mant(), ex(rng)));
+  std::uniform_real_distribution<double> lg(-12.0, 2.0);
+  for (int q = 0; q < 400000; ++q) in.push_back(std::pow(10.0, lg(rng)));
+  // a whose root lies next to a midpoint m = s + u/2: a = RN(m^2) and its neighbours
+  for (int q = 0; q < 100000; ++q) {
+    const double s = std::ldexp(mant(), ex(rng) / 2);
+    const long double m = static_cast<long double>(s) + static_cast<long double>(std::nextafter(s, 1e300) - s) / 2;
+    const double a = static_cast<double>(m * m);
+    for (int k = -2; k <= 2; ++k) {
+      double b = a;
+      for (int t = 0; t < std::abs(k); ++t) b = std::nextafter(b, k > 0 ? 1e300 : 0.0);
+      in.push_back(b);
+    }
+  }
+  // s whose reciprocal lies next to a midpoint: s = RN(1 / (q + u/2)) and neighbours, a = s^2
+  // (sqrt(RN(s^2)) = s in binary64)
+  for (int q = 0; q < 100000; ++q) {
+    const double r = std::ldexp(mant(), ex(rng) / 2);
+    const long double m = static_cast<long double>(r) + static_cast<long double>(std::nextafter(r, 1e300) - r) / 2;
+    const double s0 = static_cast<double>(1.0L / m);
+    for (int k = -2; k <= 2; ++k) {
+      double s = s0;
+      for (int t = 0; t < std::abs(k); ++t) s = std::nextafter(s, k > 0 ? 1e300 : 0.0);
+      in.push_back(s * s);
+    }
+  }
+  for (int e = -940; e <= 940; e += 7)
+    for (double base : {1.0, 2.0 - 0x1p-52, 4.0 - 0x1p-51}) {
+      const double p = std::ldexp(base, e);
+      in.push_back(p);
+      in.push_back(std::nextafter(p, 0.0));
+      in.push_back(std::nextafter(p, 1e300));
+      in.push_back(std::nextafter(std::nextafter(p, 0.0), 0.0));
+    }
+  in.push_back(loom::kernels::kSqrtRecipMin);
+  in.push_back(loom::kernels::kSqrtRecipMax);
+  const std::vector<double> outside{0.0, DBL_MIN, 1e-310, std::nextafter(loom::kernels::kSqrtRecipMin, 0.0),
+                                    std::nextafter(loom::kernels::kSqrtRecipMax, 1e308), 1e300,
+                                    std::numeric_limits<double>::infinity(), 1e-320};
+  while (in.size() % 8 != 0) in.push_back(1.0);
+  long double worst_s = 0, worst_q = 0;
+  std::size_t checked = 0;
+  for (std::size_t b = 0; b < in.size(); b += 8) {
+    alignas(64) double S[8], Q[8];
+    __m512d s, q;
+    const __mmask8 left = loom::kernels::sqrt_recip_cr_pd(_mm512_loadu_pd(in.data() + b), s, q);
+    ASSERT_EQ(left, 0) << "block " << b;
+    _mm512_store_pd(S, s);
+    _mm512_store_pd(Q, q);
+    for (int l = 0; l < 8; ++l) {
+      const double a = in[b + l];
+      const double rs = std::sqrt(a), rq = 1.0 / rs;
+      ASSERT_TRUE(same_bits(S[l], rs)) << "sqrt(" << a << "): " << S[l] << " vs " << rs;
+      ASSERT_TRUE(same_bits(Q[l], rq)) << "1/sqrt(" << a << "): " << Q[l] << " vs " << rq;
+      const long double es = std::sqrt(static_cast<long double>(a));
+      const long double eq = 1.0L / static_cast<long double>(S[l]);
+      const long double us = std::nextafter(S[l], 1e308) - S[l], uq = std::nextafter(Q[l], 1e308) - Q[l];
+      worst_s = std::max(worst_s, std::abs(static_cast<long double>(S[l]) - es) / us);
+      worst_q = std::max(worst_q, std::abs(static_cast<long double>(Q[l]) - eq) / uq);
+      ++checked;
+    }
+  }
+  // long double carries 11 more bits: an error up to 0.5 ulp + 2^-11 ulp still means correctly rounded
+  EXPECT_LE(worst_s, 0.5L + 0x1p-10L);
+  EXPECT_LE(worst_q, 0.5L + 0x1p-10L);
+  std::printf("sqrt_recip_cr_pd: %zu inputs, max error %.6Lf ulp (sqrt), %.6Lf ulp (reciprocal)\n", checked, worst_s,
+              worst_q);
+  for (std::size_t b = 0; b < outside.size(); b += 8) {
+    __m512d s, q;
+    const __mmask8 left = loom::kernels::sqrt_recip_cr_pd(_mm512_loadu_pd(outside.data() + b), s, q);
+    EXPECT_EQ(left, 0xFF);
+  }
+}
+#endif
+
+}  // namespace
