@@ -25,7 +25,10 @@
 // a vertex is handed to fin from the window as soon as its block is done. Per-spring arithmetic is block_forces' (one sqrt
 // and one division per spring); only the order of the additions into a vertex differs from the
 // one-spring-at-a-time sweep, so the two agree to rounding (tests/symplectic_euler,
-// SymplecticEulerFused.WindowedSweepMatchesPlainSweep). Used when grouping pays (segments average
+// SymplecticEulerFused.WindowedSweepMatchesPlainSweep). A unit-stride segment whose lower and
+// upper ranges are disjoint computes and scatters its forces in one loop
+// (sweep_segment_forces_scatter), one whose ranges overlap is scattered in one pass
+// (window_segment_scatter_overlap); both give the two passes' bits (fuse, issue 16). Used when grouping pays (segments average
 // at least 4 springs) and the window fits (live span <= kSpringWinMaxSpan); build(..., false)
 // keeps the plain sweep.
 #pragma once

@@ -516,7 +516,6 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
         const T* l0 = P.l0 + off;
         const T* kx = P.kx + off;
         const T* kv = P.kv + off;
-        // One run with its stride (1 or 2) as a template argument.
         // unit stride, lower and upper ranges disjoint: impulses and scatter in one pass
         if constexpr (!kPos) {
           if (s.fuse && G.step == 1 && G.off >= G.len) {
@@ -525,6 +524,7 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
             continue;
           }
         }
+        // One run with its stride (1 or 2) as a template argument.
         const auto run = [&]<int Step>() {
           ho_window_impulses<T, Vi, Table, Step, Bk>(G.len, a, G.off, id, l0, kx, kv, ex, ev, X, Y, Z, VX, VY, VZ,
                                                      Gb, Qb);

@@ -17,7 +17,10 @@
 // plan_ho_window from the largest live span of any block (4x it, at least 1024), so a move
 // copies at most a quarter of the window. The arithmetic and the order of every addition are
 // those of the plain grouped sweep: results are bit-identical (tests/harmonic_oscillation,
-// HoStorage.WindowedSweepIsBitIdentical).
+// HoStorage.WindowedSweepIsBitIdentical). Unit-stride segments whose lower and upper ranges are
+// disjoint compute and scatter their impulses in one loop (ho_window_impulses_scatter), those
+// whose ranges overlap scatter in one pass (window_segment_scatter_overlap); the same bits
+// (HoSprings::fuse, issue 16; HoStorage.FusedImpulseScatterIsBitIdentical).
 #pragma once
 
 #include <algorithm>
