@@ -1,6 +1,6 @@
 // What `threads: auto`'s load readings cost (issue 16; loom/cpu_load.hpp, loom/thread_start.hpp).
 //   build/bin/bench_threads --benchmark_repetitions=3 --benchmark_report_aggregates_only=true
-// BM_LoadReading: one reading of the others' CPU use (/proc/stat + /proc/self/stat, parsed):
+// BM_LoadReading: one reading of the others' CPU use (/proc/stat parsed + the process's CPU clock):
 //   taken at the end of the set-up and by the load gate at most once per 0.25 s of steps.
 // BM_SetUpAndStart: a whole start-up decision as Simulation::build makes it (monitor created,
 //   one reading, the rule, the controller attached), for a large mesh.

@@ -387,8 +387,13 @@ int main(int argc, char** argv) {
                   st.scene().state.step > first_step ? 1e3 * st.step_seconds_total() / (st.scene().state.step - first_step) : 0.0, f.max_strain,
                   f.kinetic + f.gravitational + f.elastic, f.kinetic, f.elastic, st.force_evaluations(), st.linear_iterations());
       if (const auto* tc = st.thread_controller()) {
-        char load[64] = "not measured (short set-up)";
+        char load[128] = "not measured (short set-up)";
         if (tc->start_load() >= 0) std::snprintf(load, sizeof load, "%.2f cores", tc->start_load());
+        if (tc->start_runnable() >= 0) {  // the runnable count was read: the fallback, or the check of the load
+          const std::size_t n = std::strlen(load);
+          std::snprintf(load + n, sizeof load - n, ", %d other%s runnable%s", tc->start_runnable(),
+                        tc->start_runnable() == 1 ? "" : "s", tc->start_unconfirmed() ? ": not confirmed" : "");
+        }
         // Where the step time went, per count (for comparing with a fixed count's run).
         std::string on;
         for (int n = 1; n <= loom::usable_cores(); ++n)

@@ -1,6 +1,8 @@
 #include "loom/cpu_load.hpp"
 
+#include <dirent.h>
 #include <sched.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -20,6 +22,30 @@ bool ProcSource::read(const char* path, std::string& text) const {
   const bool ok = !std::ferror(f);
   std::fclose(f);
   return ok && !text.empty();
+}
+
+double ProcSource::self_cpu_ticks() const {
+  static const long hz = sysconf(_SC_CLK_TCK);
+  timespec ts{};
+  if (hz > 0 && clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) == 0)
+    return (static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec)) * static_cast<double>(hz);
+  std::string text;
+  if (!read("/proc/self/stat", text)) return -1;
+  return static_cast<double>(parse_self_stat_ticks(text));  // -1 when malformed
+}
+
+int ProcSource::self_running_threads() const {
+  DIR* d = opendir("/proc/self/task");
+  if (!d) return -1;
+  int running = 0;
+  std::string text;
+  while (const dirent* e = readdir(d)) {
+    if (e->d_name[0] < '0' || e->d_name[0] > '9') continue;
+    const std::string path = std::string("/proc/self/task/") + e->d_name + "/stat";
+    if (read(path.c_str(), text) && parse_stat_state(text) == 'R') ++running;
+  }
+  closedir(d);
+  return running;
 }
 
 namespace {
@@ -96,6 +122,14 @@ long long parse_self_stat_ticks(std::string_view text) {
   return -1;
 }
 
+char parse_stat_state(std::string_view text) {
+  // "pid (comm) S ...": the state follows the last ')' and a blank.
+  const std::size_t close = text.rfind(')');
+  if (close == std::string_view::npos || close + 2 >= text.size() || text[close + 1] != ' ') return 0;
+  const char c = text[close + 2];
+  return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') ? c : 0;
+}
+
 int parse_loadavg_running(std::string_view text) {
   // "l1 l5 l15 running/total last_pid"
   int field = 0;
@@ -138,10 +172,14 @@ const ProcSource& real_proc() {
 }  // namespace
 
 int read_others_runnable(const ProcSource* src) {
+  const ProcSource& p = src ? *src : real_proc();
   std::string text;
-  if (!(src ? src : &real_proc())->read("/proc/loadavg", text)) return -1;
+  if (!p.read("/proc/loadavg", text)) return -1;
   const int running = parse_loadavg_running(text);
-  return running < 0 ? -1 : std::max(0, running - 1);
+  if (running < 0) return -1;
+  // Our own running threads are not others (at least the reader, which is one of them).
+  const int ours = p.self_running_threads();
+  return std::max(0, running - std::max(1, ours));
 }
 
 CpuLoadMonitor::CpuLoadMonitor(std::vector<int> cpus, const ProcSource* src, long long min_ticks)
@@ -151,21 +189,26 @@ CpuLoadMonitor::CpuLoadMonitor(std::vector<int> cpus, const ProcSource* src, lon
   mark();
 }
 
-bool CpuLoadMonitor::snapshot(CpuTicks& t, long long& self) const {
+bool CpuLoadMonitor::snapshot(CpuTicks& t, double& self) const {
   std::string text;
   if (!src_->read("/proc/stat", text)) return false;
   t = parse_proc_stat(text, cpus_);
   if (t.cpus == 0) return false;
-  if (!src_->read("/proc/self/stat", text)) return false;
-  self = parse_self_stat_ticks(text);
+  self = src_->self_cpu_ticks();
   return self >= 0;
+}
+
+long long CpuLoadMonitor::min_window_ticks() const {
+  // One tick of rounding per CPU may move the reading by at most a quarter core.
+  const long long n = have_ ? t0_.cpus : static_cast<long long>(cpus_.size());
+  return std::max(min_ticks_, 4LL * std::max(1LL, n));
 }
 
 void CpuLoadMonitor::mark() { have_ = snapshot(t0_, self0_); }
 
 double CpuLoadMonitor::others_busy_cores() {
   CpuTicks t;
-  long long self = 0;
+  double self = 0;
   if (!snapshot(t, self)) {
     have_ = false;
     return -1;
@@ -177,13 +220,15 @@ double CpuLoadMonitor::others_busy_cores() {
     return -1;
   }
   const long long window = (t.total - t0_.total) / t.cpus;  // ticks per CPU
-  if (window < min_ticks_) return -1;                     // too short to say: keep the window
-  const long long others = (t.busy - t0_.busy) - (self - self0_);
+  // Too short to say (fewer ticks than the resolution rule needs for the CPUs in the text):
+  // keep the window.
+  if (window < min_window_ticks()) return -1;
+  const double others = static_cast<double>(t.busy - t0_.busy) - (self - self0_);
   t0_ = t;
   self0_ = self;
   last_window_ = window;
   // Ticks are sampled: a window may show a little less than our own time; never negative.
-  return std::max(0.0, static_cast<double>(others) / static_cast<double>(window));
+  return std::max(0.0, others / static_cast<double>(window));
 }
 
 }  // namespace loom

@@ -109,11 +109,17 @@ void ThreadController::on_sample(double s, int steps) {
     return;
   }
   // The load gate: counts above the chosen one that exceed the cores free now stay out. A
-  // reading costs a /proc read (about 30 us): at most one per min_interval of step time.
+  // reading costs a /proc read (about 30 us): after a known one, at most one per min_interval
+  // of step time; an unknown one (the window since the last is still too short to measure)
+  // keeps the last figure and is asked again at the next due probe, so a start-up figure is
+  // replaced as soon as the window is long enough rather than a whole interval later.
   if (free_cores_ && (gate_read_at_ < 0 || elapsed_ - gate_read_at_ >= cfg_.min_interval)) {
-    free_now_ = free_cores_();
-    gate_read_at_ = elapsed_;
+    const int f = free_cores_();
     ++gate_reads_;
+    if (f > 0) {
+      free_now_ = f;
+      gate_read_at_ = elapsed_;
+    }
   }
   bool any = false;
   for (int k = 0; k < ncand_; ++k) {

@@ -11,18 +11,24 @@ std::unique_ptr<ThreadController> AutoThreadStart::finish(int cores, long long v
   const int mask = load_->cpus() > 0 ? load_->cpus() : cores;
   others_busy_ = load_->others_busy_cores();
   const bool small = vertices >= 0 && vertices < kParallelMinVertices;
-  const int runnable = others_busy_ < 0 && !small && cores > 1 ? others_runnable_sampled(src_) : -1;
+  // The runnable count: the fallback when the set-up was too short to measure, and the check
+  // of a reading that takes cores from the run (choose_start_threads); not for a small mesh,
+  // which starts on 1 thread anyway.
+  int runnable = -1;
+  if (!small && cores > 1) {
+    if (others_busy_ < 0) runnable = others_runnable_sampled(src_);
+    else if (free_cores(cores, mask, others_busy_) < cores) runnable = others_runnable_confirm(src_);
+  }
+  runnable_ = runnable;
   start_ = choose_start_threads(cores, mask, others_busy_, runnable, vertices);
   if (cores < 2) return nullptr;
   auto ctl = std::make_unique<ThreadController>(start_.threads, cores);
-  ctl->set_start_load(others_busy_);
-  // The gate: the cores free since the last reading, or the last known figure while the
-  // window is still too short to measure.
-  ctl->set_free_cores([load = load_, cores, mask, last = start_.free]() mutable {
-    const int f = free_cores(cores, mask, load->others_busy_cores());
-    if (f > 0) last = f;
-    return last;
-  });
+  ctl->set_start_load(others_busy_, runnable, start_.unconfirmed);
+  // The gate: the cores free since the last reading; -1 while the window is still too short
+  // to measure (the controller keeps its last figure, this start's, and asks again at the
+  // next due probe).
+  ctl->set_free_cores([load = load_, cores, mask]() { return free_cores(cores, mask, load->others_busy_cores()); },
+                      start_.free);
   return ctl;
 }
 

@@ -63,6 +63,15 @@ int others_runnable_sampled(const ProcSource* src) {
   return others;
 }
 
+int others_runnable_confirm(const ProcSource* src) {
+  int others = read_others_runnable(src);
+  for (int k = 0; k < 2 && others == 0; ++k) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    others = std::max(others, read_others_runnable(src));
+  }
+  return others;
+}
+
 int resolve_thread_count(int requested, bool* capped) {
   const int cores = usable_cores();
   if (capped) *capped = requested > cores;
@@ -88,9 +97,12 @@ ThreadStart choose_start_threads(int cores, int mask_cpus, double others_busy, i
                                  long long vertices) {
   ThreadStart s;
   cores = std::max(1, cores);
-  s.free = others_busy >= 0 ? free_cores(cores, mask_cpus, others_busy)
-           : others_runnable >= 0 ? std::max(1, cores - others_runnable)
-                                  : -1;
+  const int by_runnable = others_runnable >= 0 ? std::max(1, cores - others_runnable) : -1;
+  s.free = others_busy >= 0 ? free_cores(cores, mask_cpus, others_busy) : by_runnable;
+  if (others_busy >= 0 && by_runnable > s.free) {  // the busy reading is not confirmed now
+    s.free = by_runnable;
+    s.unconfirmed = true;
+  }
   s.small_mesh = vertices >= 0 && vertices < kParallelMinVertices;
   s.threads = s.small_mesh ? 1 : (s.free > 0 ? s.free : cores);
   return s;

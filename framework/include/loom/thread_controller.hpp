@@ -119,16 +119,28 @@ class ThreadController {
   /// The run's total number of steps, counted from the first record() (0: unknown, the default).
   /// Probes then start only when the steps left can repay them (see the top of this file).
   void set_run_steps(long total) { run_steps_ = total; }
-  /// The load gate (see the top of this file): free() returns the cores free now, -1 when unknown.
-  /// Read only when a probe is due, and at most once per min_interval of step time.
-  void set_free_cores(std::function<int()> free) { free_cores_ = std::move(free); }
+  /// The load gate (see the top of this file): free() returns the cores free now, -1 when unknown
+  /// (the window is still too short to measure: the last figure stays, `initial` before any, and
+  /// the next due probe asks again). Read only when a probe is due, and after a known reading at
+  /// most once per min_interval of step time.
+  void set_free_cores(std::function<int()> free, int initial = -1) {
+    free_cores_ = std::move(free);
+    free_now_ = initial;
+  }
   int initial() const { return cand_[0]; }           ///< the count the run started on
   int gated_probes() const { return gated_; }        ///< probes due but not started: no count fits the free cores
   int small_step_holds() const { return small_held_; }  ///< probes due but not started: the step is below min_step_seconds
   int gate_reads() const { return gate_reads_; }     ///< readings taken by the load gate
-  /// What the start-up rule saw (informational): cores other processes kept busy during the set-up, -1 unknown.
-  void set_start_load(double cores) { start_load_ = cores; }
+  /// What the start-up rule saw (informational): cores other processes kept busy during the set-up, -1 unknown;
+  /// other processes runnable at the start, -1 not read; whether the runnable count overruled the load.
+  void set_start_load(double cores, int runnable = -1, bool unconfirmed = false) {
+    start_load_ = cores;
+    start_runnable_ = runnable;
+    start_unconfirmed_ = unconfirmed;
+  }
   double start_load() const { return start_load_; }
+  int start_runnable() const { return start_runnable_; }
+  bool start_unconfirmed() const { return start_unconfirmed_; }
   long steps() const { return steps_; }              ///< steps recorded so far
   int skipped_probes() const { return skipped_; }    ///< probes due but not started: the run is too short to repay them
 
@@ -201,6 +213,8 @@ class ThreadController {
   int small_held_ = 0;
   bool early_tried_ = false;                 // the early down-probe was started or skipped
   double start_load_ = -1;
+  int start_runnable_ = -1;
+  bool start_unconfirmed_ = false;
   double gate_read_at_ = -1;                 // elapsed_ at the last gate reading
   int gate_reads_ = 0;
 };

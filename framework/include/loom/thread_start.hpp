@@ -19,16 +19,20 @@ class AutoThreadStart {
   /// At the end of the set-up: the start count (see choose_start_threads) for a mesh of
   /// `vertices`, and the controller to adapt it (null on one usable core). When the set-up was
   /// too short to measure and the mesh is not small, the runnable count decides
-  /// (others_runnable_sampled: up to 8 ms of sleep while others are runnable). Call once.
+  /// (others_runnable_sampled: up to 8 ms of sleep while others are runnable); when the reading
+  /// takes cores from the run, the runnable count must confirm it (others_runnable_confirm: up
+  /// to 2 ms of sleep while nothing else is runnable). Call once.
   std::unique_ptr<ThreadController> finish(int cores, long long vertices);
   const ThreadStart& start() const { return start_; }
   double others_busy() const { return others_busy_; }  ///< during the set-up; -1 unknown
+  int others_runnable() const { return runnable_; }     ///< the runnable count read at the start; -1 not read
 
  private:
   std::shared_ptr<CpuLoadMonitor> load_;
   const ProcSource* src_;
   ThreadStart start_;
   double others_busy_ = -1;
+  int runnable_ = -1;
 };
 
 }  // namespace loom

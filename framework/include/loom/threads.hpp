@@ -35,6 +35,11 @@ class ProcSource;  // loom/cpu_load.hpp
 /// not a competitor; the sleeps happen only while the count is above 0). -1 when unknown.
 int others_runnable_sampled(const ProcSource* src = nullptr);
 
+/// Runnable tasks other than this process, to check a reading that says others take a core:
+/// the largest of up to three readings 1 ms apart (it stops at the first that shows one; a
+/// CPU-bound competitor is runnable at every reading). -1 when unknown.
+int others_runnable_confirm(const ProcSource* src = nullptr);
+
 /// Cores free for this run's threads: min(cores, mask_cpus - the cores others keep busy), where
 /// others take a core from half a core's use (others_busy 0.5 -> 1 core); at least 1.
 /// -1 when others_busy is unknown (< 0).
@@ -45,11 +50,15 @@ struct ThreadStart {
   int threads = 1;
   int free = -1;            ///< free cores (free_cores(), or from the runnable count; -1 unknown)
   bool small_mesh = false;  ///< below kParallelMinVertices: starts on 1 whatever the load
+  bool unconfirmed = false; ///< others_busy took cores that the runnable count did not: not trusted
 };
 /// The start-up rule. cores: usable_cores(); mask_cpus: CPUs in the affinity mask;
 /// others_busy: cores other processes kept busy during the set-up (CpuLoadMonitor, -1 unknown);
-/// others_runnable: the fallback when that is unknown (others_runnable_sampled(); -1 unknown
-/// too: all cores are free);
+/// others_runnable: other processes runnable now (-1 not read): the fallback when others_busy
+/// is unknown (others_runnable_sampled(); both unknown: all cores are free), and the check of
+/// an others_busy that takes cores (others_runnable_confirm()): others take a core only when
+/// both say so, so one window's reading (a short set-up is a few ticks per CPU, and a burst
+/// that ended counts in it) cannot hold the run on fewer cores by itself;
 /// vertices: the mesh's vertex count.
 ThreadStart choose_start_threads(int cores, int mask_cpus, double others_busy, int others_runnable,
                                  long long vertices);
