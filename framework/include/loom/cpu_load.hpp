@@ -7,9 +7,10 @@
 //   ("busy": user, nice, system, irq, softirq and steal, the last being time a hypervisor gave
 //   to another machine). This process's own time is its CPU clock (CLOCK_PROCESS_CPUTIME_ID,
 //   nanoseconds, all threads), not /proc/self/stat's utime + stime: those two are each cut
-//   to whole 10 ms ticks, and over a set-up of 6-8 ticks they read 0.2-1.7 ticks (mean 0.75)
-//   less than the clock (measured: docs/ARCHITECTURE.md, "Threads: measured (issue 16, the
-//   0.50 cores at kang_cho_fig7_ho_k2000's set-up)"), which others' share then gained.
+//   to whole 10 ms ticks, and over kang_cho_fig7_ho_k2000's set-up they grew 0.24-1.67 ticks
+//   (mean 0.74) less than the clock in 30 of 30 runs (docs/ARCHITECTURE.md, "Threads: measured
+//   (issue 16, the 0.50 cores at kang_cho_fig7_ho_k2000's set-up)"), which others' share then
+//   gained: +0.1 core on the 7-tick set-up of an idle machine.
 // - Resolution: /proc/stat's counters are whole ticks (10 ms), so each CPU's share of a window
 //   may be off by about a tick. A window is long enough only when that rounding, one tick per
 //   CPU, moves the reading by at most a quarter core: at least 4 ticks per CPU watched, and at
