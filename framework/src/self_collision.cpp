@@ -720,6 +720,27 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
       }
     }
   }
+  // The neighbour-list pairs by element (CSR), for refresh(): the pairs of a refreshed vertex,
+  // triangle or edge among them are found without a traversal.
+  {
+    auto csr = [](std::size_t n, const auto& pairs, auto&& keys, std::vector<Index>& off, std::vector<Index>& idx) {
+      off.assign(n + 1, 0);
+      for (const auto& p : pairs)
+        for (const Index k : keys(p)) ++off[static_cast<std::size_t>(k) + 1];
+      for (std::size_t i = 0; i < n; ++i) off[i + 1] += off[i];
+      idx.assign(static_cast<std::size_t>(off[n]), 0);
+      std::vector<Index> fill(off.begin(), off.end() - 1);
+      for (std::size_t q = 0; q < pairs.size(); ++q)
+        for (const Index k : keys(pairs[q])) idx[static_cast<std::size_t>(fill[static_cast<std::size_t>(k)]++)] = static_cast<Index>(q);
+    };
+    csr(static_cast<std::size_t>(nv_), nb_vt_, [](const std::array<Index, 2>& p) { return std::array<Index, 1>{p[0]}; },
+        nbv_off_, nbv_idx_);
+    csr(static_cast<std::size_t>(nt_), nb_vt_, [](const std::array<Index, 2>& p) { return std::array<Index, 1>{p[1]}; },
+        nbt_off_, nbt_idx_);
+    csr(edges_.size(), nb_ee_, [](const std::array<Index, 2>& p) { return p; }, nbe_off_, nbe_idx_);
+    refresh_nbvt_.reserve(nb_vt_.size() / 8);
+    refresh_nbee_.reserve(nb_ee_.size() / 8);
+  }
   vt_.reserve(static_cast<std::size_t>(nv_));
   ee_.reserve(static_cast<std::size_t>(nv_));
   stack_.reserve(256);
@@ -860,11 +881,11 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
   const bool par = nv_ >= kParallelMinVertices;
   const int nth = par ? std::max(1, omp_get_max_threads()) : 1;
   bvh_.split(par ? kTraversalTasks : 1, tasks_);
-  // A full rebuild leaves the leaf pairs of triangles sharing a vertex to the neighbour lists
-  // (nb_vt_, nb_ee_): tasks ntrav.. test their chunks. A refresh keeps them in the traversal.
-  const bool neighbours = !marked_only;
+  // The leaf pairs of triangles sharing a vertex are left to the neighbour lists (nb_vt_,
+  // nb_ee_): tasks ntrav.. test their chunks; a refresh (marked_only) tests only the pairs of
+  // them that refresh() selected (refresh_nbvt_, refresh_nbee_: a refreshed element in each).
   const std::size_t ntrav = tasks_.size();
-  const std::size_t ntasks = ntrav + (neighbours ? kNeighbourChunks : 0);
+  const std::size_t ntasks = ntrav + kNeighbourChunks;
   if (task_vt_.size() < ntasks) {
     task_vt_.resize(ntasks);
     task_ee_.resize(ntasks);
@@ -975,19 +996,23 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
         }
       };
       if (q < ntrav) {
-        bvh_.pairs_from(tasks_[q], emit, tstack_[me], marked_only, neighbours);  // neighbours: in the lists below
+        bvh_.pairs_from(tasks_[q], emit, tstack_[me], marked_only, true);  // sharing pairs: in the lists below
         continue;
       }
       // A chunk of the neighbour lists: the element tests of vert_tri and of emit's edge pairs.
       const std::size_t c = q - ntrav;
-      const std::size_t vt0 = nb_vt_.size() * c / kNeighbourChunks, vt1 = nb_vt_.size() * (c + 1) / kNeighbourChunks;
+      const std::size_t nvt = marked_only ? refresh_nbvt_.size() : nb_vt_.size();
+      const std::size_t nee = marked_only ? refresh_nbee_.size() : nb_ee_.size();
+      const std::size_t vt0 = nvt * c / kNeighbourChunks, vt1 = nvt * (c + 1) / kNeighbourChunks;
       const double* X = ref_x_.data();
-      for (std::size_t i = vt0; i < vt1; ++i) {
+      for (std::size_t k = vt0; k < vt1; ++k) {
+        const std::size_t i = marked_only ? static_cast<std::size_t>(refresh_nbvt_[k]) : k;
         const Index v = nb_vt_[i][0], t = nb_vt_[i][1];
         test_vt(v, &X[3 * v], reach_[v], t, trec_[tri_slot_[t]]);
       }
-      const std::size_t ee0 = nb_ee_.size() * c / kNeighbourChunks, ee1 = nb_ee_.size() * (c + 1) / kNeighbourChunks;
-      for (std::size_t i = ee0; i < ee1; ++i) {
+      const std::size_t ee0 = nee * c / kNeighbourChunks, ee1 = nee * (c + 1) / kNeighbourChunks;
+      for (std::size_t k = ee0; k < ee1; ++k) {
+        const std::size_t i = marked_only ? static_cast<std::size_t>(refresh_nbee_[k]) : k;
         const Index e = nb_ee_[i][0], f = nb_ee_[i][1];
         const double *p0 = &X[3 * edges_[e][0]], *p1 = &X[3 * edges_[e][1]];
         const double er = std::max(reach_[edges_[e][0]], reach_[edges_[e][1]]);
@@ -1086,7 +1111,24 @@ void SelfCollision::refresh(const double* x0) {
   // refreshed triangle, and in them to the element pairs just dropped. A pair (vertex v,
   // triangle t) is met at the leaf pair (owner of v, t) and an edge pair at the pair of the
   // edges' owners, exactly once each as in a rebuild; a refreshed vertex or edge lies in a
-  // refreshed owner, so every dropped pair has a marked leaf.
+  // refreshed owner, so every dropped pair has a marked leaf. As in a rebuild, the traversal
+  // skips the leaf pairs of triangles sharing a vertex: their element pairs among the dropped
+  // ones are taken from the neighbour lists, by element (each once: a pair of a refreshed
+  // vertex from the vertex's entries, one of a refreshed triangle and a vertex that is not
+  // from the triangle's, an edge pair from its lower refreshed edge).
+  refresh_nbvt_.clear();
+  refresh_nbee_.clear();
+  for (const Index v : refresh_v_)
+    for (Index j = nbv_off_[v]; j < nbv_off_[v + 1]; ++j) refresh_nbvt_.push_back(nbv_idx_[j]);
+  for (const Index t : refresh_t_)
+    for (Index j = nbt_off_[t]; j < nbt_off_[t + 1]; ++j)
+      if (!vflag_[nb_vt_[nbt_idx_[j]][0]]) refresh_nbvt_.push_back(nbt_idx_[j]);
+  for (const Index e : refresh_e_)
+    for (Index j = nbe_off_[e]; j < nbe_off_[e + 1]; ++j) {
+      const auto& pr = nb_ee_[nbe_idx_[j]];
+      const Index other = pr[0] == e ? pr[1] : pr[0];
+      if (!eflag_[other] || e < other) refresh_nbee_.push_back(nbe_idx_[j]);
+    }
   for (const Index t : refresh_t_) bvh_.mark(t);
   traverse(th, true, true);
   bvh_.clear_marks();
@@ -1184,20 +1226,31 @@ namespace {
 double relative_motion(bool vt, const Index idx[4], const double* p, const double* q);
 }  // namespace
 
-Index SelfCollision::freeze_pass(State& s, bool changed_only) {
+Index SelfCollision::freeze_pass(State& s, bool changed_only, const double* d_ref, double change) {
   // Fail-safe: every vertex of a pair that still collides returns to its start position and
   // stops. A pass ends when no collision remains; each pass freezes at least one moving vertex.
   // changed_only: the CCD passes ended clean, so only pairs with a vertex put back onto a
   // collider (keep_outside) or frozen here since have a path that was not checked.
-  const double tol = kCcdTolerance * opt_.thickness;
+  // d_ref (with changed_only): the d the near list was built with (nullptr: s.x - x0), and
+  // `change` the largest |d - d_ref| of a vertex so far. A pair outside the near list was at
+  // least the thickness apart over the path x0 + t d_ref; every vertex's path has moved by at
+  // most `change` since, so while 2 change < thickness - tol no such pair meets within tol and
+  // only the near pairs need the test (the CCD passes' rule). Freezing a vertex changes its d
+  // to 0, by |d_ref| of it: counted in `change` before the next pass.
+  const double th = opt_.thickness;
+  const double tol = kCcdTolerance * th;
+  const Index nvt = static_cast<Index>(vt_.size());
   Index frozen = 0;
   for (;;) {
     Index found = 0;
     const Index before = frozen;
-    for (int pass = 0; pass < 2; ++pass) {
-      const bool vt = pass == 0;
-      const std::vector<Pair>& list = vt ? vt_ : ee_;
-      for (const Pair& p : list) {
+    const bool use_near = changed_only && 2 * change < th - tol;
+    const Index count = use_near ? static_cast<Index>(near_.size()) : nvt + static_cast<Index>(ee_.size());
+    {
+      for (Index r = 0; r < count; ++r) {
+        const Index q = use_near ? near_[r] : r;
+        const bool vt = q < nvt;
+        const Pair& p = vt ? vt_[q] : ee_[q - nvt];
         Index idx[4];
         pair_vertices(vt, p, idx);
         if (changed_only && !(touched_flag_[idx[0]] == 2 || touched_flag_[idx[1]] == 2 || touched_flag_[idx[2]] == 2 ||
@@ -1222,6 +1275,14 @@ Index SelfCollision::freeze_pass(State& s, bool changed_only) {
           if (s.pinned[v] || frozen_[v]) continue;
           frozen_[v] = 1;
           ++frozen;
+          {
+            double c2 = 0;
+            for (int k = 0; k < 3; ++k) {
+              const double c = d_ref ? d_ref[3 * v + k] : s.x[3 * v + k] - x0_[3 * v + k];
+              c2 += c * c;
+            }
+            change = std::max(change, std::sqrt(c2));
+          }
           inv_mass_[v] = 0;
           step_len_[v] = 0;
           for (int k = 0; k < 3; ++k) {
@@ -1489,7 +1550,17 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
       update_candidates(x0_.data());
       all_pairs = true;  // pairs new to the lists were not in the CCD passes
     }
-    stats_.frozen = freeze_pass(s, !all_pairs);
+    // The largest change of a vertex's d since the near list's d (see freeze_pass).
+    double change = near_renewed ? 0.0 : max_growth_;
+    for (const Index v : touched_) {
+      double c2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const double c = near_renewed ? d_[3 * v + k] - d_near_[3 * v + k] : x0_[3 * v + k] + d_[3 * v + k] - x[3 * v + k];
+        c2 += c * c;
+      }
+      change = std::max(change, std::sqrt(c2));
+    }
+    stats_.frozen = freeze_pass(s, !all_pairs, near_renewed ? d_near_.data() : nullptr, change);
     responded_ = true;
   }
   if (responded_)

@@ -7,7 +7,9 @@
 #include <random>
 #include <string>
 
+#include "loom/collider.hpp"
 #include "loom/mesh.hpp"
+#include "loom/params.hpp"
 #include "loom/self_collision.hpp"
 #include "loom/intersection_check.hpp"
 
@@ -315,6 +317,48 @@ TEST(SelfCollisionResponse, FailSafeAloneReturnsTheCollidingVerticesToTheirStart
   for (Index i = 6; i < 9; ++i) EXPECT_EQ(t.s.x[3 * i], t.x1[3 * i]);  // C moved as integrated
 }
 
+
+TEST(SelfCollisionResponse, AVertexPutBackOntoAColliderFarAlongItsPathIsCheckedAgainstPairsThatWereNotNear) {
+  // The fail-safe after a clean CCD pass re-checks the pairs of the vertices that keep_outside
+  // put back onto a collider, and only the near pairs while no vertex's displacement changed by
+  // more than about half the thickness. Here the put-back changes it by 4-5 thicknesses:
+  // vertex A of P (its other vertices at rest) and the small triangle E beside it (0.5 th
+  // away, moving with A, so that the repulsion touches both) fall 15.5 cm from above a sphere
+  // of radius 0.1 to 3.5-5.5 cm inside it; the projection onto the sphere carries their ends
+  // 4.5-6.5 cm further down, through triangle C, which was 3 thicknesses farther than A's
+  // step could bring it (a pair outside the near list). The fail-safe must find the crossings.
+  const double th = 0.01;
+  Mesh mesh;
+  mesh.positions = {0, 0, 0.105, 0.3, 0, 0.2, 0.3, 0.05, 0.2,                      // P (vertex 0 = A)
+                    -0.005, -0.01, 0.10, -0.005, 0.01, 0.10, -0.005, 0, 0.12,       // E
+                    -0.01, -0.02, -0.08, 0.01, -0.02, -0.08, 0, 0.02, -0.08};      // C, inside the sphere
+  mesh.triangles = {0, 1, 2, 3, 4, 5, 6, 7, 8};
+  State s;
+  s.resize(9);
+  for (Index i = 0; i < 9; ++i) s.mass[i] = 0.01;
+  s.update_inverse_masses();
+  const std::vector<double> x0 = mesh.positions;
+  std::vector<double> x1 = x0;
+  x1[2] = -0.05;
+  for (Index i = 3; i < 6; ++i) x1[3 * i + 2] -= 0.155;
+  ASSERT_EQ(loom::count_intersecting_pairs(mesh, x0), 0);
+  ASSERT_EQ(loom::count_intersecting_pairs(mesh, x1), 0);  // the unprojected ends do not reach C
+  const ColliderSet colliders =
+      ColliderSet::parse(Params::from_string("colliders: [{type: sphere, center: [0, 0, 0], radius: 0.1}]", "c.yaml")
+                             .child("colliders"));
+  SelfCollision sc({th, 0.0}, mesh);
+  const double h = 0.01;
+  s.x = x0;
+  sc.begin_step(s);
+  s.x = x1;
+  for (std::size_t k = 0; k < s.v.size(); ++k) s.v[k] = (x1[k] - x0[k]) / h;
+  sc.resolve(s, h, &colliders);
+  ASSERT_GT(sc.last_stats().proximity, 0);  // E's repulsion touched A (keep_outside looks at touched vertices)
+  EXPECT_EQ(sc.last_stats().ccd_collisions, 0);
+  EXPECT_EQ(loom::count_intersecting_pairs(mesh, s.x), 0);
+  EXPECT_GT(sc.last_stats().frozen, 0);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(s.x[k], x0[k]);  // A returned to its start
+}
 
 TEST(SelfCollisionResponse, APinnedTriangleDrivenThroughFreeClothPushesItAndTheFailSafeEnds) {
   // A is pinned and moves up 10 cm through B (free, at rest 5 cm above): B must give way.

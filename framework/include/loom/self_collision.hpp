@@ -357,7 +357,9 @@ class SelfCollision {
   // Apply: separation push dpos (>= 0, displacement units) along n with weights w; velocity:
   // remove approach along n, Coulomb friction on the tangential part. Returns true if changed.
   bool respond(const Index idx[4], const double w[4], const double n[3], double dpos, double h, State& s);
-  Index freeze_pass(State& s, bool changed_only = false);
+  // changed_only: only pairs with a vertex put back or frozen; then, while the near list still
+  // covers the changed d (d_ref, change: see the definition), only the near pairs.
+  Index freeze_pass(State& s, bool changed_only, const double* d_ref, double change);
   /// Puts the touched vertices that ended inside a collider back onto its surface (at the
   /// step's end time s.time); true when one was moved.
   bool keep_outside(State& s, double h, const ColliderSet& colliders);
@@ -399,6 +401,10 @@ class SelfCollision {
   /// loop over kNeighbourChunks fixed chunks (same pairs; half a rebuild's leaf pairs at 128^2).
   std::vector<std::array<Index, 2>> nb_vt_, nb_ee_;
   static constexpr std::size_t kNeighbourChunks = 16;
+  /// The neighbour-list pairs by vertex and by triangle (nb_vt_) and by either edge (nb_ee_),
+  /// as CSR offsets and pair indices, and the pairs of them that the current refresh re-tests.
+  std::vector<Index> nbv_off_, nbv_idx_, nbt_off_, nbt_idx_, nbe_off_, nbe_idx_;
+  std::vector<Index> refresh_nbvt_, refresh_nbee_;
   std::vector<double> ref_x_;                    ///< start positions at the last broad phase
   std::vector<double> moved_;                    ///< per vertex |x0 - ref_x| this step
   std::vector<double> step_len_;                 ///< per vertex |d| this step
