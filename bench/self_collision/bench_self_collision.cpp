@@ -511,10 +511,10 @@ class AssembledOnly final : public loom::ForwardingSolver {  // hides set_extra_
 // What both contact benches below tally per counted step: thread CPU time of the integrator's
 // step (bw) and of it with the after-step response (step), the step's linear iterations, the
 // self-contact springs' solves, iterations and contacts, the solves with friction dampers,
-// pattern growths; intersections at the end (exact count).
+// pattern growths, the friction's excess over Coulomb's bounds; intersections at the end (exact count).
 struct BwContactTally {
   double step_t = 0, bw_t = 0, its = 0, spring_its = 0, solves = 0, friction_solves = 0, contacts = 0, growths = 0,
-         intersections = 0;
+         intersections = 0, col_excess = 0, pair_excess = 0, col_steps = 0, pair_steps = 0;
   // One step of `bw` with self-collision's begin_step and resolve around it; tallied when `counted`.
   void step(loom::Scene& sc, loom::BaraffWitkin& bw, double h, bool counted) {
     const int g0 = bw.pattern_rebuilds();
@@ -535,6 +535,14 @@ struct BwContactTally {
     friction_solves += static_cast<double>(bw.friction_solves() - f0);
     contacts += c.contacts;
     growths += bw.pattern_rebuilds() - g0;
+    if (bw.collider_friction().contacts > 0) {
+      col_excess += bw.collider_friction().relative_excess();
+      col_steps += 1;
+    }
+    if (bw.pair_friction().contacts > 0) {
+      pair_excess += bw.pair_friction().relative_excess();
+      pair_steps += 1;
+    }
   }
   void report(benchmark::State& st, double total) const {
     st.counters["step_ms"] = 1e3 * step_t / total;
@@ -546,6 +554,11 @@ struct BwContactTally {
     st.counters["contacts"] = contacts / total;
     st.counters["pattern_growths"] = growths / total;
     st.counters["intersections"] = intersections;
+    // After each step's last solve with dampers, the friction impulses' excess over their
+    // Coulomb bounds relative to the bounds' sum (FrictionTally::relative_excess), mean over the
+    // steps with such contacts: collider contacts, self-contact pairs.
+    st.counters["col_excess"] = col_steps > 0 ? col_excess / col_steps : 0.0;
+    st.counters["pair_excess"] = pair_steps > 0 ? pair_excess / pair_steps : 0.0;
   }
 };
 

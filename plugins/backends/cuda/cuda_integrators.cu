@@ -628,6 +628,7 @@ struct BwFrictionDamperKernel {
   const Index* diag;
   const T *v, *mass, *normal, *sv, *mus, *muk, *impulse;
   T *a, *b, *dv, *hc, *len0;
+  T* warm;  // the response of the vertex's contact in the last step (0: none), as the CPU's warm_D_
   std::uint8_t* stick;  // 1 held, 0 sliding, 2 sliding after being let go (ColliderFrictionState::released)
   LOOM_HD int operator()(Index i) const {
     const long long o = 3LL * i;
@@ -635,8 +636,9 @@ struct BwFrictionDamperKernel {
     if (mode == 0) {
       bool any = false;
       if (flag[i] == 1)
-        any = kernels::start_collider_friction(v + o, dv + o, sv + o, normal + o, mass[i], mus[i], muk[i], impulse[i],
-                                               a + 9LL * diag[i], b + o, fs);
+        any = kernels::start_collider_friction(v + o, dv + o, sv + o, normal + o, warm[i] > T(0) ? warm[i] : mass[i],
+                                               mus[i], muk[i], impulse[i], a + 9LL * diag[i], b + o, fs);
+      warm[i] = T(0);  // set again by the finish
       hc[i] = fs.hc;
       len0[i] = fs.len0;
       stick[i] = fs.stick ? 1 : 0;
@@ -648,6 +650,7 @@ struct BwFrictionDamperKernel {
     fs.stick = stick[i] == 1;
     fs.released = stick[i] == 2;
     if (mode == 2) {
+      warm[i] = kernels::collider_friction_response(v + o, dv + o, sv + o, normal + o, mass[i], fs);
       kernels::finish_collider_friction(v + o, dv + o, sv + o, normal + o, fs);
       return 0;
     }
@@ -657,6 +660,27 @@ struct BwFrictionDamperKernel {
     hc[i] = fs.hc;
     stick[i] = fs.stick ? 1 : (fs.released ? 2 : 0);
     return 1;
+  }
+};
+
+// The contacts' friction against their Coulomb bounds after a solve (the CPU's
+// BaraffWitkin::collider_friction_tally): part 0 the misses, 1 the kinetic bounds mu_k J, summed
+// by reduce_sum.
+template <class T>
+struct BwFrictionMissKernel {
+  int part;
+  const T *v, *dv, *normal, *sv, *mus, *muk, *impulse, *hc;
+  const std::uint8_t* stick;
+  LOOM_HD T operator()(Index i) const {
+    if (hc[i] == T(0)) return T(0);
+    const long long o = 3LL * i;
+    kernels::ColliderFrictionState<T> fs;
+    fs.hc = hc[i];
+    fs.stick = stick[i] == 1;
+    T excess, bound;
+    const T miss = kernels::collider_friction_miss(v + o, dv + o, sv + o, normal + o, mus[i], muk[i], impulse[i], fs,
+                                                   excess, bound);
+    return part == 0 ? miss : bound;
   }
 };
 
@@ -768,6 +792,7 @@ class CudaBw final : public Integrator {
       cimpulse_.assign(n, T(0));
       chc_.assign(n, T(0));
       clen0_.assign(n, T(0));
+      cwarm_.assign(n, T(0));
       cstick_.assign(n, 0);
       S_.resize(n);
     }
@@ -824,8 +849,11 @@ class CudaBw final : public Integrator {
       if (!ok || contacts == 0 || !bw.opt_.implicit_friction) return ok;
       if (bw.friction_dampers(0) == 0) return ok;
       long long solves = 0;
+      // Corrected while the contacts miss their bounds, in sum, by more than
+      // kernels::kFrictionStopTolerance of the bounds' sum (as on the CPU).
       return bw::friction_solves(
-          solve_once, [&] { return bw.friction_dampers(1) > 0; }, [&] { bw.friction_dampers(2); },
+          solve_once, [&] { return !bw.friction_settled() && bw.friction_dampers(1) > 0; },
+          [&] { bw.friction_dampers(2); },
           [&](double k) {
             bw.pcg_.set_tolerance_scale(k);
             return true;
@@ -894,7 +922,20 @@ class CudaBw final : public Integrator {
     return reduce_sum<int>(ds_.n, BwFrictionDamperKernel<T>{mode, raw(flag_), raw(A_.diag), raw(ds_.v), raw(ds_.mass),
                                                             raw(cnormal_), raw(csv_), raw(cmus_), raw(cmuk_),
                                                             raw(cimpulse_), raw(A_.values), raw(b_), raw(dv_),
-                                                            raw(chc_), raw(clen0_), raw(cstick_)});
+                                                            raw(chc_), raw(clen0_), raw(cwarm_), raw(cstick_)});
+  }
+
+  // Whether the contacts' friction is close enough to Coulomb's bounds to stop correcting
+  // (kernels::FrictionTally::settled).
+  bool friction_settled() {
+    kernels::FrictionTally<T> t;
+    auto part = [&](int k) {
+      return reduce_sum<T>(ds_.n, BwFrictionMissKernel<T>{k, raw(ds_.v), raw(dv_), raw(cnormal_), raw(csv_), raw(cmus_),
+                                                           raw(cmuk_), raw(cimpulse_), raw(chc_), raw(cstick_)});
+    };
+    t.miss = part(0);
+    t.bound = part(1);
+    return t.settled();
   }
 
   // Releases the contacts whose impulse (A dv - b).n is negative; true when any was.
@@ -924,7 +965,7 @@ class CudaBw final : public Integrator {
   const ColliderSet* colliders_ = nullptr;
   DeviceMeshes meshes_;
   DVec<std::uint8_t> pinned_, in_contact_, flag_, cstick_;
-  DVec<T> cnormal_, csv_, cmus_, cmuk_, cdvn_, cimpulse_, chc_, clen0_;
+  DVec<T> cnormal_, csv_, cmus_, cmuk_, cdvn_, cimpulse_, chc_, clen0_, cwarm_;
   double t0_ = 0;  // start time of the (sub)step being solved
   StepStats last_;
 };

@@ -127,6 +127,7 @@ void BaraffWitkin::prepare(Scene& scene, double h) {
   contacts_.clear();
   if (!scene.colliders.empty()) contacts_.reserve(n);
   in_contact_.assign(scene.colliders.empty() ? 0 : n, 0);
+  warm_D_.assign(scene.colliders.empty() ? 0 : n, 0.0);
   frames0_.resize(scene.colliders.size());
   frames1_.resize(scene.colliders.size());
   scene.solver->set_extra_operator(nullptr);
@@ -292,10 +293,12 @@ bool BaraffWitkin::add_collider_friction(const Scene& scene) {
     const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
     ct.fr = {};
     if (ct.landing) continue;
-    any |= kernels::start_collider_friction(&s.v[o], &dv_[o], ct.surface_velocity, ct.normal, s.mass[ct.vertex],
+    const double D = warm_D_[ct.vertex] > 0 ? warm_D_[ct.vertex] : s.mass[ct.vertex];  // warm start, or the mass
+    any |= kernels::start_collider_friction(&s.v[o], &dv_[o], ct.surface_velocity, ct.normal, D,
                                             ct.mu_static, ct.mu_kinetic, ct.impulse, diagonal_block(ct.vertex),
                                             &b_[o], ct.fr);
   }
+  std::fill(warm_D_.begin(), warm_D_.end(), 0.0);  // set again by finish_collider_friction
   return any;
 }
 
@@ -317,12 +320,30 @@ bool BaraffWitkin::correct_collider_friction(const Scene& scene) {
   return changed;
 }
 
+// After a solve with the dampers: the contacts' friction against their Coulomb bounds, summed
+// (kernels::FrictionTally; the corrections stop once it is settled()).
+kernels::FrictionTally<double> BaraffWitkin::collider_friction_tally(const Scene& scene) const {
+  const State& s = scene.state;
+  kernels::FrictionTally<double> t;
+  for (const Contact& ct : contacts_) {
+    if (ct.fr.hc == 0) continue;
+    const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
+    double excess, bound;
+    const double miss = kernels::collider_friction_miss(&s.v[o], &dv_[o], ct.surface_velocity, ct.normal,
+                                                        ct.mu_static, ct.mu_kinetic, ct.impulse, ct.fr, excess, bound);
+    t.add(miss, excess, bound);
+  }
+  return t;
+}
+
 // After the last solve: a vertex held by static friction loses the tangential velocity the
 // finite damper leaves (about 1/kStickDamping of its slip without friction).
 void BaraffWitkin::finish_collider_friction(const Scene& scene) {
   const State& s = scene.state;
   for (const Contact& ct : contacts_) {
     const std::size_t o = 3 * static_cast<std::size_t>(ct.vertex);
+    warm_D_[ct.vertex] =
+        kernels::collider_friction_response(&s.v[o], &dv_[o], ct.surface_velocity, ct.normal, s.mass[ct.vertex], ct.fr);
     kernels::finish_collider_friction(&s.v[o], &dv_[o], ct.surface_velocity, ct.normal, ct.fr);
   }
 }
@@ -475,20 +496,33 @@ struct BaraffWitkin::StepOps {
   template <class F>
   bool friction_solve(double h, F&& solve_once) {
     State& s = scene.state;
+    bw.collider_tally_ = {};
+    bw.pair_tally_ = {};
     const bool col = !bw.contacts_.empty() && bw.add_collider_friction(scene);
-    const bool self = bw.self_contact_ && !bw.self_contact_->contacts().empty() &&
-                      bw.self_contact_->add_friction(s, bw.A_, bw.b_, bw.dv_, h);
+    const bool pairs = bw.self_contact_ && !bw.self_contact_->contacts().empty();
+    if (bw.self_contact_ && !pairs) bw.self_contact_->forget_warm_responses();
+    const bool self = pairs && bw.self_contact_->add_friction(s, bw.A_, bw.b_, bw.dv_, h);
     if (!col && !self) return true;
     const bool mf = bw.self_contact_ && bw.self_contact_->matrix_free() && !bw.self_contact_->contacts().empty();
     if (mf) scene.solver->set_extra_operator(bw.self_contact_.get());
+    // Each kind is corrected while its contacts miss their bounds, in sum, by more than
+    // kernels::kFrictionStopTolerance of the bounds' sum (FrictionTally::settled); the step's
+    // friction solves stop when neither kind changed.
+    auto tally = [&] {
+      if (col) bw.collider_tally_ = bw.collider_friction_tally(scene);
+      if (self) bw.pair_tally_ = bw.self_contact_->friction_tally(s, bw.dv_);
+    };
     const bool ok = bw::friction_solves(
         solve_once,
         [&] {  // both corrected before the next solve: no short-circuit
-          const bool c1 = col && bw.correct_collider_friction(scene);
-          const bool c2 = self && bw.self_contact_->correct_friction(s, bw.A_, bw.b_, bw.dv_);
+          tally();
+          const bool c1 = col && !bw.collider_tally_.settled() && bw.correct_collider_friction(scene);
+          const bool c2 =
+              self && !bw.pair_tally_.settled() && bw.self_contact_->correct_friction(s, bw.A_, bw.b_, bw.dv_);
           return c1 || c2;
         },
         [&] {
+          tally();  // what the step's last solve left
           if (col) bw.finish_collider_friction(scene);
           if (self) bw.self_contact_->finish_friction(s, bw.dv_);
         },
@@ -586,16 +620,45 @@ void BaraffWitkin::step(Scene& scene, double h) {
   last_ = st;
 }
 
+// dv, the contact flags, the collider contacts' responses (warm_D_, as many as the flags), then
+// the self-contact pairs' responses: their count and (four vertices, response) each. A state of
+// the format before the responses (dv and flags only) is read with none.
 std::vector<double> BaraffWitkin::restart_state() const {
   std::vector<double> s(dv_.begin(), dv_.end());
   for (char c : in_contact_) s.push_back(c ? 1.0 : 0.0);
+  s.insert(s.end(), warm_D_.begin(), warm_D_.end());
+  const auto none = std::vector<std::pair<std::array<Index, 4>, double>>{};
+  const auto& pairs = self_contact_ ? self_contact_->warm_responses() : none;
+  s.push_back(static_cast<double>(pairs.size()));
+  for (const auto& [v, D] : pairs) {
+    for (Index i : v) s.push_back(static_cast<double>(i));
+    s.push_back(D);
+  }
   return s;
 }
 
 bool BaraffWitkin::set_restart_state(const std::vector<double>& s) {
-  if (s.size() != dv_.size() + in_contact_.size()) return false;
+  const std::size_t head = dv_.size() + in_contact_.size();
+  if (s.size() < head) return false;
+  std::vector<std::pair<std::array<Index, 4>, double>> pairs;
+  if (s.size() > head) {
+    const std::size_t w = head + warm_D_.size();
+    if (s.size() < w + 1) return false;
+    const std::size_t m = static_cast<std::size_t>(s[w]);
+    if (s.size() != w + 1 + 5 * m) return false;
+    for (std::size_t k = 0; k < m; ++k) {
+      const double* e = &s[w + 1 + 5 * k];
+      pairs.push_back({{static_cast<Index>(e[0]), static_cast<Index>(e[1]), static_cast<Index>(e[2]),
+                        static_cast<Index>(e[3])},
+                       e[4]});
+    }
+    std::copy(s.begin() + static_cast<std::ptrdiff_t>(head), s.begin() + static_cast<std::ptrdiff_t>(w), warm_D_.begin());
+  } else {
+    std::fill(warm_D_.begin(), warm_D_.end(), 0.0);
+  }
   std::copy(s.begin(), s.begin() + static_cast<std::ptrdiff_t>(dv_.size()), dv_.begin());
   for (std::size_t i = 0; i < in_contact_.size(); ++i) in_contact_[i] = s[dv_.size() + i] != 0.0;
+  if (self_contact_) self_contact_->set_warm_responses(std::move(pairs));
   return true;
 }
 

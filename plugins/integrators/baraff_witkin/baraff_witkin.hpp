@@ -61,7 +61,8 @@ class BaraffWitkin final : public Integrator {
   StepStats last_step() const override { return last_; }
   /// Contacts with the scene's colliders become constraints of the filter (see contacts below).
   bool handles_contacts() const override { return true; }
-  /// The warm start dv and the per-vertex contact flags (loom run --resume restarts exactly).
+  /// The warm start dv, the per-vertex contact flags and the contacts' friction responses of
+  /// the last step (the next first dampers start from them): loom run --resume restarts exactly.
   std::vector<double> restart_state() const override;
   bool set_restart_state(const std::vector<double>& s) override;
   /// Vertices constrained by a collider in the last step (after releases).
@@ -79,6 +80,10 @@ class BaraffWitkin final : public Integrator {
   int pattern_rebuilds() const { return pattern_rebuilds_; }
   /// Solves with friction dampers since prepare() (implicit_friction).
   long long friction_solves() const { return friction_solves_; }
+  /// The last step's friction against Coulomb's bounds after its last solve with dampers
+  /// (implicit_friction; empty when it had none): the collider contacts and the self-contact pairs.
+  const kernels::FrictionTally<double>& collider_friction() const { return collider_tally_; }
+  const kernels::FrictionTally<double>& pair_friction() const { return pair_tally_; }
   /// Whether the self-contact springs are applied matrix-free by the solver (it supports an
   /// ExtraOperator: filtered_pcg on the CPU, every preconditioner); else they are assembled into A.
   bool self_contact_matrix_free() const { return self_contact_ && self_contact_->matrix_free(); }
@@ -94,6 +99,7 @@ class BaraffWitkin final : public Integrator {
   bool add_collider_friction(const Scene& scene);
   bool correct_collider_friction(const Scene& scene);
   void finish_collider_friction(const Scene& scene);
+  kernels::FrictionTally<double> collider_friction_tally(const Scene& scene) const;
   struct Contact;
   double* diagonal_block(Index i);  ///< A_'s block (i, i)
   void project_positions(Scene& scene, double t);
@@ -132,6 +138,10 @@ class BaraffWitkin final : public Integrator {
   std::vector<std::array<Index, 2>> material_pairs_, pattern_pairs_;
   int pattern_rebuilds_ = 0;
   long long friction_solves_ = 0;
+  kernels::FrictionTally<double> collider_tally_, pair_tally_;
+  // Per vertex: the response its collider contact showed in the last step (kg; 0 when none):
+  // the next step's first damper starts from it (kernels::collider_friction_response).
+  std::vector<double> warm_D_;
   BsrMatrix dfdx_, dfdv_, A_;
   Filter S_;
   std::vector<double> degree_;           // graph-Laplacian diagonal n_i

@@ -353,6 +353,15 @@ double pair_response(const ImplicitSelfContact::Contact& c, const State& s, cons
 }
 }  // namespace
 
+double ImplicitSelfContact::first_response(const Contact& c) const {
+  const std::array<Index, 4> key{c.v[0], c.v[1], c.v[2], c.v[3]};
+  const auto it = std::lower_bound(warm_.begin(), warm_.end(), key,
+                                   [](const std::pair<std::array<Index, 4>, double>& e, const std::array<Index, 4>& k) {
+                                     return e.first < k;
+                                   });
+  return it != warm_.end() && it->first == key ? it->second : 1.0 / c.W;
+}
+
 bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector<double>& b,
                                        const std::vector<double>& dv, double h) {
   if (friction_ <= 0) return false;
@@ -371,11 +380,12 @@ bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector
     c.jn = h * c.k * -c.c1;
     c.len0 = tangential_speed(c, s, dv);
     const double mj = friction_ * c.jn;
-    c.fr = coulomb_damping(c.len0, 1.0 / c.W, mj, mj, c.stick);
+    c.fr = coulomb_damping(c.len0, first_response(c), mj, mj, c.stick);
     ++stats_.friction;
     any = true;
     add_damper(c, c.fr, s, A, b, matrix_free_);
   }
+  warm_.clear();  // used: finish_friction records this step's
   return any;
 }
 
@@ -419,7 +429,26 @@ bool ImplicitSelfContact::correct_friction(const State& s, BsrMatrix& A, std::ve
   return changed;
 }
 
+kernels::FrictionTally<double> ImplicitSelfContact::friction_tally(const State& s, const std::vector<double>& dv) const {
+  kernels::FrictionTally<double> t;
+  for (const Contact& c : contacts_) {
+    if (c.fr == 0) continue;
+    const double mj = friction_ * c.jn;
+    double excess;
+    const double miss = kernels::coulomb_miss(c.fr * tangential_speed(c, s, dv), mj, mj, c.stick, excess);
+    t.add(miss, excess, mj);
+  }
+  return t;
+}
+
 void ImplicitSelfContact::finish_friction(const State& s, std::vector<double>& dv) {
+  warm_.clear();  // the pairs' responses in this step, for the next step's first dampers
+  for (const Contact& c : contacts_) {
+    if (c.fr == 0) continue;
+    const double D = kernels::friction_response(c.fr, c.len0, tangential_speed(c, s, dv), 1.0 / c.W);
+    if (D > 0) warm_.push_back({{c.v[0], c.v[1], c.v[2], c.v[3]}, D});
+  }
+  std::sort(warm_.begin(), warm_.end());
   for (const Contact& c : contacts_) {
     if (!c.stick) continue;
     double ut[3];

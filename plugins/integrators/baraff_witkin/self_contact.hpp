@@ -26,6 +26,7 @@
 #pragma once
 
 #include <array>
+#include <utility>
 #include <vector>
 
 #include "loom/bsr.hpp"
@@ -149,8 +150,8 @@ class ImplicitSelfContact final : public ExtraOperator {
   /// touching pair whose spring pushes after the last solve (C(x1) < 0, normal impulse
   /// J = h k (-C(x1))), a damper on the relative tangential velocity u = sum_a w_a v_a,
   /// f_a = -c w_a P u (P = I - n n^T), is added to A (assembled, or through apply_add when
-  /// matrix-free) and b; h c from coulomb_damping with the pair's response D = 1/W (W = sum
-  /// w_a^2 / m_a) and its |u_t| in the last solve. Implicit damping can only take energy out
+  /// matrix-free) and b; h c from coulomb_damping with the pair's first_response (1/W, W = sum
+  /// w_a^2 / m_a, or the response it showed in the step before) and its |u_t| in the last solve. Implicit damping can only take energy out
   /// of the step, and the cloth around the pair sees the friction in the same solve. Returns
   /// whether any pair got a damper.
   bool add_friction(const State& s, BsrMatrix& A, std::vector<double>& b, const std::vector<double>& dv, double h);
@@ -167,6 +168,18 @@ class ImplicitSelfContact final : public ExtraOperator {
   /// damper changed (solve again). (Before 2026-11-30: D = p / (len0 - |u_t(v1)|), the response
   /// of the solve without friction; docs/CONTACT.md, "A correction that converges".)
   bool correct_friction(const State& s, BsrMatrix& A, std::vector<double>& b, const std::vector<double>& dv);
+  /// The response a pair's first damper is sized with: the one it showed in the last step when
+  /// it was a pair with friction then (same four vertices), else 1/W (exact for a layer sliding
+  /// as one).
+  double first_response(const Contact& c) const;
+  /// The last step's pair responses (restart state): (four vertices, response) each.
+  const std::vector<std::pair<std::array<Index, 4>, double>>& warm_responses() const { return warm_; }
+  void set_warm_responses(std::vector<std::pair<std::array<Index, 4>, double>> w) { warm_ = std::move(w); }
+  /// A step without pairs to add friction to: the next step starts from 1/W.
+  void forget_warm_responses() { warm_.clear(); }
+  /// After a solve with the dampers: the pairs' friction h c |u_t(v1)| against their Coulomb
+  /// bounds mu J, summed (kernels::FrictionTally; correct_friction is skipped once settled()).
+  kernels::FrictionTally<double> friction_tally(const State& s, const std::vector<double>& dv) const;
   /// After the last solve: the pairs held by static friction lose the relative tangential
   /// velocity the finite damper leaves (about 1/kStickDamping of it), within mu J W.
   void finish_friction(const State& s, std::vector<double>& dv);
@@ -205,6 +218,9 @@ class ImplicitSelfContact final : public ExtraOperator {
   std::vector<Index> ring_ptr_, ring_;        ///< vertex one-rings (CSR, the vertex included)
   std::vector<ProximityPair> pairs_;
   std::vector<double> d_;                     ///< predicted displacement
+  /// The pairs' responses in the last step (kernels::friction_response), by their vertices,
+  /// sorted: a pair found again starts its first damper from it (first_response).
+  std::vector<std::pair<std::array<Index, 4>, double>> warm_;
   std::vector<double> diag_;                  ///< correct_friction, matrix-free: the self-contact terms' diagonal blocks (9 per vertex)
   std::vector<Contact> contacts_;
   std::vector<std::array<Index, 2>> reserve_, fresh_;
