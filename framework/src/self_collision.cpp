@@ -1429,6 +1429,19 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
   // lengthen displacements by at most max_growth_, so the list stays complete for CCD while
   // 2 max_growth_ < thickness - tol (after a new traversal, all pairs are visited).
   bool near_valid = true, near_renewed = false;
+  // The largest change of a touched vertex's d (at least `from`): since the near list's snapshot
+  // of d after a renewal, else since the start of the step (x0 + d against the responses' x).
+  auto largest_change = [&](double from) {
+    for (const Index v : touched_) {
+      double c2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const double c = near_renewed ? d_[3 * v + k] - d_near_[3 * v + k] : x0_[3 * v + k] + d_[3 * v + k] - x[3 * v + k];
+        c2 += c * c;
+      }
+      from = std::max(from, std::sqrt(c2));
+    }
+    return from;
+  };
   for (int it = 0; it < opt_.ccd_iterations && !clean; ++it) {
     if (responded_ && !candidates_valid()) {
       update_candidates(x0_.data());
@@ -1445,15 +1458,7 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
     // Responses change d by at most max_change (per vertex, |d - d at the start|), so relative
     // displacements by at most 2 max_change (max_growth_ <= max_change).
     // After a renewal of the near list: the change since its snapshot of d.
-    double max_change = 0;
-    for (const Index v : touched_) {
-      double c2 = 0;
-      for (int k = 0; k < 3; ++k) {
-        const double c = near_renewed ? d_[3 * v + k] - d_near_[3 * v + k] : x0_[3 * v + k] + d_[3 * v + k] - x[3 * v + k];
-        c2 += c * c;
-      }
-      max_change = std::max(max_change, std::sqrt(c2));
-    }
+    const double max_change = largest_change(0.0);
     const bool use_near = near_valid && 2 * (near_renewed ? max_change : std::max(max_growth_, max_change)) < th - tol;
     const Index count = use_near ? static_cast<Index>(near_.size()) : nvt_now + static_cast<Index>(ee_.size());
     for (Index r = 0; r < count; ++r) {
@@ -1551,15 +1556,7 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
       all_pairs = true;  // pairs new to the lists were not in the CCD passes
     }
     // The largest change of a vertex's d since the near list's d (see freeze_pass).
-    double change = near_renewed ? 0.0 : max_growth_;
-    for (const Index v : touched_) {
-      double c2 = 0;
-      for (int k = 0; k < 3; ++k) {
-        const double c = near_renewed ? d_[3 * v + k] - d_near_[3 * v + k] : x0_[3 * v + k] + d_[3 * v + k] - x[3 * v + k];
-        c2 += c * c;
-      }
-      change = std::max(change, std::sqrt(c2));
-    }
+    const double change = largest_change(near_renewed ? 0.0 : max_growth_);
     stats_.frozen = freeze_pass(s, !all_pairs, near_renewed ? d_near_.data() : nullptr, change);
     responded_ = true;
   }

@@ -59,6 +59,35 @@ void allocate_ho_window(Springs& s, int parts) {
                0);
 }
 
+/// One spring (p, q) of a window segment, constants at c: its unit vector n, stretch delta,
+/// velocity along n ddot and the impulse per unit inverse mass along n (the return value; HO
+/// velocity, or kang_cho_2011 with |ddot|). The arithmetic of kernels::ho_spring_velocity
+/// (ho_spring_axis) operation for operation; shared by the two-pass and the one-pass loops, so
+/// their bits agree.
+template <class T, bool kKc>
+[[gnu::always_inline]] inline T ho_window_spring(Index p, Index q, std::size_t c, const T* __restrict L0,
+                                                const T* __restrict KX, const T* __restrict KV, const T* __restrict X,
+                                                const T* __restrict Y, const T* __restrict Z, const T* __restrict VX,
+                                                const T* __restrict VY, const T* __restrict VZ, T& n0, T& n1, T& n2,
+                                                T& delta, T& ddot) {
+  using std::sqrt;
+  using std::abs;
+  const T tiny = std::numeric_limits<T>::min();
+  const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
+  const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+  const T l = sqrt(l2);
+  const T inv = T(1) / (l + tiny);
+  n0 = d0 * inv;
+  n1 = d1 * inv;
+  n2 = d2 * inv;
+  delta = l - L0[c];
+  ddot = n0 * (VX[q] - VX[p]) + n1 * (VY[q] - VY[p]) + n2 * (VZ[q] - VZ[p]);
+  if constexpr (kKc)
+    return KX[c] * delta + KV[c] * abs(ddot);
+  else
+    return KX[c] * delta + KV[c] * ddot;
+}
+
 /// Per-segment impulse loop on the window: springs (a + Step r, a + Step r + off) in window
 /// coordinates; constants per spring, read contiguously (Table: gathered from the tables by id). Writes each spring's impulse per unit inverse mass g = s n into
 /// G (3 x Bk, SoA) and, for analytic_position, its displacement per unit inverse mass into Q: the
@@ -72,24 +101,11 @@ inline void ho_window_impulses(Index len, Index a, Index off, const std::uint16_
                                const T* __restrict VY, const T* __restrict VZ, T* __restrict G, T* __restrict Q) {
   constexpr bool kPos = V == 1;   // HoVariant::AnalyticPosition
   constexpr bool kKc = V == 2;    // HoVariant::KangCho2011
-  const T tiny = std::numeric_limits<T>::min();
   for (Index r = 0; r < len; ++r) {
     const Index p = a + Step * r, q = p + off;
     const std::size_t c = Table ? static_cast<std::size_t>(ID[r]) : static_cast<std::size_t>(r);
-    using std::sqrt;
-    using std::abs;
-    const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
-    const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
-    const T l = sqrt(l2);
-    const T inv = T(1) / (l + tiny);
-    const T n0 = d0 * inv, n1 = d1 * inv, n2 = d2 * inv;
-    const T delta = l - L0[c];
-    const T ddot = n0 * (VX[q] - VX[p]) + n1 * (VY[q] - VY[p]) + n2 * (VZ[q] - VZ[p]);
-    T sv;
-    if constexpr (kKc)
-      sv = KX[c] * delta + KV[c] * abs(ddot);
-    else
-      sv = KX[c] * delta + KV[c] * ddot;
+    T n0, n1, n2, delta, ddot;
+    const T sv = ho_window_spring<T, kKc>(p, q, c, L0, KX, KV, X, Y, Z, VX, VY, VZ, n0, n1, n2, delta, ddot);
     G[r] = sv * n0;
     G[Bk + r] = sv * n1;
     G[2 * Bk + r] = sv * n2;
@@ -118,25 +134,12 @@ inline void ho_window_impulses_scatter(Index len, Index a, Index off, const std:
                                        T* __restrict G, T* __restrict DX, T* __restrict DY, T* __restrict DZ) {
   static_assert(V != 1, "analytic_position keeps the two passes");
   constexpr bool kKc = V == 2;   // HoVariant::KangCho2011
-  const T tiny = std::numeric_limits<T>::min();
 #pragma omp simd
   for (Index r = 0; r < len; ++r) {
     const Index p = a + r, q = p + off;
     const std::size_t c = Table ? static_cast<std::size_t>(ID[r]) : static_cast<std::size_t>(r);
-    using std::sqrt;
-    using std::abs;
-    const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
-    const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
-    const T l = sqrt(l2);
-    const T inv = T(1) / (l + tiny);
-    const T n0 = d0 * inv, n1 = d1 * inv, n2 = d2 * inv;
-    const T delta = l - L0[c];
-    const T ddot = n0 * (VX[q] - VX[p]) + n1 * (VY[q] - VY[p]) + n2 * (VZ[q] - VZ[p]);
-    T sv;
-    if constexpr (kKc)
-      sv = KX[c] * delta + KV[c] * abs(ddot);
-    else
-      sv = KX[c] * delta + KV[c] * ddot;
+    T n0, n1, n2, delta, ddot;
+    const T sv = ho_window_spring<T, kKc>(p, q, c, L0, KX, KV, X, Y, Z, VX, VY, VZ, n0, n1, n2, delta, ddot);
     const T g0 = sv * n0, g1 = sv * n1, g2 = sv * n2;
     G[r] = g0;
     G[Bk + r] = g1;
