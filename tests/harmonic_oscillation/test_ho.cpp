@@ -532,6 +532,17 @@ TEST(HoStorage, GroupedAndPlainSweepsAgree) {
   }
 }
 
+// An nx x nx grid of 2 cm cells, slightly rumpled, with varied velocities and masses: the
+// state of the windowed-sweep bit-identity tests.
+static void perturbed_grid_state(int nx, std::vector<double>& x, std::vector<double>& v, std::vector<double>& m) {
+  for (int r = 0; r < nx; ++r)
+    for (int c = 0; c < nx; ++c) {
+      x.insert(x.end(), {0.02 * c + 0.003 * std::sin(1.3 * r * c), 0.001 * std::sin(0.7 * c + r), 0.02 * r});
+      v.insert(v.end(), {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.005 * std::sin(c - r)});
+      m.push_back(1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5)));
+    }
+}
+
 // The windowed grouped sweep (ho_window.hpp: x, v and the accumulators of the live vertices in
 // structure of arrays) performs the plain grouped sweep's operations in the same order: the
 // same bits, for every variant and storage, with the default capacity and with the smallest
@@ -539,12 +550,7 @@ TEST(HoStorage, GroupedAndPlainSweepsAgree) {
 TEST(HoStorage, WindowedSweepIsBitIdentical) {
   const int nx = 48;
   std::vector<double> x, v, m;
-  for (int r = 0; r < nx; ++r)
-    for (int c = 0; c < nx; ++c) {
-      x.insert(x.end(), {0.02 * c + 0.003 * std::sin(1.3 * r * c), 0.001 * std::sin(0.7 * c + r), 0.02 * r});
-      v.insert(v.end(), {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.005 * std::sin(c - r)});
-      m.push_back(1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5)));
-    }
+  perturbed_grid_state(nx, x, v, m);
   SpringSet s;
   for (int r = 0; r < nx; ++r)
     for (int c = 0; c < nx; ++c) {
@@ -622,12 +628,7 @@ TEST(HoStorage, WindowedSweepIsBitIdentical) {
 TEST(HoStorage, FusedImpulseScatterIsBitIdentical) {
   const int nx = 80;
   std::vector<double> x, v, m;
-  for (int r = 0; r < nx; ++r)
-    for (int c = 0; c < nx; ++c) {
-      x.insert(x.end(), {0.02 * c + 0.003 * std::sin(1.3 * r * c), 0.001 * std::sin(0.7 * c + r), 0.02 * r});
-      v.insert(v.end(), {0.01 * std::sin(r + 2.0 * c), 0.02 * std::cos(3.0 * r - c), 0.005 * std::sin(c - r)});
-      m.push_back(1e-3 * (1 + 0.5 * ((r * 7 + c * 3) % 5)));
-    }
+  perturbed_grid_state(nx, x, v, m);
   SpringSet s;
   for (int r = 0; r < nx; ++r)
     for (int c = 0; c < nx; ++c) {
