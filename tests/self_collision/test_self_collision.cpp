@@ -807,3 +807,90 @@ TEST(SelfCollisionBvh, PairsOnAFoldedClothEqualABruteForceEnumeration) {
     EXPECT_EQ(ambiguous, 0u) << n;
   }
 }
+
+TEST(SelfCollisionBvh, ListsKeptByRefreshesOfManyVerticesOnAShakenFoldEqualTheBruteForcePairs) {
+  // A refresh searches again the pairs of its refreshed vertices, triangles and edges (through
+  // the hierarchy for triangles sharing no vertex, the neighbour lists for those sharing one):
+  // it must list every dropped pair once, including the pairs of two refreshed triangles, and no
+  // other. A 20 x 20 sheet folded into a U (layers 0.6 edge apart, so stacked pairs far apart in
+  // the mesh are listed), shaken for 60 steps with refreshes only (refresh_fraction 1: one step
+  // refreshes a single vertex, another over a third of them). After every refresh the lists must
+  // equal, pair for pair and without duplicates, the non-adjacent pairs closer than th + r_a +
+  // r_b at the reference positions (all pairs, brute force).
+  const int n = 20;
+  const Mesh mesh = make_grid(n, n, 1.0, 1.0, GridPlane::XZ);
+  const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
+  const auto edges = mesh.edges();
+  const double edge = 1.0 / (n - 1), th = 0.25 * edge, h = 0.01;
+  SelfCollision sc(shaken_sheet_options(th, 1.0), mesh);
+  State s = shaken_sheet_state(mesh);
+  s.x = folded_sheet(mesh, 0.3 * edge, 7u);
+  std::mt19937 rng(31);
+  std::normal_distribution<double> N(0.0, 1.0);
+  Index refreshed = 0, most = 0, fewest = nv, refreshes = 0, rebuilds = 0;
+  std::size_t checked = 0, far_in_mesh = 0;
+  std::vector<std::array<Index, 2>> vt, ee, bvt, bee;
+  std::vector<double> X, reach;
+  // Rest-position distance of two vertices in edges (the fold brings far ones close).
+  auto rest_apart = [&](Index a, Index b) {
+    const double* p = &mesh.positions[3 * a];
+    const double* q = &mesh.positions[3 * b];
+    return std::hypot(p[0] - q[0], p[2] - q[2]) / edge;
+  };
+  for (int step = 0; step < 60; ++step) {
+    sc.begin_step(s);
+    // Every 5th step moves about half the vertices beyond their reach (a refresh of many);
+    // the others move every 11th vertex fast and the rest slowly (a refresh of a few).
+    const bool big = step % 5 == 4;
+    for (Index i = 0; i < nv; ++i)
+      for (int k = 0; k < 3; ++k) {
+        const double dx = (big ? 0.5 * th : (i % 11 == 0 ? 0.3 * th : 0.03 * th)) * N(rng);
+        s.x[3 * i + k] += dx;
+        s.v[3 * i + k] = dx / h;
+      }
+    sc.resolve(s, h);
+    rebuilds += sc.last_stats().rebuilds;
+    const Index r = sc.last_stats().refreshed;
+    if (r == 0) continue;
+    ++refreshes;
+    refreshed += r;
+    most = std::max(most, r);
+    fewest = std::min(fewest, r);
+    sc.candidate_lists(vt, ee);
+    sc.list_reference(X, reach);
+    bvt.clear();
+    bee.clear();
+    for (Index v = 0; v < nv; ++v)
+      for (Index t = 0; t < nt; ++t) {
+        const Index* tv = &mesh.triangles[3 * t];
+        if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
+        const double rr = th + reach[v] + std::max({reach[tv[0]], reach[tv[1]], reach[tv[2]]});
+        double w[3];
+        if (point_triangle_distance(&X[3 * v], &X[3 * tv[0]], &X[3 * tv[1]], &X[3 * tv[2]], w) < rr) {
+          bvt.push_back({v, t});
+          if (rest_apart(v, tv[0]) > 4) ++far_in_mesh;
+        }
+      }
+    for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
+      for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
+        const auto &E = edges[e], &F = edges[f];
+        if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+        const double rr = th + std::max(reach[E[0]], reach[E[1]]) + std::max(reach[F[0]], reach[F[1]]);
+        double a, b;
+        if (segment_segment_distance(&X[3 * E[0]], &X[3 * E[1]], &X[3 * F[0]], &X[3 * F[1]], a, b) < rr) {
+          bee.push_back({e, f});
+          if (rest_apart(E[0], F[0]) > 4) ++far_in_mesh;
+        }
+      }
+    ASSERT_EQ(vt, bvt) << "step " << step << ", " << r << " vertices refreshed";
+    ASSERT_EQ(ee, bee) << "step " << step << ", " << r << " vertices refreshed";
+    checked += bvt.size() + bee.size();
+  }
+  EXPECT_EQ(rebuilds, 1);  // the first step only
+  EXPECT_GE(refreshes, 40) << "the check ran after most steps";
+  EXPECT_GT(most, nv / 3) << "a refresh of half the vertices (pairs of two refreshed triangles)";
+  EXPECT_LT(fewest, nv / 10) << "a refresh of a few vertices";
+  EXPECT_GT(refreshed, 2 * nv);
+  EXPECT_GT(far_in_mesh, 1000u) << "stacked pairs (found through the hierarchy, not the neighbour lists)";
+  EXPECT_GT(checked, 10000u);
+}
