@@ -348,7 +348,17 @@ TEST(BwSelfContact, FrictionSlowsASlidingLayerByMuGhPerStepAndNotALandingOneMatr
 // takes 2 solves with dampers (eigen_ldlt) and S's friction impulse meets mu J within 1 % (here
 // within 0.01 %). (The rule before, D = p / (len0 - |u_t(v1)|) from the solve without friction,
 // where H moved freely, took 3 and left S 1.9 % above mu J, both forms.)
-static void self_friction_correction_settles_on_coupled_pairs() {
+//
+// With H pinned as well (`h_pinned`), S is a lone pair among fixed vertices: the same analysis
+// (H was fixed in it) and S's response along d is exactly m + 2 h^2 k, the response
+// add_friction reads from A's diagonal blocks for its first damper (the pair's response with the
+// other vertices fixed). Its first damper is sized with it: the mass alone would hold S
+// (m |u_t| <= mu J without friction: asserted below), the stiffer response not, so S slides with
+// the damper that leaves mu J, exactly, and the step takes 1 solve with dampers (eigen_ldlt; 2
+// with filtered_pcg: the loose one and the one at the scene's tolerance). The rule before (held
+// by the stick damper sized with the mass, a friction impulse about (m + 2 h^2 k) |u_t| = 2.5
+// mu J) took 2 (3), the correction meeting the bound.
+static void self_friction_correction_settles_on_coupled_pairs(bool h_pinned = false) {
   const double h = 0.005, k = 400.0, mu = 0.5, v0 = 0.06, g = 9.81, w = 0.1, m = 0.005;
   const loom::Mesh gu = loom::make_grid(2, 2, w, w, loom::GridPlane::XZ);
   loom::Mesh mesh;
@@ -379,6 +389,7 @@ static void self_friction_correction_settles_on_coupled_pairs() {
     else if (std::abs(z) < 1e-12) H = i;
     else S = i;
   }
+  if (h_pinned && H >= 0) s.pin(H);
   s.update_inverse_masses();
   ASSERT_GE(S, 0);
   ASSERT_GE(H, 0);
@@ -398,10 +409,10 @@ static void self_friction_correction_settles_on_coupled_pairs() {
   const long long f0 = bw.friction_solves();
   sc.self_collision->begin_step(s);
   bw.step(sc, h);
-  ASSERT_EQ(bw.self_contact()->contacts().size(), 2u) << "S and H against the triangle";
+  ASSERT_EQ(bw.self_contact()->contacts().size(), h_pinned ? 1u : 2u) << "S (and H) against the triangle";
   // With eigen_ldlt the corrected dampers' solve ends the step; filtered_pcg runs the solves a
   // correction may follow at a looser tolerance, and one at the scene's ends it (bw_step.hpp).
-  EXPECT_EQ(bw.friction_solves() - f0, g_matrix_free ? 3 : 2) << "solves with dampers";
+  EXPECT_EQ(bw.friction_solves() - f0, (g_matrix_free ? 1 : 0) + (h_pinned ? 1 : 2)) << "solves with dampers";
   // The pairs' normal impulse (the springs' solve, before the dampers): the vertex's vertical
   // velocity change is -g h / (1 + kappa) (kappa = kStiffness; the springs in the sheet's plane
   // have no vertical stiffness at rest), so J = m g h kappa / (1 + kappa); stop_approach takes the
@@ -423,12 +434,16 @@ static void self_friction_correction_settles_on_coupled_pairs() {
   impulse(S, pS);
   impulse(H, pH);
   EXPECT_NEAR(pS[1], m * g * h, 1e-6 * J) << "S's weight: the spring and stop_approach";
-  EXPECT_NEAR(pH[1], m * g * h, 1e-6 * J) << "H's weight: the spring and stop_approach";
+  if (!h_pinned) EXPECT_NEAR(pH[1], m * g * h, 1e-6 * J) << "H's weight: the spring and stop_approach";
   const double vS = (m * v0 - mu * J) / (m + 2 * h * h * k);
   ASSERT_LE(h * h * k * vS / std::sqrt(2.0), mu * J) << "H is held (the analysis above)";
-  const double tolS = loom::kernels::kCoulombTolerance * mu * J;
+  // Lone S: its first damper exact (the bound to rounding and the solve's tolerance).
+  const double tolS = (h_pinned ? 1e-6 : loom::kernels::kCoulombTolerance) * mu * J;
+  if (h_pinned)  // S's slip without friction: m v0 / (m + 2 h^2 k); the mass alone would hold it
+    ASSERT_LE(m * m * v0 / (m + 2 * h * h * k), mu * J) << "the analysis above";
   EXPECT_NEAR(std::hypot(pS[0], pS[2]), mu * J, tolS) << "S slides with the kinetic bound";
-  EXPECT_LE(std::hypot(pH[0], pH[2]), mu * J * (1 + loom::kernels::kCoulombTolerance)) << "H within the bound";
+  if (!h_pinned)
+    EXPECT_LE(std::hypot(pH[0], pH[2]), mu * J * (1 + loom::kernels::kCoulombTolerance)) << "H within the bound";
   for (int c : {0, 2}) EXPECT_NEAR(s.v[3 * S + c], vS * d[c], tolS / m) << c;
   EXPECT_NEAR(std::hypot(s.v[3 * H], s.v[3 * H + 2]), 0.0, 1e-6 * vS) << "H held";
   if (verbose())
@@ -443,6 +458,13 @@ TEST(BwSelfContact, FrictionCorrectionSettlesOnCoupledPairs) { self_friction_cor
 TEST(BwSelfContact, FrictionCorrectionSettlesOnCoupledPairsMatrixFree) {
   g_matrix_free = true;
   self_friction_correction_settles_on_coupled_pairs();
+  g_matrix_free = false;
+}
+
+TEST(BwSelfContact, ALonePairSlidesWithTheBoundFromItsFirstDamper) { self_friction_correction_settles_on_coupled_pairs(true); }
+TEST(BwSelfContact, ALonePairSlidesWithTheBoundFromItsFirstDamperMatrixFree) {
+  g_matrix_free = true;
+  self_friction_correction_settles_on_coupled_pairs(true);
   g_matrix_free = false;
 }
 

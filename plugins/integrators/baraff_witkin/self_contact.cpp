@@ -370,6 +370,19 @@ bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector
     c.fr = 0;
     c.stick = false;
     c.released = false;
+  }
+  // Matrix-free, A holds no self-contact term: their diagonal blocks (the springs', no damper
+  // yet) beside it, so that both forms read the same response (as correct_friction).
+  double* E = matrix_free_ ? diag_.data() : nullptr;
+  if (E) {
+    for (const Contact& c : contacts_)
+      for (int a = 0; a < 4; ++a) std::fill_n(E + 9 * static_cast<std::size_t>(c.v[a]), 9, 0.0);
+    add_diagonal(E);
+  }
+  // First every pair's response with the other vertices fixed, from A as the last solve had it
+  // (no pair's damper in it yet, assembled or not), then the dampers.
+  for (Contact& c : contacts_) {
+    c.stiff = 0;
     double u1[3] = {0, 0, 0};
     for (int a = 0; a < 4; ++a) {
       const std::size_t o = 3 * static_cast<std::size_t>(c.v[a]);
@@ -377,10 +390,15 @@ bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector
     }
     c.c1 = c.gap0 - c.rest + h * dot3(u1, c.n);
     if (!c.touching || c.c1 >= 0 || !(c.W > 0)) continue;
+    double ut[3];
+    c.len0 = tangential_speed(c, s, dv, ut);
+    c.stiff = pair_response(c, s, A, E, ut, c.len0);
+  }
+  for (Contact& c : contacts_) {
+    if (!(c.stiff > 0)) continue;
     c.jn = h * c.k * -c.c1;
-    c.len0 = tangential_speed(c, s, dv);
     const double mj = friction_ * c.jn;
-    c.fr = coulomb_damping(c.len0, first_response(c), mj, mj, c.stick);
+    c.fr = kernels::bracketed_coulomb_damping(c.len0, first_response(c), c.stiff, mj, mj, c.stick);
     ++stats_.friction;
     any = true;
     add_damper(c, c.fr, s, A, b, matrix_free_);

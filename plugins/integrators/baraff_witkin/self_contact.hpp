@@ -80,6 +80,7 @@ class ImplicitSelfContact final : public ExtraOperator {
     double fr;         ///< implicit friction: h c of the tangential damper (kg), 0 when none
     double len0;       ///< implicit friction: |u_t| of the solve without the damper (m/s)
     double jn;         ///< implicit friction: the spring's normal impulse h k (-C(x1)) (N s)
+    double stiff;      ///< implicit friction: its response with the other vertices fixed (add_friction; kg)
     Index blk[16];     ///< positions of blocks (v[a], v[b]) in the pattern, a-major
   };
   struct Stats {
@@ -150,8 +151,13 @@ class ImplicitSelfContact final : public ExtraOperator {
   /// touching pair whose spring pushes after the last solve (C(x1) < 0, normal impulse
   /// J = h k (-C(x1))), a damper on the relative tangential velocity u = sum_a w_a v_a,
   /// f_a = -c w_a P u (P = I - n n^T), is added to A (assembled, or through apply_add when
-  /// matrix-free) and b; h c from coulomb_damping with the pair's first_response (1/W, W = sum
-  /// w_a^2 / m_a, or the response it showed in the step before) and its |u_t| in the last solve. Implicit damping can only take energy out
+  /// matrix-free) and b; h c from kernels::bracketed_coulomb_damping with the pair's
+  /// first_response (1/W, W = sum w_a^2 / m_a, or the response it showed in the step before) and
+  /// its response with the other vertices fixed (as correct_friction reads it, before any
+  /// pair's damper), and its |u_t| in the last solve: held only when even the stiffer response
+  /// cannot exceed mu J (before 2026-11-30: held when the first_response could not, which let a
+  /// new pair the cloth holds stiffly start with a friction impulse up to 20 times mu J;
+  /// docs/CONTACT.md, "A first damper that cannot exceed the bound"). Implicit damping can only take energy out
   /// of the step, and the cloth around the pair sees the friction in the same solve. Returns
   /// whether any pair got a damper.
   bool add_friction(const State& s, BsrMatrix& A, std::vector<double>& b, const std::vector<double>& dv, double h);

@@ -59,6 +59,29 @@ LOOM_HD inline T coulomb_damping(T len, T D, T mus_Jn, T muk_Jn, bool& stick) {
   return slide < hold ? slide : hold;
 }
 
+/// The first damper of a contact whose response lies between D0 (kg; what coulomb_damping
+/// would size it with: a lower bound, or the response it showed in the step before) and D1 (an
+/// upper bound: its response with every other vertex fixed, read from the diagonal blocks of
+/// A), tangential speed len without friction: held (kStickDamping D1, stick = true) only when
+/// even D1 cannot exceed the static bound (D1 len <= mu_s Jn); sliding with D0's damper where D0
+/// already slides (D0 len > mu_s Jn: exact for a layer sliding as one); else, where D0 would
+/// hold it and D1 would not, the damper that leaves mu_k Jn for the response D1: its friction
+/// impulse h c len D / (D + h c) grows with the response D, so for any D in [D0, D1] it stays
+/// at or below mu_k Jn (coulomb_damping with D0 holds it, and where its response is nearer D1
+/// the stick damper's impulse is about D len, up to D1 len / (mu_k Jn) times the bound).
+template <class T>
+LOOM_HD inline T bracketed_coulomb_damping(T len, T D0, T D1, T mus_Jn, T muk_Jn, bool& stick) {
+  if (D1 < D0) D1 = D0;
+  if (D1 * len <= mus_Jn) {
+    stick = true;
+    return static_cast<T>(kStickDamping) * D1;
+  }
+  stick = false;
+  const T D = D0 * len > mus_Jn ? D0 : D1;
+  const T slide = muk_Jn * D / (D * len - muk_Jn), hold = static_cast<T>(kStickDamping) * D;
+  return slide < hold ? slide : hold;
+}
+
 /// The correction's new damper for a contact (a collider contact or a self-contact pair) that
 /// missed its Coulomb bound, given its response D (kg) with its neighbours as solved and its slip
 /// f (m/s) without its own damper: held (kStickDamping D) when D f <= mu_s J and it was not
