@@ -245,7 +245,7 @@ void BM_HoStep_double_table(benchmark::State& st) {
 // step without pins and clock), window on (the default) and off (the plain grouped sweep, what
 // the step ran before). Same springs, same cloth, interleave them with --benchmark_repetitions.
 // blk >= 0: the springs grouped with blocks of kGroupBlocks[blk] vertices.
-void ho_window_bench(benchmark::State& st, bool window, int blk = -1, bool fuse = true) {
+void ho_window_bench(benchmark::State& st, bool window, int blk = -1, bool fuse = true, bool twins = true) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -255,12 +255,14 @@ void ho_window_bench(benchmark::State& st, bool window, int blk = -1, bool fuse 
   const SpringLayout& layout = blk >= 0 ? c.ho_blk_layout[blk] : c.ho.layout();
   if (!window) s.win_cap = 0;
   s.fuse = fuse;
+  s.twins = twins;
   st.counters["window"] = static_cast<double>(s.win_cap);
   // the grouped structure: segments, springs left over after whole groups of 4 (the vector
   // loops' scalar remainders), segments with stride 2, and segments without one shared id
   // and the unit-stride segments with disjoint lower and upper ranges (one pass when fused)
-  double tail = 0, step2 = 0, mixed = 0, disjoint = 0;
+  double tail = 0, step2 = 0, mixed = 0, disjoint = 0, twin_springs = 0;
   for (std::size_t g = 0; g < s.segs.size(); ++g) {
+    twin_springs += s.segs[g].twin ? 2.0 * s.segs[g].len : 0.0;   // springs in twin pairs
     tail += static_cast<double>(s.segs[g].len % 4);
     step2 += s.segs[g].step == 2 ? 1 : 0;
     disjoint += s.segs[g].step == 1 && s.segs[g].off >= s.segs[g].len ? 1 : 0;
@@ -269,6 +271,7 @@ void ho_window_bench(benchmark::State& st, bool window, int blk = -1, bool fuse 
   st.counters["segs"] = static_cast<double>(s.segs.size());
   st.counters["tail_springs"] = tail;
   st.counters["step2_segs"] = step2;
+  st.counters["twin_springs"] = twin_springs;
   // with the parameter tables: segments whose springs do not share one id, or kx and kv
   double kmixed = 0, l0_float_delta_ok = 0;
   const HoSprings<double>& t = c.ho_table.springs();
@@ -304,6 +307,8 @@ void BM_HoStep_double_block128(benchmark::State& st) { ho_window_bench(st, true,
 void BM_HoStep_double_block256(benchmark::State& st) { ho_window_bench(st, true, 2); }
 // The windowed sweep with two passes (impulses, then scatter) for every segment (issue 16's A/B).
 void BM_HoStep_double_unfused(benchmark::State& st) { ho_window_bench(st, true, -1, false); }
+// The windowed sweep with each segment of a twin pair on its own (HoSprings::twins = false).
+void BM_HoStep_double_notwin(benchmark::State& st) { ho_window_bench(st, true, -1, true, false); }
 
 void BM_HoStep_float(benchmark::State& st) {
   const Row& r = rows()[st.range(0)];
@@ -371,7 +376,8 @@ void BM_Rk4Step_float(benchmark::State& st) {
 // kind 0: the default sweep (grouped and windowed, loom/spring_groups.hpp), 1: plain (one spring
 // at a time, what the step ran before), 2: blocked (plain order, forces of 128 springs by one loop),
 // 3 + b: grouped and windowed with blocks of kGroupBlocks[b] vertices; 6: the default sweep with
-// two passes (forces, then scatter) for every segment (SpringSweep::fuse = false).
+// two passes (forces, then scatter) for every segment (SpringSweep::fuse = false); 7: the default
+// sweep with each segment of a twin pair on its own (SpringSweep::twins = false).
 template <class T>
 void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const Row& r = rows()[st.range(0)];
@@ -385,14 +391,16 @@ void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const T g[3] = {T(0), T(-9.81), T(0)};
   SpringSweep<T>* sw = nullptr;
   if constexpr (std::is_same_v<T, float>) sw = kind == 0 ? &c.fsweep : &c.fsweep_plain;
-  else sw = kind == 0 || kind == 6 ? &c.sweep : (kind >= 3 ? &c.sweep_blk[kind - 3] : &c.sweep_plain);
+  else sw = kind == 0 || kind == 6 || kind == 7 ? &c.sweep : (kind >= 3 ? &c.sweep_blk[kind - 3] : &c.sweep_plain);
   sw->blocked = kind == 2;
   sw->fuse = kind != 6;
+  sw->twins = kind != 7;
   st.counters["window"] = static_cast<double>(sw->win_cap);
   st.counters["segs"] = static_cast<double>(sw->segs.size());
   for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
   sw->blocked = false;
   sw->fuse = true;
+  sw->twins = true;
   benchmark::DoNotOptimize(x.data());
   set_counters(st, r, threads, se_bytes(*sw));
 }
@@ -407,6 +415,7 @@ void BM_SeStep_double_block64(benchmark::State& st) { se_bench<double>(st, false
 void BM_SeStep_double_block128(benchmark::State& st) { se_bench<double>(st, false, 4); }
 void BM_SeStep_double_block256(benchmark::State& st) { se_bench<double>(st, false, 5); }
 void BM_SeStep_double_unfused(benchmark::State& st) { se_bench<double>(st, false, 6); }
+void BM_SeStep_double_notwin(benchmark::State& st) { se_bench<double>(st, false, 7); }
 
 template <class T>
 void rk4_fused_bench(benchmark::State& st, bool /*is_float*/, bool plain = false) {
@@ -588,6 +597,7 @@ BENCHMARK(BM_HoStep_double_block64)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_block128)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_block256)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_unfused)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_notwin)->Apply(rows_args);
 BENCHMARK(BM_HoStep_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Step_float)->Apply(rows_args);
@@ -601,6 +611,7 @@ BENCHMARK(BM_SeStep_double_block64)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_block128)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_block256)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_unfused)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_notwin)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double_plain)->Apply(rows_args);

@@ -696,6 +696,132 @@ TEST(HoStorage, FusedImpulseScatterIsBitIdentical) {
   EXPECT_EQ(checked, 4);
 }
 
+// Issue 16: duplicate springs on the same pair (the kang_cho_table1 stencil puts two springs on
+// most pairs) give twin segments (SpringSegment::twin: the same i0, len, off and step), whose
+// geometry the windowed sweep computes once (ho_window_impulses_twin,
+// ho_window_impulses_scatter_twin). Each slot then gets the two segments' additions in the order
+// of the two segments run one after the other, so 12 steps give the bits of the windowed sweep
+// without twins and of the plain grouped sweep, in every variant, with and without tables, fused
+// and two-pass, on 1 and 2 threads. The duplicates have their own rest lengths, stiffnesses and
+// dampers (a twin that used its partner's constants would change the result), and the cloth has
+// twin pairs of all kinds: unit stride with disjoint and with overlapping ranges, and stride 2.
+TEST(HoStorage, TwinSegmentsAreBitIdentical) {
+  const int nx = 130;   // rows longer than a block: most blocks hold one row's segments
+  std::vector<double> x, v, m;
+  perturbed_grid_state(nx, x, v, m);
+  int checked = 0;
+  for (HoVariant var : {HoVariant::Velocity, HoVariant::AnalyticPosition, HoVariant::KangCho2011}) {
+    const double c = var == HoVariant::KangCho2011 ? 0.0 : 0.01;   // kang_cho_2011 has no dampers
+    SpringSet s;
+    const double d = 0.02, dd = 0.02 * std::sqrt(2.0);
+    for (int r = 0; r < nx; ++r)
+      for (int col = 0; col < nx; ++col) {
+        const int a = r * nx + col;
+        if (col + 1 < nx) {
+          s.add(a, a + 1, d, 2000, c, SpringClass::Structural);
+          s.add(a + 1, a, 1.01 * d, 1500, 2 * c, SpringClass::Structural);   // twin, horizontal: overlapping
+        }
+        if (r + 1 < nx) {
+          s.add(a, a + nx, d, 2000, c, SpringClass::Structural);
+          s.add(a + nx, a, 0.99 * d, 2500, 0.5 * c, SpringClass::Structural);   // twin, disjoint
+        }
+        if (col + 1 < nx && r + 1 < nx) {
+          s.add(a, a + nx + 1, dd, 500, c, SpringClass::Shear);
+          s.add(a, a + nx + 1, 1.02 * dd, 700, 0.0, SpringClass::Shear);
+        }
+        if (col > 0 && r + 1 < nx) s.add(a, a + nx - 1, dd, 500 + (col % 3), c, SpringClass::Shear);
+        if (col + 2 < nx && (r + col) % 2 == 0) {   // stride-2 twins
+          s.add(a, a + 2, 2 * d, 50, c, SpringClass::Bend);
+          s.add(a + 2, a, 2.03 * d, 80, 0.0, SpringClass::Bend);
+        }
+        if (r + 2 < nx) s.add(a, a + 2 * nx, 2 * d, 50, 0.0, SpringClass::Bend);
+      }
+    const std::vector<Index> pins{nx * (nx - 1), nx * nx - 1};
+    for (bool table : {true, false}) {
+      auto scene = make_scene(x, v, m, pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(s, m));
+      HoIntegrator ho(var, table, true, HoReorder::None);
+      ho.set_tables_on_window(table);
+      ho.prepare(*scene, 1e-4);
+      const HoSprings<double>& sp0 = ho.springs();
+      ASSERT_TRUE(sp0.grouped);
+      ASSERT_GT(sp0.win_cap, 0);
+      EXPECT_EQ(sp0.table, table);
+      EXPECT_TRUE(sp0.twins);   // the default
+      int disjoint = 0, overlapping = 0, stride2 = 0;
+      Index twin_springs = 0;
+      for (std::size_t sg = 0; sg < sp0.segs.size(); ++sg) {
+        const HoSegment& G = sp0.segs[sg];
+        if (!G.twin) continue;
+        ASSERT_LT(sg + 1, sp0.segs.size());
+        const HoSegment& H = sp0.segs[sg + 1];
+        EXPECT_EQ(H.twin, 0);
+        for (Index r = 0; r < G.len; ++r) {   // the same endpoints, spring by spring
+          ASSERT_EQ(sp0.i[G.begin + r], sp0.i[H.begin + r]);
+          ASSERT_EQ(sp0.j[G.begin + r], sp0.j[H.begin + r]);
+        }
+        twin_springs += 2 * G.len;
+        if (G.step == 2) ++stride2;
+        else (G.off >= G.len ? disjoint : overlapping) += 1;
+      }
+      EXPECT_GT(disjoint, 100);
+      EXPECT_GT(overlapping, 100);
+      EXPECT_GT(stride2, 100);
+      // 8 of the 9 springs per vertex (all but the second shear and the vertical bend) are duplicates
+      EXPECT_GT(twin_springs, sp0.size() / 2);
+      const std::array<double, 3> g{0, -9.81, 0};
+      const double* w = scene->state.inv_mass.data();
+      auto run = [&](bool window, bool twins, bool fuse, int threads) {
+        omp_set_num_threads(threads);
+        HoSprings<double> sp = ho.springs();
+        sp.twins = twins;
+        sp.fuse = fuse;
+        if (!window) sp.win_cap = 0;
+        allocate_ho_window(sp, ho.layout().parts());
+        std::vector<double> X = x, V = v, dv(x.size(), 0.0), dx(x.size(), 0.0);
+        for (int st = 0; st < 12; ++st) {
+          switch (var) {
+            case HoVariant::Velocity:
+              ho_step_arrays<double, HoVariant::Velocity>(ho.layout(), sp, X.data(), V.data(), dv.data(), nullptr, w,
+                                                          1e-4, g);
+              break;
+            case HoVariant::AnalyticPosition:
+              ho_step_arrays<double, HoVariant::AnalyticPosition>(ho.layout(), sp, X.data(), V.data(), dv.data(),
+                                                                  dx.data(), w, 1e-4, g);
+              break;
+            case HoVariant::KangCho2011:
+              ho_step_arrays<double, HoVariant::KangCho2011>(ho.layout(), sp, X.data(), V.data(), dv.data(), nullptr,
+                                                             w, 1e-4, g);
+              break;
+          }
+        }
+        EXPECT_TRUE(std::all_of(dv.begin(), dv.end(), [](double e) { return e == 0.0; }));
+        X.insert(X.end(), V.begin(), V.end());
+        return X;
+      };
+      const std::vector<double> plain = run(false, false, true, 1);
+      double change = 0;
+      for (bool fuse : {true, false}) {
+        const std::vector<double> single = run(true, false, fuse, 1);
+        for (int threads : {1, 2}) {
+          const std::vector<double> twin = run(true, true, fuse, threads);
+          ASSERT_EQ(plain.size(), twin.size());
+          for (std::size_t q = 0; q < plain.size(); ++q) {
+            ASSERT_EQ(single[q], twin[q]) << to_string(var) << " table " << table << " fuse " << fuse << " threads "
+                                          << threads << " entry " << q;
+            ASSERT_EQ(plain[q], twin[q]) << to_string(var) << " table " << table << " fuse " << fuse << " threads "
+                                         << threads << " entry " << q;
+            change = std::max(change, std::abs(plain[q] - (q < x.size() ? x[q] : v[q - x.size()])));
+          }
+        }
+      }
+      EXPECT_GT(change, 1e-6);   // the springs did act
+      ++checked;
+    }
+  }
+  omp_set_num_threads(2);
+  EXPECT_EQ(checked, 6);
+}
+
 // The block size of the grouping (build_ho_springs' group_block, default kHoGroupBlock) changes
 // only the order of the additions into a vertex: 12 velocity steps with blocks of 16, 64, 128 and
 // 256 vertices agree with the plain (ungrouped) sweep to rounding; every segment stays inside one

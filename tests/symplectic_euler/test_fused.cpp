@@ -218,6 +218,88 @@ TEST(SymplecticEulerFused, FusedForceScatterIsBitIdentical) {
   omp_set_num_threads(2);
 }
 
+// Issue 16: duplicate springs on the same pair (as in the kang_cho_table1 stencil) give twin
+// segments (SpringSegment::twin), whose d, inverse length and du the windowed sweep computes once
+// (sweep_segment_forces_twin, sweep_segment_forces_scatter_twin). Each slot gets the two
+// segments' additions in the order of the two segments run one after the other, so 30 steps with
+// SpringSweep::twins on (the default) give the bits of twins off, damped and undamped, fused and
+// two-pass, on 1 and 2 threads; and the one-spring-at-a-time sweep's result to rounding. The
+// duplicates have their own constants, and there are twin pairs of every kind (unit stride with
+// disjoint and with overlapping ranges, stride 2).
+TEST(SymplecticEulerFused, TwinSegmentsAreBitIdentical) {
+  const int nx = 130;   // rows longer than a block: most blocks hold one row's segments
+  for (bool damped : {false, true}) {
+    SweepCloth cl = sweep_cloth(nx, damped);
+    const double cd = damped ? 0.03 : 0.0;
+    for (int r = 0; r < nx; ++r)
+      for (int col = 0; col < nx; ++col) {
+        const int a = r * nx + col;
+        if (col + 1 < nx) cl.s.add(a + 1, a, 0.0201, 1500, cd, SpringClass::Structural);   // overlapping twins
+        if (r + 1 < nx) cl.s.add(a, a + nx, 0.0199, 2500, 0.5 * cd, SpringClass::Structural);   // disjoint twins
+        if (col + 2 < nx && (r + col) % 2 == 0)   // stride-2 twins
+          for (int t = 0; t < 2; ++t) cl.s.add(a, a + 2, 0.04 + 0.001 * t, 60 + 20 * t, cd, SpringClass::Bend);
+      }
+    SpringSweep<double> sw, plain;
+    sw.build(cl.n, cl.s);
+    plain.build(cl.n, cl.s, false);
+    ASSERT_TRUE(sw.grouped);
+    EXPECT_TRUE(sw.twins);
+    int disjoint = 0, overlapping = 0, stride2 = 0;
+    for (std::size_t sg = 0; sg < sw.segs.size(); ++sg) {
+      const SpringSegment& G = sw.segs[sg];
+      if (!G.twin) continue;
+      ASSERT_LT(sg + 1, sw.segs.size());
+      const SpringSegment& H = sw.segs[sg + 1];
+      for (Index r = 0; r < G.len; ++r) {   // the same endpoints, spring by spring
+        ASSERT_EQ(sw.i[G.begin + r], sw.i[H.begin + r]);
+        ASSERT_EQ(sw.j[G.begin + r], sw.j[H.begin + r]);
+      }
+      if (G.step == 2) ++stride2;
+      else (G.off >= G.len ? disjoint : overlapping) += 1;
+    }
+    EXPECT_GT(disjoint, 100);
+    EXPECT_GT(overlapping, 100);
+    EXPECT_GT(stride2, 100);
+    const double g[3] = {0.0, -9.81, 0.0};
+    auto run = [&](SpringSweep<double>& s, bool twins, bool fuse, int threads) {
+      omp_set_num_threads(threads);
+      s.twins = twins;
+      s.fuse = fuse;
+      std::vector<double> x = cl.x0, v = cl.v0, f(x.size(), 0.0);
+      for (int st = 0; st < 30; ++st) se_step_springs<double>(s, x.data(), v.data(), cl.w.data(), f.data(), 1e-4, g);
+      for (double e : f) EXPECT_EQ(e, 0.0);
+      x.insert(x.end(), v.begin(), v.end());
+      return x;
+    };
+    const std::vector<double> ref = run(plain, true, true, 1);
+    const std::size_t m3 = cl.x0.size();
+    double sx = 0, sv = 0;
+    for (std::size_t q = 0; q < m3; ++q) {
+      sx = std::max(sx, std::abs(ref[q]));
+      sv = std::max(sv, std::abs(ref[m3 + q]));
+    }
+    double change = 0;
+    for (bool fuse : {true, false}) {
+      const std::vector<double> single = run(sw, false, fuse, 1);
+      for (int threads : {1, 2}) {
+        const std::vector<double> twin = run(sw, true, fuse, threads);
+        ASSERT_EQ(single.size(), twin.size());
+        for (std::size_t q = 0; q < twin.size(); ++q) {
+          ASSERT_EQ(single[q], twin[q]) << "damped " << damped << " fuse " << fuse << " threads " << threads
+                                        << " entry " << q;
+          ASSERT_NEAR(twin[q], ref[q], q < m3 ? 1e-12 * sx : 1e-9 * sv) << q;
+          const double start = q < m3 ? cl.x0[q] : cl.v0[q - m3];
+          change = std::max(change, std::abs(twin[q] - start));
+        }
+      }
+    }
+    EXPECT_GT(change, 1e-6);   // the springs did act
+    sw.twins = true;
+    sw.fuse = true;
+  }
+  omp_set_num_threads(2);
+}
+
 // One force pass of the windowed sweep: fin is called exactly once per vertex, with the force of
 // an independent per-spring sum over the original spring set (kernels::spring_force, the set's
 // order) to rounding; f is zero again on return.

@@ -111,6 +111,91 @@ inline void sweep_segment_forces_scatter(Index len, Index a, Index off, const T*
   }
 }
 
+/// The shared part of a spring's force (sweep_segment_forces' arithmetic): d = x_q - x_p, the
+/// inverse length il and, damped, du = d . (v_q - v_p); the twin loops compute it once per pair.
+template <class T, bool Damped>
+[[gnu::always_inline]] inline void sweep_spring_geometry(Index p, Index q, const T* __restrict X,
+                                                        const T* __restrict Y, const T* __restrict Z,
+                                                        const T* __restrict VX, const T* __restrict VY,
+                                                        const T* __restrict VZ, T& d0, T& d1, T& d2, T& il, T& du) {
+  const T tiny = std::numeric_limits<T>::min();
+  d0 = X[q] - X[p];
+  d1 = Y[q] - Y[p];
+  d2 = Z[q] - Z[p];
+  const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+  using std::sqrt;
+  il = T(1) / sqrt(l2 + tiny);
+  if constexpr (Damped) du = d0 * (VX[q] - VX[p]) + d1 * (VY[q] - VY[p]) + d2 * (VZ[q] - VZ[p]);
+}
+
+/// A spring's force scale from the shared part (sweep_segment_forces' arithmetic).
+template <class T, bool Damped>
+[[gnu::always_inline]] inline T sweep_spring_scale(T k, T l0, T c, T il, T du) {
+  T sc = k * (T(1) - l0 * il);
+  if constexpr (Damped) sc += c * du * il * il;
+  return sc;
+}
+
+/// sweep_segment_forces for a twin pair of segments (SpringSegment::twin: the same endpoints;
+/// constants KA, L0A, CA and KB, L0B, CB): d, il (and du) once per endpoint pair, the forces of
+/// both springs into FA and FB, each with sweep_segment_forces' operations (the same bits).
+template <class T, bool Damped, int Step, Index Bk>
+inline void sweep_segment_forces_twin(Index len, Index a, Index off, const T* __restrict KA, const T* __restrict L0A,
+                                      const T* __restrict CA, const T* __restrict KB, const T* __restrict L0B,
+                                      const T* __restrict CB, const T* __restrict X, const T* __restrict Y,
+                                      const T* __restrict Z, const T* __restrict VX, const T* __restrict VY,
+                                      const T* __restrict VZ, T* __restrict FA, T* __restrict FB) {
+#pragma omp simd
+  for (Index r = 0; r < len; ++r) {
+    const Index p = a + Step * r, q = p + off;
+    T d0, d1, d2, il, du = T(0);
+    sweep_spring_geometry<T, Damped>(p, q, X, Y, Z, VX, VY, VZ, d0, d1, d2, il, du);
+    const T sa = sweep_spring_scale<T, Damped>(KA[r], L0A[r], Damped ? CA[r] : T(0), il, du);
+    const T sb = sweep_spring_scale<T, Damped>(KB[r], L0B[r], Damped ? CB[r] : T(0), il, du);
+    FA[r] = sa * d0;
+    FA[Bk + r] = sa * d1;
+    FA[2 * Bk + r] = sa * d2;
+    FB[r] = sb * d0;
+    FB[Bk + r] = sb * d1;
+    FB[2 * Bk + r] = sb * d2;
+  }
+}
+
+/// sweep_segment_forces_scatter for a twin pair of unit-stride segments with disjoint lower and
+/// upper ranges (off >= len): slot a + r gets + fA, then + fB, slot a + r + off gets - fA, then
+/// - fB: the two segments' additions in the order of the two loops run one after the other.
+template <class T, bool Damped, Index Bk>
+inline void sweep_segment_forces_scatter_twin(Index len, Index a, Index off, const T* __restrict KA,
+                                              const T* __restrict L0A, const T* __restrict CA,
+                                              const T* __restrict KB, const T* __restrict L0B,
+                                              const T* __restrict CB, const T* __restrict X, const T* __restrict Y,
+                                              const T* __restrict Z, const T* __restrict VX, const T* __restrict VY,
+                                              const T* __restrict VZ, T* __restrict FA, T* __restrict FB,
+                                              T* __restrict FX, T* __restrict FY, T* __restrict FZ) {
+#pragma omp simd
+  for (Index r = 0; r < len; ++r) {
+    const Index p = a + r, q = p + off;
+    T d0, d1, d2, il, du = T(0);
+    sweep_spring_geometry<T, Damped>(p, q, X, Y, Z, VX, VY, VZ, d0, d1, d2, il, du);
+    const T sa = sweep_spring_scale<T, Damped>(KA[r], L0A[r], Damped ? CA[r] : T(0), il, du);
+    const T sb = sweep_spring_scale<T, Damped>(KB[r], L0B[r], Damped ? CB[r] : T(0), il, du);
+    const T a0 = sa * d0, a1 = sa * d1, a2 = sa * d2;
+    const T b0 = sb * d0, b1 = sb * d1, b2 = sb * d2;
+    FA[r] = a0;
+    FA[Bk + r] = a1;
+    FA[2 * Bk + r] = a2;
+    FB[r] = b0;
+    FB[Bk + r] = b1;
+    FB[2 * Bk + r] = b2;
+    FX[p] = (FX[p] + a0) + b0;
+    FY[p] = (FY[p] + a1) + b1;
+    FZ[p] = (FZ[p] + a2) + b2;
+    FX[q] = (FX[q] - a0) - b0;
+    FY[q] = (FY[q] - a1) - b1;
+    FZ[q] = (FZ[q] - a2) - b2;
+  }
+}
+
 template <class T>
 struct SpringSweep {
   SpringLayout layout;
@@ -141,6 +226,10 @@ struct SpringSweep {
   /// whose ranges overlap (window_segment_scatter_overlap); the same bits. false: forces, then
   /// two scatter passes for every segment (table1's SeStep_double_unfused row).
   bool fuse = true;
+  /// Grouped sweep: a twin pair of segments (SpringSegment::twin: duplicate springs on the same
+  /// endpoints) computes d, the inverse length (and du) once per pair (sweep_segment_forces_twin);
+  /// the same bits. false: each segment on its own (table1's SeStep_double_notwin row).
+  bool twins = true;
 
   Index size() const { return static_cast<Index>(i.size()); }
   bool damped() const { return !c.empty(); }
@@ -200,6 +289,7 @@ struct SpringSweep {
     win_cap = o.win_cap;
     win.assign(o.win.size(), T(0));
     fuse = o.fuse;
+    twins = o.twins;
   }
 
   /// Spring forces at (x, v) accumulated into f, with fin(q, f + 3q) per completed vertex
@@ -276,6 +366,7 @@ struct SpringSweep {
       const int narr = Damped ? 9 : 6;
       Index ws = layout.part_vertex_begin(p), fill = ws, qfin = ws;
       alignas(64) T F[3 * Bk];
+      alignas(64) T F2[3 * Bk];   // the second segment of a twin pair
       for (Index bk = part_block[p]; bk < part_block[p + 1]; ++bk) {
         const SpringBlock& B = blocks[bk];
         const Index need = block_need[bk];
@@ -287,6 +378,35 @@ struct SpringSweep {
           const SpringSegment& G = segs[sg];
           const Index a = G.i0 - ws;
           const T* Cg = Damped ? C + G.begin : nullptr;
+          if (twins && G.twin) {
+            // a twin pair (the next segment has the same endpoints): the shared part once, then
+            // each segment's additions in the order of the two segments run one after the other
+            const SpringSegment& G2 = segs[++sg];
+            const T* Cg2 = Damped ? C + G2.begin : nullptr;
+            if (G.step == 1 && fuse && G.off >= G.len) {
+              sweep_segment_forces_scatter_twin<T, Damped, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg,
+                                                               K + G2.begin, L0 + G2.begin, Cg2, X, Y, Z, VX, VY, VZ,
+                                                               F, F2, FX, FY, FZ);
+            } else if (G.step == 1) {
+              sweep_segment_forces_twin<T, Damped, 1, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg,
+                                                          K + G2.begin, L0 + G2.begin, Cg2, X, Y, Z, VX, VY, VZ, F,
+                                                          F2);
+              if (fuse && G.off > 0) {   // overlapping ranges: one scatter pass each
+                window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+                window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, FX, FY, FZ, F2);
+              } else {
+                window_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+                window_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F2);
+              }
+            } else {
+              sweep_segment_forces_twin<T, Damped, 2, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg,
+                                                          K + G2.begin, L0 + G2.begin, Cg2, X, Y, Z, VX, VY, VZ, F,
+                                                          F2);
+              window_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+              window_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F2);
+            }
+            continue;
+          }
           if (G.step == 1 && fuse && G.off >= G.len) {   // disjoint ranges: one pass
             sweep_segment_forces_scatter<T, Damped, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg, X, Y, Z, VX,
                                                         VY, VZ, F, FX, FY, FZ);

@@ -35,8 +35,12 @@
 namespace loom {
 
 /// A run of springs (i0 + step r, i0 + step r + off), r < len, stored at [begin, begin + len).
+/// twin = 1: the next segment of the block has the same i0, len, off and step (duplicate pairs,
+/// the next rank: it reads the same vertices), so a sweep may compute the two segments' shared
+/// geometry once (issue 16; group_springs sets it on the first of the two, 0 on the second).
 struct SpringSegment {
   Index begin, len, i0, off, step;   ///< step 1 or 2
+  Index twin = 0;
 };
 /// A block of the grouped sweep: its segments, and the vertex bound below which vertices are final
 /// once the block is done.
@@ -120,6 +124,16 @@ inline std::vector<Index> group_springs(const SpringLayout& layout, const std::v
           ++q;
         }
         g.segs.push_back(s);
+      }
+      // twins: consecutive segments of the block over the same springs' endpoints (left to right,
+      // each segment in at most one pair)
+      for (std::size_t t = static_cast<std::size_t>(seg_begin); t + 1 < g.segs.size(); ++t) {
+        SpringSegment& s0 = g.segs[t];
+        const SpringSegment& s1 = g.segs[t + 1];
+        if (s0.i0 == s1.i0 && s0.len == s1.len && s0.off == s1.off && s0.step == s1.step) {
+          s0.twin = 1;
+          ++t;
+        }
       }
       g.blocks.push_back({v1, seg_begin, static_cast<Index>(g.segs.size())});
     }

@@ -88,6 +88,11 @@ struct HoSprings {
   /// ranges overlap (window_segment_scatter_overlap); the same bits. false: impulses, then two
   /// scatter passes for every segment (table1's HoStep_double_unfused row).
   bool fuse = true;
+  /// Windowed sweep: a twin pair of segments (SpringSegment::twin: duplicate springs on the same
+  /// endpoints, 88% of the Table 1 cloth's springs) computes its shared geometry once
+  /// (ho_window_impulses_twin); the same bits. false: each segment on its own (table1's
+  /// HoStep_double_notwin row).
+  bool twins = true;
 
   Index size() const { return static_cast<Index>(i.size()); }
 };
@@ -122,6 +127,7 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
   out.win_cap = in.win_cap;
   out.win.assign(in.win.size(), T(0));
   out.fuse = in.fuse;
+  out.twins = in.twins;
   out.l0.assign(in.l0.begin(), in.l0.end());
   out.k.assign(in.k.begin(), in.k.end());
   out.c.assign(in.c.begin(), in.c.end());
@@ -500,6 +506,8 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
     Index ws = layout.part_vertex_begin(p), fill = ws, qfin = ws;
     alignas(64) T Gb[3 * Bk];
     alignas(64) T Qb[kPos ? 3 * Bk : 1];
+    alignas(64) T Gb2[3 * Bk];               // the second segment of a twin pair
+    alignas(64) T Qb2[kPos ? 3 * Bk : 1];
     for (Index bk = s.part_block[p]; bk < s.part_block[p + 1]; ++bk) {
       const auto& B = s.blocks[bk];
       const Index need = s.block_need[bk];
@@ -516,6 +524,43 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
         const T* l0 = P.l0 + off;
         const T* kx = P.kx + off;
         const T* kv = P.kv + off;
+        if (s.twins && G.twin) {
+          // a twin pair (the next segment has the same endpoints): the geometry once, then each
+          // segment's additions in the order of the two segments run one after the other
+          const auto& G2 = s.segs[sg + 1];
+          const std::size_t off2 = Table ? 0 : static_cast<std::size_t>(G2.begin);
+          const HoSegConsts<T> CA{id, l0, kx, kv, ex, ev};
+          const HoSegConsts<T> CB{Table ? P.id + G2.begin : nullptr, P.l0 + off2, P.kx + off2, P.kv + off2,
+                                  kPos ? P.ex + off2 : nullptr, kPos ? P.ev + off2 : nullptr};
+          ++sg;
+          if constexpr (!kPos) {
+            if (s.fuse && G.step == 1 && G.off >= G.len) {
+              ho_window_impulses_scatter_twin<T, Vi, Table, Bk>(G.len, a, G.off, CA, CB, X, Y, Z, VX, VY, VZ, Gb,
+                                                                Gb2, DX, DY, DZ);
+              continue;
+            }
+          }
+          const auto run2 = [&]<int Step>() {
+            ho_window_impulses_twin<T, Vi, Table, Step, Bk>(G.len, a, G.off, CA, CB, X, Y, Z, VX, VY, VZ, Gb, Gb2,
+                                                            Qb, Qb2);
+            if constexpr (Step == 1 && !kPos) {
+              if (s.fuse && G.off > 0) {   // off < len here: overlapping ranges, one scatter pass each
+                window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, DX, DY, DZ, Gb);
+                window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, DX, DY, DZ, Gb2);
+                return;
+              }
+            }
+            window_segment_scatter<T, Step, Bk>(G.len, a, G.off, DX, DY, DZ, Gb);
+            if constexpr (kPos) window_segment_scatter<T, Step, Bk>(G.len, a, G.off, PX, PY, PZ, Qb);
+            window_segment_scatter<T, Step, Bk>(G.len, a, G.off, DX, DY, DZ, Gb2);
+            if constexpr (kPos) window_segment_scatter<T, Step, Bk>(G.len, a, G.off, PX, PY, PZ, Qb2);
+          };
+          if (G.step == 1)
+            run2.template operator()<1>();
+          else
+            run2.template operator()<2>();
+          continue;
+        }
         // unit stride, lower and upper ranges disjoint: impulses and scatter in one pass
         if constexpr (!kPos) {
           if (s.fuse && G.step == 1 && G.off >= G.len) {

@@ -59,6 +59,39 @@ void allocate_ho_window(Springs& s, int parts) {
                0);
 }
 
+/// The geometry of a window spring (p, q): unit vector n, length l and velocity along n ddot.
+/// The arithmetic of kernels::ho_spring_velocity (ho_spring_axis) operation for operation; shared
+/// by the one-spring and the twin loops (ho_window_spring, ho_window_twin_*), so their bits agree.
+template <class T>
+[[gnu::always_inline]] inline void ho_window_geometry(Index p, Index q, const T* __restrict X, const T* __restrict Y,
+                                                     const T* __restrict Z, const T* __restrict VX,
+                                                     const T* __restrict VY, const T* __restrict VZ, T& n0, T& n1,
+                                                     T& n2, T& l, T& ddot) {
+  using std::sqrt;
+  const T tiny = std::numeric_limits<T>::min();
+  const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
+  const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+  l = sqrt(l2);
+  const T inv = T(1) / (l + tiny);
+  n0 = d0 * inv;
+  n1 = d1 * inv;
+  n2 = d2 * inv;
+  ddot = n0 * (VX[q] - VX[p]) + n1 * (VY[q] - VY[p]) + n2 * (VZ[q] - VZ[p]);
+}
+
+/// The impulse per unit inverse mass along n of a spring with constants at c, from its geometry
+/// (HO velocity, or kang_cho_2011 with |ddot|); also its stretch delta.
+template <class T, bool kKc>
+[[gnu::always_inline]] inline T ho_window_sv(std::size_t c, const T* __restrict L0, const T* __restrict KX,
+                                            const T* __restrict KV, T l, T ddot, T& delta) {
+  using std::abs;
+  delta = l - L0[c];
+  if constexpr (kKc)
+    return KX[c] * delta + KV[c] * abs(ddot);
+  else
+    return KX[c] * delta + KV[c] * ddot;
+}
+
 /// One spring (p, q) of a window segment, constants at c: its unit vector n, stretch delta,
 /// velocity along n ddot and the impulse per unit inverse mass along n (the return value; HO
 /// velocity, or kang_cho_2011 with |ddot|). The arithmetic of kernels::ho_spring_velocity
@@ -70,22 +103,9 @@ template <class T, bool kKc>
                                                 const T* __restrict Y, const T* __restrict Z, const T* __restrict VX,
                                                 const T* __restrict VY, const T* __restrict VZ, T& n0, T& n1, T& n2,
                                                 T& delta, T& ddot) {
-  using std::sqrt;
-  using std::abs;
-  const T tiny = std::numeric_limits<T>::min();
-  const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
-  const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
-  const T l = sqrt(l2);
-  const T inv = T(1) / (l + tiny);
-  n0 = d0 * inv;
-  n1 = d1 * inv;
-  n2 = d2 * inv;
-  delta = l - L0[c];
-  ddot = n0 * (VX[q] - VX[p]) + n1 * (VY[q] - VY[p]) + n2 * (VZ[q] - VZ[p]);
-  if constexpr (kKc)
-    return KX[c] * delta + KV[c] * abs(ddot);
-  else
-    return KX[c] * delta + KV[c] * ddot;
+  T l;
+  ho_window_geometry<T>(p, q, X, Y, Z, VX, VY, VZ, n0, n1, n2, l, ddot);
+  return ho_window_sv<T, kKc>(c, L0, KX, KV, l, ddot, delta);
 }
 
 /// Per-segment impulse loop on the window: springs (a + Step r, a + Step r + off) in window
@@ -150,6 +170,109 @@ inline void ho_window_impulses_scatter(Index len, Index a, Index off, const std:
     DX[q] -= g0;
     DY[q] -= g1;
     DZ[q] -= g2;
+  }
+}
+
+/// Per-spring constants of one segment of a twin pair (ho_window_impulses_twin): the table ids
+/// (Table) or the streams l0, kx, kv (and ex, ev for analytic_position), from the segment's start.
+template <class T>
+struct HoSegConsts {
+  const std::uint16_t* id;
+  const T *l0, *kx, *kv, *ex, *ev;
+};
+
+/// ho_window_impulses for a twin pair of segments (SpringSegment::twin: the same endpoints, the
+/// springs' own constants A and B): the geometry of each endpoint pair (n, l, ddot) once, the
+/// impulses of both springs into GA and GB (and QA, QB for analytic_position). Each spring's
+/// operations are those of ho_window_impulses, so GA and GB hold the bits the two segments'
+/// loops would write.
+template <class T, int V, bool Table, int Step, Index Bk>
+inline void ho_window_impulses_twin(Index len, Index a, Index off, HoSegConsts<T> A, HoSegConsts<T> B,
+                                    const T* __restrict X, const T* __restrict Y, const T* __restrict Z,
+                                    const T* __restrict VX, const T* __restrict VY, const T* __restrict VZ,
+                                    T* __restrict GA, T* __restrict GB, T* __restrict QA, T* __restrict QB) {
+  constexpr bool kPos = V == 1;   // HoVariant::AnalyticPosition
+  constexpr bool kKc = V == 2;    // HoVariant::KangCho2011
+  const std::uint16_t* __restrict IA = A.id;
+  const std::uint16_t* __restrict IB = B.id;
+  const T* __restrict L0a = A.l0;
+  const T* __restrict KXa = A.kx;
+  const T* __restrict KVa = A.kv;
+  const T* __restrict L0b = B.l0;
+  const T* __restrict KXb = B.kx;
+  const T* __restrict KVb = B.kv;
+  for (Index r = 0; r < len; ++r) {
+    const Index p = a + Step * r, q = p + off;
+    const std::size_t ca = Table ? static_cast<std::size_t>(IA[r]) : static_cast<std::size_t>(r);
+    const std::size_t cb = Table ? static_cast<std::size_t>(IB[r]) : static_cast<std::size_t>(r);
+    T n0, n1, n2, l, ddot, da, db;
+    ho_window_geometry<T>(p, q, X, Y, Z, VX, VY, VZ, n0, n1, n2, l, ddot);
+    const T sa = ho_window_sv<T, kKc>(ca, L0a, KXa, KVa, l, ddot, da);
+    const T sb = ho_window_sv<T, kKc>(cb, L0b, KXb, KVb, l, ddot, db);
+    GA[r] = sa * n0;
+    GA[Bk + r] = sa * n1;
+    GA[2 * Bk + r] = sa * n2;
+    GB[r] = sb * n0;
+    GB[Bk + r] = sb * n1;
+    GB[2 * Bk + r] = sb * n2;
+    if constexpr (kPos) {
+      const T ea = A.ex[ca] * da + A.ev[ca] * ddot;
+      const T eb = B.ex[cb] * db + B.ev[cb] * ddot;
+      QA[r] = ea * n0;
+      QA[Bk + r] = ea * n1;
+      QA[2 * Bk + r] = ea * n2;
+      QB[r] = eb * n0;
+      QB[Bk + r] = eb * n1;
+      QB[2 * Bk + r] = eb * n2;
+    }
+  }
+}
+
+/// ho_window_impulses_scatter for a twin pair of unit-stride segments with disjoint lower and
+/// upper ranges (off >= len): per spring position r the geometry once, then slot a + r gets
+/// + gA, then + gB, and slot a + r + off gets - gA, then - gB: each slot the additions of the
+/// first segment's loop, then the second's, as when the two run one after the other (no slot
+/// gets two additions from one segment). GA and GB still receive the impulses (no contraction
+/// into the additions). Velocity and kang_cho_2011 variants.
+template <class T, int V, bool Table, Index Bk>
+inline void ho_window_impulses_scatter_twin(Index len, Index a, Index off, HoSegConsts<T> A, HoSegConsts<T> B,
+                                            const T* __restrict X, const T* __restrict Y, const T* __restrict Z,
+                                            const T* __restrict VX, const T* __restrict VY, const T* __restrict VZ,
+                                            T* __restrict GA, T* __restrict GB, T* __restrict DX, T* __restrict DY,
+                                            T* __restrict DZ) {
+  static_assert(V != 1, "analytic_position keeps the two passes");
+  constexpr bool kKc = V == 2;   // HoVariant::KangCho2011
+  const std::uint16_t* __restrict IA = A.id;
+  const std::uint16_t* __restrict IB = B.id;
+  const T* __restrict L0a = A.l0;
+  const T* __restrict KXa = A.kx;
+  const T* __restrict KVa = A.kv;
+  const T* __restrict L0b = B.l0;
+  const T* __restrict KXb = B.kx;
+  const T* __restrict KVb = B.kv;
+#pragma omp simd
+  for (Index r = 0; r < len; ++r) {
+    const Index p = a + r, q = p + off;
+    const std::size_t ca = Table ? static_cast<std::size_t>(IA[r]) : static_cast<std::size_t>(r);
+    const std::size_t cb = Table ? static_cast<std::size_t>(IB[r]) : static_cast<std::size_t>(r);
+    T n0, n1, n2, l, ddot, da, db;
+    ho_window_geometry<T>(p, q, X, Y, Z, VX, VY, VZ, n0, n1, n2, l, ddot);
+    const T sa = ho_window_sv<T, kKc>(ca, L0a, KXa, KVa, l, ddot, da);
+    const T sb = ho_window_sv<T, kKc>(cb, L0b, KXb, KVb, l, ddot, db);
+    const T a0 = sa * n0, a1 = sa * n1, a2 = sa * n2;
+    const T b0 = sb * n0, b1 = sb * n1, b2 = sb * n2;
+    GA[r] = a0;
+    GA[Bk + r] = a1;
+    GA[2 * Bk + r] = a2;
+    GB[r] = b0;
+    GB[Bk + r] = b1;
+    GB[2 * Bk + r] = b2;
+    DX[p] = (DX[p] + a0) + b0;
+    DY[p] = (DY[p] + a1) + b1;
+    DZ[p] = (DZ[p] + a2) + b2;
+    DX[q] = (DX[q] - a0) - b0;
+    DY[q] = (DY[q] - a1) - b1;
+    DZ[q] = (DZ[q] - a2) - b2;
   }
 }
 
