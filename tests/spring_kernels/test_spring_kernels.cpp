@@ -271,3 +271,91 @@ TEST(SpringKernels, SqrtRecipAvx512IsCorrectlyRounded) {
 }
 
 }  // namespace
+
+#include <map>
+#include <utility>
+
+namespace {
+
+// Per slot, the sequence of additions (spring begin + r, sign) that a sweep over segs in this
+// order performs (lower endpoint +, upper endpoint -; each segment's lower pass, then its upper).
+std::map<Index, std::vector<std::pair<Index, int>>> slot_additions(const std::vector<loom::SpringSegment>& segs) {
+  std::map<Index, std::vector<std::pair<Index, int>>> out;
+  for (const auto& G : segs) {
+    for (Index r = 0; r < G.len; ++r) out[G.i0 + G.step * r].push_back({G.begin + r, +1});
+    for (Index r = 0; r < G.len; ++r) out[G.i0 + G.step * r + G.off].push_back({G.begin + r, -1});
+  }
+  return out;
+}
+
+void expect_valid_pairing(const std::vector<loom::SpringSegment>& before, const std::vector<loom::SpringSegment>& after) {
+  ASSERT_EQ(before.size(), after.size());
+  // the same segments, and every slot gets its additions in the same order
+  EXPECT_EQ(slot_additions(before), slot_additions(after));
+  for (std::size_t t = 0; t < after.size(); ++t) {
+    if (!after[t].twin) continue;
+    ASSERT_LT(t + 1, after.size());
+    const auto &a = after[t], &b = after[t + 1];
+    EXPECT_EQ(b.twin, 0);
+    EXPECT_EQ(a.i0, b.i0);
+    EXPECT_EQ(a.len, b.len);
+    EXPECT_EQ(a.off, b.off);
+    EXPECT_EQ(a.step, b.step);
+    EXPECT_NE(a.begin, b.begin);
+  }
+}
+
+}  // namespace
+
+// pair_twin_segments (issue 16) makes segments over the same endpoints neighbours only where no
+// slot's order of additions changes: a hand-built block (a move past a disjoint segment, a move
+// blocked by a segment that shares slots, an adjacent pair), then random blocks checked against
+// the per-slot addition sequences of the original order.
+TEST(SpringKernels, TwinPairingKeepsEverySlotsOrder) {
+  using loom::SpringSegment;
+  // begin, len, i0, off, step
+  const std::vector<SpringSegment> block{
+      {0, 10, 0, 1, 1},    {10, 10, 100, 1, 1}, {20, 10, 0, 1, 1},  {30, 10, 100, 1, 1}, {40, 5, 200, 2, 2},
+      {45, 5, 201, 3, 1},  {50, 5, 200, 2, 2},  {55, 3, 300, 5, 1}, {58, 3, 300, 5, 1}};
+  std::vector<SpringSegment> s = block;
+  loom::pair_twin_segments(s, 0);
+  expect_valid_pairing(block, s);
+  const Index order[] = {0, 20, 10, 30, 40, 45, 50, 55, 58};   // by begin
+  const Index twin[] = {1, 0, 1, 0, 0, 0, 0, 1, 0};
+  for (std::size_t t = 0; t < s.size(); ++t) {
+    EXPECT_EQ(s[t].begin, order[t]) << t;
+    EXPECT_EQ(s[t].twin, twin[t]) << t;
+  }
+  // only [from, end) is touched
+  std::vector<SpringSegment> s2 = block;
+  loom::pair_twin_segments(s2, 3);
+  EXPECT_EQ(s2[0].twin, 0);
+  EXPECT_EQ(s2[2].begin, 20);
+
+  std::mt19937 rng(7);
+  int paired = 0, moved = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    std::vector<SpringSegment> b;
+    Index begin = 0;
+    const int n = 2 + static_cast<int>(rng() % 12);
+    for (int k = 0; k < n; ++k) {
+      SpringSegment G{begin, 1 + static_cast<Index>(rng() % 6), static_cast<Index>(rng() % 40),
+                      1 + static_cast<Index>(rng() % 8), 1 + static_cast<Index>(rng() % 2)};
+      if (k > 0 && rng() % 2 == 0) {   // a copy of an earlier segment's endpoints
+        const SpringSegment& e = b[rng() % b.size()];
+        G = {begin, e.len, e.i0, e.off, e.step};
+      }
+      begin += G.len;
+      b.push_back(G);
+    }
+    std::vector<SpringSegment> p = b;
+    loom::pair_twin_segments(p, 0);
+    expect_valid_pairing(b, p);
+    for (std::size_t t = 0; t < p.size(); ++t) {
+      paired += p[t].twin ? 1 : 0;
+      moved += p[t].begin != b[t].begin ? 1 : 0;
+    }
+  }
+  EXPECT_GT(paired, 100);   // the random blocks did exercise pairing and moves
+  EXPECT_GT(moved, 50);
+}

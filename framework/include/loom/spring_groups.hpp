@@ -37,7 +37,9 @@ namespace loom {
 /// A run of springs (i0 + step r, i0 + step r + off), r < len, stored at [begin, begin + len).
 /// twin = 1: the next segment of the block has the same i0, len, off and step (duplicate pairs,
 /// the next rank: it reads the same vertices), so a sweep may compute the two segments' shared
-/// geometry once (issue 16; group_springs sets it on the first of the two, 0 on the second).
+/// geometry once (issue 16; group_springs sets it on the first of the two, 0 on the second, and
+/// makes such segments neighbours where that keeps every slot's order of additions:
+/// pair_twin_segments).
 struct SpringSegment {
   Index begin, len, i0, off, step;   ///< step 1 or 2
   Index twin = 0;
@@ -69,6 +71,42 @@ struct SpringGroups {
   std::vector<SpringBlock> blocks;
   std::vector<Index> part_block;      ///< blocks of part p: [part_block[p], part_block[p + 1])
 };
+
+/// Whether two segments add to no common slot (conservatively: their lower and upper slot
+/// intervals [i0, i0 + step (len - 1)] and [i0 + off, ...] do not meet).
+inline bool spring_segments_disjoint(const SpringSegment& a, const SpringSegment& b) {
+  const Index ea = a.step * (a.len - 1), eb = b.step * (b.len - 1);
+  const Index sa[2] = {a.i0, a.i0 + a.off}, sb[2] = {b.i0, b.i0 + b.off};
+  for (Index x : sa)
+    for (Index y : sb)
+      if (x <= y + eb && y <= x + ea) return false;
+  return true;
+}
+
+/// Twin pairs among the segments [from, end) of one block (issue 16): a segment and a later one
+/// with the same i0, len, off and step (duplicate springs on the same pairs: they read the same
+/// vertices) are made neighbours, the first marked twin = 1. The later segment moves up only past
+/// segments that add to none of its slots (spring_segments_disjoint), so every slot receives its
+/// additions in the same order as before: the sums are unchanged, bit for bit. Segments refer to
+/// their springs by begin, so the springs stay where they are.
+inline void pair_twin_segments(std::vector<SpringSegment>& segs, std::size_t from) {
+  const std::size_t end = segs.size();
+  for (std::size_t t = from; t + 1 < end; ++t) {
+    const SpringSegment s0 = segs[t];
+    for (std::size_t u = t + 1; u < end; ++u) {
+      const SpringSegment s1 = segs[u];
+      if (s1.i0 != s0.i0 || s1.len != s0.len || s1.off != s0.off || s1.step != s0.step) continue;
+      bool free = true;
+      for (std::size_t m = t + 1; m < u && free; ++m) free = spring_segments_disjoint(segs[m], s1);
+      if (!free) continue;   // a later match may still move up
+      for (std::size_t m = u; m > t + 1; --m) segs[m] = segs[m - 1];
+      segs[t + 1] = s1;
+      segs[t].twin = 1;
+      ++t;
+      break;
+    }
+  }
+}
 
 /// Group the springs (i[q] < j[q], in the layout's traversal order: each part's interior
 /// springs sorted by lower endpoint). Returns perm: the grouped order is q' -> perm[q'] (apply it
@@ -125,16 +163,7 @@ inline std::vector<Index> group_springs(const SpringLayout& layout, const std::v
         }
         g.segs.push_back(s);
       }
-      // twins: consecutive segments of the block over the same springs' endpoints (left to right,
-      // each segment in at most one pair)
-      for (std::size_t t = static_cast<std::size_t>(seg_begin); t + 1 < g.segs.size(); ++t) {
-        SpringSegment& s0 = g.segs[t];
-        const SpringSegment& s1 = g.segs[t + 1];
-        if (s0.i0 == s1.i0 && s0.len == s1.len && s0.off == s1.off && s0.step == s1.step) {
-          s0.twin = 1;
-          ++t;
-        }
-      }
+      pair_twin_segments(g.segs, static_cast<std::size_t>(seg_begin));
       g.blocks.push_back({v1, seg_begin, static_cast<Index>(g.segs.size())});
     }
   }
