@@ -110,6 +110,23 @@ void check_one_step_velocity(SpringCase sc, double tol, bool table = true) {
   }
 }
 
+// One HO step on raw arrays in the variant var (dx: analytic_position's position accumulator).
+void ho_step_variant(HoVariant var, const SpringLayout& layout, const HoSprings<double>& sp, std::vector<double>& X,
+                     std::vector<double>& V, std::vector<double>& dv, std::vector<double>& dx, const double* w, double h,
+                     const std::array<double, 3>& g) {
+  switch (var) {
+    case HoVariant::Velocity:
+      ho_step_arrays<double, HoVariant::Velocity>(layout, sp, X.data(), V.data(), dv.data(), nullptr, w, h, g);
+      break;
+    case HoVariant::AnalyticPosition:
+      ho_step_arrays<double, HoVariant::AnalyticPosition>(layout, sp, X.data(), V.data(), dv.data(), dx.data(), w, h, g);
+      break;
+    case HoVariant::KangCho2011:
+      ho_step_arrays<double, HoVariant::KangCho2011>(layout, sp, X.data(), V.data(), dv.data(), nullptr, w, h, g);
+      break;
+  }
+}
+
 }  // namespace
 
 TEST(HoOneStep, VelocityChangeIsExactUndamped) {
@@ -582,22 +599,7 @@ TEST(HoStorage, WindowedSweepIsBitIdentical) {
         sp.win_cap = cap;
         allocate_ho_window(sp, ho.layout().parts());
         std::vector<double> X = x, V = v, dv(x.size(), 0.0), dx(x.size(), 0.0);
-        for (int st = 0; st < 12; ++st) {
-          switch (var) {
-            case HoVariant::Velocity:
-              ho_step_arrays<double, HoVariant::Velocity>(ho.layout(), sp, X.data(), V.data(), dv.data(), nullptr, w,
-                                                          1e-4, g);
-              break;
-            case HoVariant::AnalyticPosition:
-              ho_step_arrays<double, HoVariant::AnalyticPosition>(ho.layout(), sp, X.data(), V.data(), dv.data(),
-                                                                  dx.data(), w, 1e-4, g);
-              break;
-            case HoVariant::KangCho2011:
-              ho_step_arrays<double, HoVariant::KangCho2011>(ho.layout(), sp, X.data(), V.data(), dv.data(), nullptr,
-                                                             w, 1e-4, g);
-              break;
-          }
-        }
+        for (int st = 0; st < 12; ++st) ho_step_variant(var, ho.layout(), sp, X, V, dv, dx, w, 1e-4, g);
         EXPECT_TRUE(std::all_of(dv.begin(), dv.end(), [](double d) { return d == 0.0; }));
         X.insert(X.end(), V.begin(), V.end());
         return X;
@@ -778,22 +780,7 @@ TEST(HoStorage, TwinSegmentsAreBitIdentical) {
         if (!window) sp.win_cap = 0;
         allocate_ho_window(sp, ho.layout().parts());
         std::vector<double> X = x, V = v, dv(x.size(), 0.0), dx(x.size(), 0.0);
-        for (int st = 0; st < 12; ++st) {
-          switch (var) {
-            case HoVariant::Velocity:
-              ho_step_arrays<double, HoVariant::Velocity>(ho.layout(), sp, X.data(), V.data(), dv.data(), nullptr, w,
-                                                          1e-4, g);
-              break;
-            case HoVariant::AnalyticPosition:
-              ho_step_arrays<double, HoVariant::AnalyticPosition>(ho.layout(), sp, X.data(), V.data(), dv.data(),
-                                                                  dx.data(), w, 1e-4, g);
-              break;
-            case HoVariant::KangCho2011:
-              ho_step_arrays<double, HoVariant::KangCho2011>(ho.layout(), sp, X.data(), V.data(), dv.data(), nullptr,
-                                                             w, 1e-4, g);
-              break;
-          }
-        }
+        for (int st = 0; st < 12; ++st) ho_step_variant(var, ho.layout(), sp, X, V, dv, dx, w, 1e-4, g);
         EXPECT_TRUE(std::all_of(dv.begin(), dv.end(), [](double e) { return e == 0.0; }));
         X.insert(X.end(), V.begin(), V.end());
         return X;

@@ -394,6 +394,33 @@ SelfCollision::Options shaken_sheet_options(double thickness, double refresh_fra
   return o;
 }
 
+// The lists by brute force: every non-adjacent vertex-triangle and edge-edge pair whose distance
+// at the reference positions X is below th + the largest reach of each element's vertices, in
+// the lists' order (vertex, then triangle; edge pairs e < f).
+void brute_force_lists(const Mesh& mesh, const std::vector<std::array<Index, 2>>& edges, const std::vector<double>& X,
+                       const std::vector<double>& reach, double th, std::vector<std::array<Index, 2>>& bvt,
+                       std::vector<std::array<Index, 2>>& bee) {
+  bvt.clear();
+  bee.clear();
+  const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
+  for (Index v = 0; v < nv; ++v)
+    for (Index t = 0; t < nt; ++t) {
+      const Index* tv = &mesh.triangles[3 * t];
+      if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
+      const double r = th + reach[v] + std::max({reach[tv[0]], reach[tv[1]], reach[tv[2]]});
+      double w[3];
+      if (point_triangle_distance(&X[3 * v], &X[3 * tv[0]], &X[3 * tv[1]], &X[3 * tv[2]], w) < r) bvt.push_back({v, t});
+    }
+  for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
+    for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
+      const auto &E = edges[e], &F = edges[f];
+      if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
+      const double r = th + std::max(reach[E[0]], reach[E[1]]) + std::max(reach[F[0]], reach[F[1]]);
+      double a, b;
+      if (segment_segment_distance(&X[3 * E[0]], &X[3 * E[1]], &X[3 * F[0]], &X[3 * F[1]], a, b) < r) bee.push_back({e, f});
+    }
+}
+
 State shaken_sheet_state(const Mesh& mesh) {
   State s;
   s.resize(mesh.num_vertices());
@@ -597,7 +624,6 @@ TEST(SelfCollisionBvh, ListsHoldExactlyThePairsWithinThicknessPlusReachesAfterRe
   // pairs): refreshes (a traversal restricted to the refreshed triangles, which must find
   // exactly the pairs it dropped) and rebuilds alike.
   const Mesh mesh = make_grid(10, 10, 0.3, 0.3, GridPlane::XZ);
-  const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
   const auto edges = mesh.edges();
   const double th = 0.006, h = 0.01;
   for (const double fraction : {1.0, 0.0}) {
@@ -617,24 +643,7 @@ TEST(SelfCollisionBvh, ListsHoldExactlyThePairsWithinThicknessPlusReachesAfterRe
       refreshed += sc.last_stats().refreshed;
       sc.candidate_lists(vt, ee);
       sc.list_reference(X, reach);
-      bvt.clear();
-      bee.clear();
-      for (Index v = 0; v < nv; ++v)
-        for (Index t = 0; t < nt; ++t) {
-          const Index* tv = &mesh.triangles[3 * t];
-          if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
-          const double r = th + reach[v] + std::max({reach[tv[0]], reach[tv[1]], reach[tv[2]]});
-          double w[3];
-          if (point_triangle_distance(&X[3 * v], &X[3 * tv[0]], &X[3 * tv[1]], &X[3 * tv[2]], w) < r) bvt.push_back({v, t});
-        }
-      for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
-        for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
-          const auto &E = edges[e], &F = edges[f];
-          if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
-          const double r = th + std::max(reach[E[0]], reach[E[1]]) + std::max(reach[F[0]], reach[F[1]]);
-          double a, b;
-          if (segment_segment_distance(&X[3 * E[0]], &X[3 * E[1]], &X[3 * F[0]], &X[3 * F[1]], a, b) < r) bee.push_back({e, f});
-        }
+      brute_force_lists(mesh, edges, X, reach, th, bvt, bee);
       ASSERT_EQ(vt, bvt) << "step " << step << ", fraction " << fraction;
       ASSERT_EQ(ee, bee) << "step " << step << ", fraction " << fraction;
       checked += bvt.size() + bee.size();
@@ -819,7 +828,7 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshesOfManyVerticesOnAShakenFoldEqualTheBr
   // r_b at the reference positions (all pairs, brute force).
   const int n = 20;
   const Mesh mesh = make_grid(n, n, 1.0, 1.0, GridPlane::XZ);
-  const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
+  const Index nv = mesh.num_vertices();
   const auto edges = mesh.edges();
   const double edge = 1.0 / (n - 1), th = 0.25 * edge, h = 0.01;
   SelfCollision sc(shaken_sheet_options(th, 1.0), mesh);
@@ -858,30 +867,11 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshesOfManyVerticesOnAShakenFoldEqualTheBr
     fewest = std::min(fewest, r);
     sc.candidate_lists(vt, ee);
     sc.list_reference(X, reach);
-    bvt.clear();
-    bee.clear();
-    for (Index v = 0; v < nv; ++v)
-      for (Index t = 0; t < nt; ++t) {
-        const Index* tv = &mesh.triangles[3 * t];
-        if (v == tv[0] || v == tv[1] || v == tv[2]) continue;
-        const double rr = th + reach[v] + std::max({reach[tv[0]], reach[tv[1]], reach[tv[2]]});
-        double w[3];
-        if (point_triangle_distance(&X[3 * v], &X[3 * tv[0]], &X[3 * tv[1]], &X[3 * tv[2]], w) < rr) {
-          bvt.push_back({v, t});
-          if (rest_apart(v, tv[0]) > 4) ++far_in_mesh;
-        }
-      }
-    for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
-      for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
-        const auto &E = edges[e], &F = edges[f];
-        if (E[0] == F[0] || E[0] == F[1] || E[1] == F[0] || E[1] == F[1]) continue;
-        const double rr = th + std::max(reach[E[0]], reach[E[1]]) + std::max(reach[F[0]], reach[F[1]]);
-        double a, b;
-        if (segment_segment_distance(&X[3 * E[0]], &X[3 * E[1]], &X[3 * F[0]], &X[3 * F[1]], a, b) < rr) {
-          bee.push_back({e, f});
-          if (rest_apart(E[0], F[0]) > 4) ++far_in_mesh;
-        }
-      }
+    brute_force_lists(mesh, edges, X, reach, th, bvt, bee);
+    for (const auto& p : bvt)
+      if (rest_apart(p[0], mesh.triangles[3 * p[1]]) > 4) ++far_in_mesh;
+    for (const auto& p : bee)
+      if (rest_apart(edges[p[0]][0], edges[p[1]][0]) > 4) ++far_in_mesh;
     ASSERT_EQ(vt, bvt) << "step " << step << ", " << r << " vertices refreshed";
     ASSERT_EQ(ee, bee) << "step " << step << ", " << r << " vertices refreshed";
     checked += bvt.size() + bee.size();

@@ -362,6 +362,15 @@ double ImplicitSelfContact::first_response(const Contact& c) const {
   return it != warm_.end() && it->first == key ? it->second : 1.0 / c.W;
 }
 
+double* ImplicitSelfContact::matrix_free_diagonal() {
+  if (!matrix_free_) return nullptr;
+  double* E = diag_.data();
+  for (const Contact& c : contacts_)
+    for (int a = 0; a < 4; ++a) std::fill_n(E + 9 * static_cast<std::size_t>(c.v[a]), 9, 0.0);
+  add_diagonal(E);
+  return E;
+}
+
 bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector<double>& b,
                                        const std::vector<double>& dv, double h) {
   if (friction_ <= 0) return false;
@@ -371,14 +380,8 @@ bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector
     c.stick = false;
     c.released = false;
   }
-  // Matrix-free, A holds no self-contact term: their diagonal blocks (the springs', no damper
-  // yet) beside it, so that both forms read the same response (as correct_friction).
-  double* E = matrix_free_ ? diag_.data() : nullptr;
-  if (E) {
-    for (const Contact& c : contacts_)
-      for (int a = 0; a < 4; ++a) std::fill_n(E + 9 * static_cast<std::size_t>(c.v[a]), 9, 0.0);
-    add_diagonal(E);
-  }
+  // Matrix-free: the self-contact terms' diagonal blocks (the springs', no damper yet) beside A.
+  double* E = matrix_free_diagonal();
   // First every pair's response with the other vertices fixed, from A as the last solve had it
   // (no pair's damper in it yet, assembled or not), then the dampers.
   for (Contact& c : contacts_) {
@@ -410,14 +413,8 @@ bool ImplicitSelfContact::add_friction(const State& s, BsrMatrix& A, std::vector
 bool ImplicitSelfContact::correct_friction(const State& s, BsrMatrix& A, std::vector<double>& b,
                                            const std::vector<double>& dv) {
   bool changed = false;
-  // Matrix-free, A holds no self-contact term: their diagonal blocks (add_diagonal) beside it,
-  // so that both forms read the same response.
-  double* E = matrix_free_ ? diag_.data() : nullptr;
-  if (E) {
-    for (const Contact& c : contacts_)
-      for (int a = 0; a < 4; ++a) std::fill_n(E + 9 * static_cast<std::size_t>(c.v[a]), 9, 0.0);
-    add_diagonal(E);
-  }
+  // Matrix-free: the self-contact terms' diagonal blocks (with the dampers) beside A.
+  double* E = matrix_free_diagonal();
   for (Contact& c : contacts_) {
     if (c.fr == 0) continue;
     double ut[3];

@@ -227,7 +227,11 @@ class ImplicitSelfContact final : public ExtraOperator {
   /// The pairs' responses in the last step (kernels::friction_response), by their vertices,
   /// sorted: a pair found again starts its first damper from it (first_response).
   std::vector<std::pair<std::array<Index, 4>, double>> warm_;
-  std::vector<double> diag_;                  ///< correct_friction, matrix-free: the self-contact terms' diagonal blocks (9 per vertex)
+  std::vector<double> diag_;                  ///< add_friction / correct_friction, matrix-free: the self-contact terms' diagonal blocks (9 per vertex)
+  /// Matrix-free, A holds no self-contact term: diag_ gets their diagonal blocks (add_diagonal,
+  /// the contacts' vertices zeroed first) and is returned, so that both forms read the same
+  /// response beside A; assembled, nullptr.
+  double* matrix_free_diagonal();
   std::vector<Contact> contacts_;
   std::vector<std::array<Index, 2>> reserve_, fresh_;
   std::vector<std::array<Index, 3>> extra_;   ///< (block position, row, column) of non-material blocks
