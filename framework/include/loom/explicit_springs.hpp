@@ -48,6 +48,33 @@
 
 namespace loom {
 
+/// The shared part of a spring's force (the arithmetic of SpringSweep::block_forces): d = x_q - x_p,
+/// the inverse length il (no compare: l2 + the smallest normal, the same value for l2 > 0) and,
+/// damped, du = d . (v_q - v_p). One function for the one-segment and the twin loops, so their
+/// bits agree; the twin loops compute it once per endpoint pair.
+template <class T, bool Damped>
+[[gnu::always_inline]] inline void sweep_spring_geometry(Index p, Index q, const T* __restrict X,
+                                                        const T* __restrict Y, const T* __restrict Z,
+                                                        const T* __restrict VX, const T* __restrict VY,
+                                                        const T* __restrict VZ, T& d0, T& d1, T& d2, T& il, T& du) {
+  const T tiny = std::numeric_limits<T>::min();
+  d0 = X[q] - X[p];
+  d1 = Y[q] - Y[p];
+  d2 = Z[q] - Z[p];
+  const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
+  using std::sqrt;
+  il = T(1) / sqrt(l2 + tiny);
+  if constexpr (Damped) du = d0 * (VX[q] - VX[p]) + d1 * (VY[q] - VY[p]) + d2 * (VZ[q] - VZ[p]);
+}
+
+/// A spring's force scale from the shared part.
+template <class T, bool Damped>
+[[gnu::always_inline]] inline T sweep_spring_scale(T k, T l0, T c, T il, T du) {
+  T sc = k * (T(1) - l0 * il);
+  if constexpr (Damped) sc += c * du * il * il;
+  return sc;
+}
+
 /// Forces of a segment's springs (a + Step r, a + Step r + off), r < len, in window coordinates,
 /// into F (3 x Bk, structure of arrays): the arithmetic of SpringSweep::block_forces.
 template <class T, bool Damped, int Step, Index Bk>
@@ -55,19 +82,12 @@ inline void sweep_segment_forces(Index len, Index a, Index off, const T* __restr
                                  const T* __restrict C, const T* __restrict X, const T* __restrict Y,
                                  const T* __restrict Z, const T* __restrict VX, const T* __restrict VY,
                                  const T* __restrict VZ, T* __restrict F) {
-  const T tiny = std::numeric_limits<T>::min();
 #pragma omp simd
   for (Index r = 0; r < len; ++r) {
     const Index p = a + Step * r, q = p + off;
-    const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
-    const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
-    using std::sqrt;
-    const T il = T(1) / sqrt(l2 + tiny);   // see block_forces: no compare, same value for l2 > 0
-    T sc = K[r] * (T(1) - L0[r] * il);
-    if constexpr (Damped) {
-      const T du = d0 * (VX[q] - VX[p]) + d1 * (VY[q] - VY[p]) + d2 * (VZ[q] - VZ[p]);
-      sc += C[r] * du * il * il;
-    }
+    T d0, d1, d2, il, du = T(0);
+    sweep_spring_geometry<T, Damped>(p, q, X, Y, Z, VX, VY, VZ, d0, d1, d2, il, du);
+    const T sc = sweep_spring_scale<T, Damped>(K[r], L0[r], Damped ? C[r] : T(0), il, du);
     F[r] = sc * d0;
     F[Bk + r] = sc * d1;
     F[2 * Bk + r] = sc * d2;
@@ -85,19 +105,12 @@ inline void sweep_segment_forces_scatter(Index len, Index a, Index off, const T*
                                          const T* __restrict Y, const T* __restrict Z, const T* __restrict VX,
                                          const T* __restrict VY, const T* __restrict VZ, T* __restrict F,
                                          T* __restrict FX, T* __restrict FY, T* __restrict FZ) {
-  const T tiny = std::numeric_limits<T>::min();
 #pragma omp simd
   for (Index r = 0; r < len; ++r) {
     const Index p = a + r, q = p + off;
-    const T d0 = X[q] - X[p], d1 = Y[q] - Y[p], d2 = Z[q] - Z[p];
-    const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
-    using std::sqrt;
-    const T il = T(1) / sqrt(l2 + tiny);
-    T sc = K[r] * (T(1) - L0[r] * il);
-    if constexpr (Damped) {
-      const T du = d0 * (VX[q] - VX[p]) + d1 * (VY[q] - VY[p]) + d2 * (VZ[q] - VZ[p]);
-      sc += C[r] * du * il * il;
-    }
+    T d0, d1, d2, il, du = T(0);
+    sweep_spring_geometry<T, Damped>(p, q, X, Y, Z, VX, VY, VZ, d0, d1, d2, il, du);
+    const T sc = sweep_spring_scale<T, Damped>(K[r], L0[r], Damped ? C[r] : T(0), il, du);
     const T f0 = sc * d0, f1 = sc * d1, f2 = sc * d2;
     F[r] = f0;
     F[Bk + r] = f1;
@@ -109,31 +122,6 @@ inline void sweep_segment_forces_scatter(Index len, Index a, Index off, const T*
     FY[q] -= f1;
     FZ[q] -= f2;
   }
-}
-
-/// The shared part of a spring's force (sweep_segment_forces' arithmetic): d = x_q - x_p, the
-/// inverse length il and, damped, du = d . (v_q - v_p); the twin loops compute it once per pair.
-template <class T, bool Damped>
-[[gnu::always_inline]] inline void sweep_spring_geometry(Index p, Index q, const T* __restrict X,
-                                                        const T* __restrict Y, const T* __restrict Z,
-                                                        const T* __restrict VX, const T* __restrict VY,
-                                                        const T* __restrict VZ, T& d0, T& d1, T& d2, T& il, T& du) {
-  const T tiny = std::numeric_limits<T>::min();
-  d0 = X[q] - X[p];
-  d1 = Y[q] - Y[p];
-  d2 = Z[q] - Z[p];
-  const T l2 = d0 * d0 + d1 * d1 + d2 * d2;
-  using std::sqrt;
-  il = T(1) / sqrt(l2 + tiny);
-  if constexpr (Damped) du = d0 * (VX[q] - VX[p]) + d1 * (VY[q] - VY[p]) + d2 * (VZ[q] - VZ[p]);
-}
-
-/// A spring's force scale from the shared part (sweep_segment_forces' arithmetic).
-template <class T, bool Damped>
-[[gnu::always_inline]] inline T sweep_spring_scale(T k, T l0, T c, T il, T du) {
-  T sc = k * (T(1) - l0 * il);
-  if constexpr (Damped) sc += c * du * il * il;
-  return sc;
 }
 
 /// sweep_segment_forces for a twin pair of segments (SpringSegment::twin: the same endpoints;
