@@ -377,7 +377,8 @@ void BM_Rk4Step_float(benchmark::State& st) {
 // at a time, what the step ran before), 2: blocked (plain order, forces of 128 springs by one loop),
 // 3 + b: grouped and windowed with blocks of kGroupBlocks[b] vertices; 6: the default sweep with
 // two passes (forces, then scatter) for every segment (SpringSweep::fuse = false); 7: the default
-// sweep with each segment of a twin pair on its own (SpringSweep::twins = false).
+// sweep with each segment of a twin pair on its own (SpringSweep::twins = false); 8: the default
+// sweep with each vertex finalised on its own (SpringSweep::block_finalise = false).
 template <class T>
 void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const Row& r = rows()[st.range(0)];
@@ -391,16 +392,18 @@ void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const T g[3] = {T(0), T(-9.81), T(0)};
   SpringSweep<T>* sw = nullptr;
   if constexpr (std::is_same_v<T, float>) sw = kind == 0 ? &c.fsweep : &c.fsweep_plain;
-  else sw = kind == 0 || kind == 6 || kind == 7 ? &c.sweep : (kind >= 3 ? &c.sweep_blk[kind - 3] : &c.sweep_plain);
+  else sw = kind == 0 || kind >= 6 ? &c.sweep : (kind >= 3 ? &c.sweep_blk[kind - 3] : &c.sweep_plain);
   sw->blocked = kind == 2;
   sw->fuse = kind != 6;
   sw->twins = kind != 7;
+  sw->block_finalise = kind != 8;
   st.counters["window"] = static_cast<double>(sw->win_cap);
   st.counters["segs"] = static_cast<double>(sw->segs.size());
   for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
   sw->blocked = false;
   sw->fuse = true;
   sw->twins = true;
+  sw->block_finalise = true;
   benchmark::DoNotOptimize(x.data());
   set_counters(st, r, threads, se_bytes(*sw));
 }
@@ -416,6 +419,7 @@ void BM_SeStep_double_block128(benchmark::State& st) { se_bench<double>(st, fals
 void BM_SeStep_double_block256(benchmark::State& st) { se_bench<double>(st, false, 5); }
 void BM_SeStep_double_unfused(benchmark::State& st) { se_bench<double>(st, false, 6); }
 void BM_SeStep_double_notwin(benchmark::State& st) { se_bench<double>(st, false, 7); }
+void BM_SeStep_double_scalarfin(benchmark::State& st) { se_bench<double>(st, false, 8); }
 
 template <class T>
 void rk4_fused_bench(benchmark::State& st, bool /*is_float*/, bool plain = false) {
@@ -612,6 +616,7 @@ BENCHMARK(BM_SeStep_double_block128)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_block256)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_unfused)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_notwin)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_scalarfin)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double_plain)->Apply(rows_args);

@@ -37,6 +37,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 #include "loom/common.hpp"
@@ -218,6 +219,10 @@ struct SpringSweep {
   /// endpoints) computes d, the inverse length (and du) once per pair (sweep_segment_forces_twin);
   /// the same bits. false: each segment on its own (table1's SeStep_double_notwin row).
   bool twins = true;
+  /// Grouped sweep: when fin offers `finalise4` (se_step_springs' SeFinish), the vertices of a
+  /// block are handed to it four at a time from the window (vectorised, the same bits as fin);
+  /// false: fin one vertex at a time (table1's SeStep_double_scalarfin row, the tests' reference).
+  bool block_finalise = true;
 
   Index size() const { return static_cast<Index>(i.size()); }
   bool damped() const { return !c.empty(); }
@@ -278,6 +283,7 @@ struct SpringSweep {
     win.assign(o.win.size(), T(0));
     fuse = o.fuse;
     twins = o.twins;
+    block_finalise = o.block_finalise;
   }
 
   /// Spring forces at (x, v) accumulated into f, with fin(q, f + 3q) per completed vertex
@@ -411,13 +417,26 @@ struct SpringSweep {
             window_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F);
           }
         }
+        const auto hand_off = [&](Index q) {   // cross springs add to q later: its sums to f
+          const Index l = q - ws;
+          T* fq = f + 3 * static_cast<std::size_t>(q);
+          fq[0] += FX[l];
+          fq[1] += FY[l];
+          fq[2] += FZ[l];
+        };
+        if constexpr (requires { fin.finalise4(qfin, qfin, ws, X, Y, Z, VX, VY, VZ, FX, FY, FZ, def); }) {
+          // four vertices at a time (deferred ones written back unchanged), then their hand-offs
+          if (block_finalise) {
+            const Index vend = fin.finalise4(qfin, B.vertex_end, ws, X, Y, Z, Damped ? VX : nullptr,
+                                             Damped ? VY : nullptr, Damped ? VZ : nullptr, FX, FY, FZ, def);
+            for (; qfin < vend; ++qfin)
+              if (def[qfin]) hand_off(qfin);
+          }
+        }
         for (; qfin < B.vertex_end; ++qfin) {
           const Index l = qfin - ws;
-          if (def[qfin]) {   // cross springs add to it later: hand the sums to f
-            T* fq = f + 3 * static_cast<std::size_t>(qfin);
-            fq[0] += FX[l];
-            fq[1] += FY[l];
-            fq[2] += FZ[l];
+          if (def[qfin]) {
+            hand_off(qfin);
           } else {
             const T fq[3] = {FX[l], FY[l], FZ[l]};
             fin(qfin, fq);
@@ -573,28 +592,104 @@ struct SpringSweep {
   }
 };
 
+/// The per-vertex update of se_step_springs: v += h (w f + g), x += h v for a free vertex (w != 0,
+/// as fma(h, fma(w, f, g), v) and fma(h, v, x)); a pinned one (w = 0) moves with its velocity
+/// (x += h v where that component of v is not zero: a fixed pin is not touched at all).
+/// finalise4 does the same for four vertices at a time from the windowed sweep's copies
+/// (SpringSweep::block_finalise), operation for operation (double with AVX2 and FMA), so the
+/// same bits; it returns the first vertex it left to operator() (none without AVX2, or in float).
+template <class T>
+struct SeFinish {
+  T* x;
+  T* v;
+  const T* w;
+  T h, g0, g1, g2;
+
+  void operator()(Index q, const T* fq) const {
+    const T wi = w[q];
+    T* xi = x + 3 * static_cast<std::size_t>(q);
+    T* vi = v + 3 * static_cast<std::size_t>(q);
+    const T g[3] = {g0, g1, g2};
+    if (wi != T(0)) {
+      for (int e = 0; e < 3; ++e) {
+        vi[e] = fma_(h, fma_(wi, fq[e], g[e]), vi[e]);
+        xi[e] = fma_(h, vi[e], xi[e]);
+      }
+    } else {
+      for (int e = 0; e < 3; ++e)
+        if (vi[e] != T(0)) xi[e] = fma_(h, vi[e], xi[e]);
+    }
+  }
+
+  /// Vertices [from, from + 4 m) (m = (to - from) / 4) from the window: positions X, Y, Z (the
+  /// user's x until the vertex is finalised), velocities VX, VY, VZ when the sweep copied them
+  /// (damped springs; else read from v), force sums FX, FY, FZ; a deferred vertex (cross springs
+  /// add to it later) is written back unchanged, its hand-off is the caller's.
+  Index finalise4(Index from, Index to, Index ws, const T* X, const T* Y, const T* Z, const T* VX, const T* VY,
+                  const T* VZ, const T* FX, const T* FY, const T* FZ, const std::uint8_t* deferred) const {
+#if defined(__AVX2__) && defined(__FMA__)
+    if constexpr (std::is_same_v<T, double>) {
+      const __m256d zero = _mm256_setzero_pd(), hv = _mm256_set1_pd(h);
+      const __m256d gv0 = _mm256_set1_pd(g0), gv1 = _mm256_set1_pd(g1), gv2 = _mm256_set1_pd(g2);
+      const Index end = from + ((to - from) / 4) * 4;
+      for (Index q = from; q < end; q += 4) {
+        const Index l = q - ws;
+        const std::size_t o = 3 * static_cast<std::size_t>(q);
+        const __m256d wq = _mm256_loadu_pd(w + q);
+        const __m256d free = _mm256_cmp_pd(wq, zero, _CMP_NEQ_UQ);   // w != 0
+        const __m256d keep = lanes_where_zero4(deferred + q);       // not deferred
+        const __m256d x0 = _mm256_loadu_pd(X + l), x1 = _mm256_loadu_pd(Y + l), x2 = _mm256_loadu_pd(Z + l);
+        __m256d v0, v1, v2;
+        if (VX) {
+          v0 = _mm256_loadu_pd(VX + l), v1 = _mm256_loadu_pd(VY + l), v2 = _mm256_loadu_pd(VZ + l);
+        } else {
+          aos3_load4(v + o, v0, v1, v2);
+        }
+        // free: n = fma(h, fma(w, f, g), v), y = fma(h, n, x); pinned: n = v, y = fma(h, v, x)
+        // where v != 0, else x
+        const __m256d n0 = _mm256_blendv_pd(
+            v0, _mm256_fmadd_pd(hv, _mm256_fmadd_pd(wq, _mm256_loadu_pd(FX + l), gv0), v0), free);
+        const __m256d n1 = _mm256_blendv_pd(
+            v1, _mm256_fmadd_pd(hv, _mm256_fmadd_pd(wq, _mm256_loadu_pd(FY + l), gv1), v1), free);
+        const __m256d n2 = _mm256_blendv_pd(
+            v2, _mm256_fmadd_pd(hv, _mm256_fmadd_pd(wq, _mm256_loadu_pd(FZ + l), gv2), v2), free);
+        const __m256d y0 = _mm256_blendv_pd(x0, _mm256_fmadd_pd(hv, n0, x0),
+                                            _mm256_or_pd(free, _mm256_cmp_pd(n0, zero, _CMP_NEQ_UQ)));
+        const __m256d y1 = _mm256_blendv_pd(x1, _mm256_fmadd_pd(hv, n1, x1),
+                                            _mm256_or_pd(free, _mm256_cmp_pd(n1, zero, _CMP_NEQ_UQ)));
+        const __m256d y2 = _mm256_blendv_pd(x2, _mm256_fmadd_pd(hv, n2, x2),
+                                            _mm256_or_pd(free, _mm256_cmp_pd(n2, zero, _CMP_NEQ_UQ)));
+        aos3_store4(v + o, _mm256_blendv_pd(v0, n0, keep), _mm256_blendv_pd(v1, n1, keep),
+                    _mm256_blendv_pd(v2, n2, keep));
+        aos3_store4(x + o, _mm256_blendv_pd(x0, y0, keep), _mm256_blendv_pd(x1, y1, keep),
+                    _mm256_blendv_pd(x2, y2, keep));
+      }
+      return end;
+    }
+#endif
+    (void)to, (void)ws, (void)X, (void)Y, (void)Z, (void)VX, (void)VY, (void)VZ, (void)FX, (void)FY, (void)FZ;
+    (void)deferred;
+    return from;
+  }
+
+ private:
+  // fma where the machine has it (the compiler contracts the plain expression to the same with
+  // -march=native); the plain expression elsewhere, where no vector path exists either.
+  static T fma_(T a, T b, T c) {
+#if defined(__FMA__)
+    return std::fma(a, b, c);
+#else
+    return a * b + c;
+#endif
+  }
+};
+
 /// One symplectic Euler step of a spring network on raw arrays (3n x, v, f; n inverse masses
 /// w): v += h (w f + g), x += h v for free vertices; pinned ones (w = 0) move with their
 /// velocity, and a fixed pin (v = 0) is not touched at all. f: zero on entry and on return.
 template <class T>
 void se_step_springs(const SpringSweep<T>& sw, T* x, T* v, const T* w, T* f, T h, const T g[3]) {
-  const T g0 = g[0], g1 = g[1], g2 = g[2];
-  sw.forces(x, v, f, [=](Index q, const T* fq) {
-    const T wi = w[q];
-    T* xi = x + 3 * static_cast<std::size_t>(q);
-    T* vi = v + 3 * static_cast<std::size_t>(q);
-    if (wi != T(0)) {
-      vi[0] += h * (wi * fq[0] + g0);
-      vi[1] += h * (wi * fq[1] + g1);
-      vi[2] += h * (wi * fq[2] + g2);
-      xi[0] += h * vi[0];
-      xi[1] += h * vi[1];
-      xi[2] += h * vi[2];
-    } else {
-      for (int e = 0; e < 3; ++e)
-        if (vi[e] != T(0)) xi[e] += h * vi[e];
-    }
-  });
+  sw.forces(x, v, f, SeFinish<T>{x, v, w, h, g[0], g[1], g[2]});
 }
 
 }  // namespace loom

@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <cstring>
 #include <numeric>
 #include <type_traits>
@@ -301,6 +302,39 @@ inline void window_scatter_step2_avx2(Index len, double* __restrict A, const dou
     else
       A[2 * r] -= G[r];
   }
+}
+#endif
+
+#if defined(__AVX2__)
+/// Four vertices' components a, b, c (a0..a3, b0..b3, c0..c3) stored interleaved, as the user
+/// arrays hold them: a0 b0 c0 a1 | b1 c1 a2 b2 | c2 a3 b3 c3 (12 doubles from out). Used by the
+/// windowed sweeps' vectorised finalisations (harmonic_oscillation, symplectic_euler).
+inline void aos3_store4(double* out, __m256d a, __m256d b, __m256d c) {
+  const __m256d t0 = _mm256_unpacklo_pd(a, b);       // a0 b0 a2 b2
+  const __m256d t2 = _mm256_shuffle_pd(c, a, 0xA);   // c0 a1 c2 a3
+  const __m256d t3 = _mm256_shuffle_pd(b, c, 0xF);   // b1 c1 b3 c3
+  _mm256_storeu_pd(out, _mm256_permute2f128_pd(t0, t2, 0x20));
+  _mm256_storeu_pd(out + 4, _mm256_permute2f128_pd(t3, t0, 0x30));
+  _mm256_storeu_pd(out + 8, _mm256_permute2f128_pd(t2, t3, 0x31));
+}
+
+/// The inverse of aos3_store4: 12 interleaved doubles from in to four vertices' a, b, c.
+inline void aos3_load4(const double* in, __m256d& a, __m256d& b, __m256d& c) {
+  const __m256d m0 = _mm256_loadu_pd(in), m1 = _mm256_loadu_pd(in + 4), m2 = _mm256_loadu_pd(in + 8);
+  const __m256d t0 = _mm256_permute2f128_pd(m0, m1, 0x30);   // a0 b0 a2 b2
+  const __m256d t1 = _mm256_permute2f128_pd(m0, m2, 0x21);   // c0 a1 c2 a3
+  const __m256d t2 = _mm256_permute2f128_pd(m1, m2, 0x30);   // b1 c1 b3 c3
+  a = _mm256_shuffle_pd(t0, t1, 0xA);
+  b = _mm256_shuffle_pd(t0, t2, 0x5);
+  c = _mm256_shuffle_pd(t1, t2, 0xA);
+}
+
+/// Four bytes of a 0/1 flag array as a lane mask: all ones where the flag is 0.
+inline __m256d lanes_where_zero4(const std::uint8_t* flags) {
+  std::uint32_t d4;
+  std::memcpy(&d4, flags, 4);
+  return _mm256_castsi256_pd(
+      _mm256_cmpeq_epi64(_mm256_cvtepu8_epi64(_mm_cvtsi32_si128(static_cast<int>(d4))), _mm256_setzero_si256()));
 }
 #endif
 

@@ -294,24 +294,12 @@ inline Index ho_finalise_block_avx2(Index from, Index to, Index ws, const double
                                     double* __restrict x, double* __restrict v, double h, const double hg[3]) {
   const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0), hv = _mm256_set1_pd(h);
   const __m256d hg0 = _mm256_set1_pd(hg[0]), hg1 = _mm256_set1_pd(hg[1]), hg2 = _mm256_set1_pd(hg[2]);
-  // 4 vertices' components (a0..a3, b0..b3, c0..c3) to the interleaved a0 b0 c0 a1 | b1 c1 a2 b2 | c2 a3 b3 c3
-  const auto store3 = [](double* out, __m256d a, __m256d b, __m256d c) {
-    const __m256d t0 = _mm256_unpacklo_pd(a, b);       // a0 b0 a2 b2
-    const __m256d t2 = _mm256_shuffle_pd(c, a, 0xA);   // c0 a1 c2 a3
-    const __m256d t3 = _mm256_shuffle_pd(b, c, 0xF);   // b1 c1 b3 c3
-    _mm256_storeu_pd(out, _mm256_permute2f128_pd(t0, t2, 0x20));
-    _mm256_storeu_pd(out + 4, _mm256_permute2f128_pd(t3, t0, 0x30));
-    _mm256_storeu_pd(out + 8, _mm256_permute2f128_pd(t2, t3, 0x31));
-  };
   const Index end = from + ((to - from) / 4) * 4;
   for (Index q = from; q < end; q += 4) {
     const Index l = q - ws;
     const __m256d wq = _mm256_loadu_pd(w + q);
     const __m256d f = _mm256_and_pd(_mm256_cmp_pd(wq, zero, _CMP_GT_OQ), one);   // w > 0 ? 1 : 0
-    std::uint32_t d4;
-    std::memcpy(&d4, deferred + q, 4);
-    const __m256d keep = _mm256_castsi256_pd(
-        _mm256_cmpeq_epi64(_mm256_cvtepu8_epi64(_mm_cvtsi32_si128(static_cast<int>(d4))), _mm256_setzero_si256()));
+    const __m256d keep = lanes_where_zero4(deferred + q);   // not deferred
     const __m256d x0 = _mm256_loadu_pd(X + l), x1 = _mm256_loadu_pd(Y + l), x2 = _mm256_loadu_pd(Z + l);
     const __m256d v0 = _mm256_loadu_pd(VX + l), v1 = _mm256_loadu_pd(VY + l), v2 = _mm256_loadu_pd(VZ + l);
     // v = v + fma(f, hg, w s); x = fma(h, v, x)
@@ -320,8 +308,8 @@ inline Index ho_finalise_block_avx2(Index from, Index to, Index ws, const double
     const __m256d n2 = _mm256_add_pd(v2, _mm256_fmadd_pd(f, hg2, _mm256_mul_pd(wq, _mm256_loadu_pd(DZ + l))));
     const __m256d y0 = _mm256_fmadd_pd(hv, n0, x0), y1 = _mm256_fmadd_pd(hv, n1, x1), y2 = _mm256_fmadd_pd(hv, n2, x2);
     const std::size_t o = 3 * static_cast<std::size_t>(q);
-    store3(v + o, _mm256_blendv_pd(v0, n0, keep), _mm256_blendv_pd(v1, n1, keep), _mm256_blendv_pd(v2, n2, keep));
-    store3(x + o, _mm256_blendv_pd(x0, y0, keep), _mm256_blendv_pd(x1, y1, keep), _mm256_blendv_pd(x2, y2, keep));
+    aos3_store4(v + o, _mm256_blendv_pd(v0, n0, keep), _mm256_blendv_pd(v1, n1, keep), _mm256_blendv_pd(v2, n2, keep));
+    aos3_store4(x + o, _mm256_blendv_pd(x0, y0, keep), _mm256_blendv_pd(x1, y1, keep), _mm256_blendv_pd(x2, y2, keep));
   }
   return end;
 }
