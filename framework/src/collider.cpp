@@ -158,6 +158,26 @@ Collider::Contact Collider::query(const Frame& f, const double xp[3]) const {
 
 Collider::Contact Collider::query(const Frame& f, const double xp[3], double cutoff) const {
   Contact ct{};
+  if (shape != Shape::Mesh && cutoff < INFINITY) {
+    // A vertex certainly at least `cutoff` away gets that lower bound without the exact query
+    // (its square root, division and surface velocity): most vertices of a scene, every step.
+    // "Certainly": the margins exceed the rounding of these expressions and of
+    // kernels::contact_query's, so a vertex skipped here would also read >= cutoff there.
+    const double r[3] = {xp[0] - f.center[0], xp[1] - f.center[1], xp[2] - f.center[2]};
+    if (shape == Shape::Sphere) {
+      const double reach = radius + thickness + cutoff;
+      if (r[0] * r[0] + r[1] * r[1] + r[2] * r[2] > reach * reach * (1 + 1e-12)) {
+        ct.distance = cutoff;
+        return ct;
+      }
+    } else {
+      const double d = r[0] * f.normal[0] + r[1] * f.normal[1] + r[2] * f.normal[2] - thickness;
+      if (d > cutoff + 1e-12 * (std::abs(r[0]) + std::abs(r[1]) + std::abs(r[2]) + thickness + std::abs(cutoff))) {
+        ct.distance = cutoff;
+        return ct;
+      }
+    }
+  }
   if (shape != Shape::Mesh) {  // sphere, plane: the shared kernel (loom/kernels/contact.hpp)
     ct.distance = kernels::contact_query(contact_shape(f), xp, ct.normal.data(), ct.velocity.data());
   } else {

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 
 #include "loom/collider.hpp"
 
@@ -172,4 +173,57 @@ TEST(Colliders, BadInputNamesLineAndFix) {
   EXPECT_NE(e.find("did you mean 'radius'"), std::string::npos) << e;
   e = error_of("colliders: {type: plane}");
   EXPECT_NE(e.find("must be a list"), std::string::npos) << e;
+}
+
+// Spheres and planes answer a cutoff query without the exact one where the vertex is certainly
+// at least `cutoff` away (a bound without a square root): below the cutoff the result is the
+// exact query's, bit for bit (distance, normal, surface velocity); above it a lower bound at or
+// above the cutoff. Points uniformly in a box, and points placed at the offset surface + cutoff
+// within a few ulp, where the bound must not skip a vertex the exact query puts below the cutoff.
+TEST(Colliders, SphereAndPlaneCutoffQueryIsExactBelowTheCutoffAndALowerBoundAbove) {
+  const auto set = parse(
+      "colliders: [{type: sphere, center: [0.5, -0.35, -0.5], radius: 0.3, thickness: 0.004,"
+      " motion: {type: rotate, axis: [0, 1, 0], angular_velocity: 2.0}},"
+      " {type: plane, point: [0.1, -0.2, 0.3], normal: [0.3, 1, -0.2], thickness: 0.002,"
+      " motion: {type: translate, velocity: [0.1, 0.2, 0.0]}}]");
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> U(-1.5, 1.5), A(-1.0, 1.0);
+  int below = 0, above = 0, near = 0;
+  for (const loom::Collider& c : set.colliders()) {
+    const loom::Collider::Frame f = c.frame_at(0.37);
+    for (const double cutoff : {0.0, 0.004, 0.05})
+      for (int i = 0; i < 20000; ++i) {
+        double p[3] = {U(rng), U(rng), U(rng)};
+        if (i % 2 == 1) {   // on the cutoff surface, nudged by a few ulp either way
+          double u[3] = {A(rng), A(rng), A(rng)};
+          const double len = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+          if (c.shape == loom::Collider::Shape::Sphere) {
+            for (int k = 0; k < 3; ++k) p[k] = f.center[k] + u[k] / len * (c.radius + c.thickness + cutoff);
+          } else {   // a point of the plane + (thickness + cutoff) along the normal
+            const double s = (p[0] - f.center[0]) * f.normal[0] + (p[1] - f.center[1]) * f.normal[1] +
+                             (p[2] - f.center[2]) * f.normal[2];
+            for (int k = 0; k < 3; ++k) p[k] += (c.thickness + cutoff - s) * f.normal[k];
+          }
+          for (int k = 0; k < 3; ++k) p[k] = std::nextafter(p[k], (i / 2) % 2 ? 10.0 : -10.0);
+        }
+        const loom::Collider::Contact e = c.query(f, p);
+        const loom::Collider::Contact q = c.query(f, p, cutoff);
+        if (std::abs(e.distance - cutoff) < 1e-12) ++near;
+        if (e.distance < cutoff) {
+          ++below;
+          ASSERT_EQ(q.distance, e.distance) << c.name << " cutoff " << cutoff << " point " << i;
+          for (int k = 0; k < 3; ++k) {
+            ASSERT_EQ(q.normal[k], e.normal[k]);
+            ASSERT_EQ(q.velocity[k], e.velocity[k]);
+          }
+        } else {
+          ++above;
+          ASSERT_GE(q.distance, cutoff) << c.name;
+          ASSERT_LE(q.distance, e.distance) << c.name;
+        }
+      }
+  }
+  EXPECT_GT(below, 10000);   // both branches and the boundary are exercised
+  EXPECT_GT(above, 10000);
+  EXPECT_GT(near, 10000);
 }

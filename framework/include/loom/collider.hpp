@@ -90,7 +90,7 @@ struct Collider {
   /// The same for callers that need it only where the distance is below `cutoff` (>= 0): a
   /// result below cutoff is exact; a result >= cutoff is a lower bound (normal and velocity
   /// then unspecified). Mesh colliders answer far vertices cheaply (MeshBody::signed_distance
-  /// with a cutoff); spheres and planes are always exact.
+  /// with a cutoff; spheres and planes by a bound on the distance that needs no square root).
   Contact query(const Frame& f, const double x[3], double cutoff) const;
   /// Same, at time t (computes the frame: use frame_at + query in loops).
   Contact query(const double x[3], double t) const { return query(frame_at(t), x); }
