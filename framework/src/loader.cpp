@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <limits.h>
 
+#include "loom/blas_kernels.hpp"
 #include "loom/registry.hpp"
 
 namespace fs = std::filesystem;
@@ -102,6 +103,9 @@ std::vector<std::string> PluginLoader::names(PluginKind kind) const {
 
 void PluginLoader::load_file(const std::string& path) {
   if (std::find(loaded_.begin(), loaded_.end(), path) != loaded_.end()) return;
+  // Before the first plugin brings in OpenBLAS (cholmod, petsc): its kernels by the CPU's
+  // instructions unless the user chose them (loom/blas_kernels.hpp).
+  static const char* const blas_kernels [[maybe_unused]] = choose_openblas_kernels();
   void* h = ::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
   if (!h) {
     const char* err = ::dlerror();

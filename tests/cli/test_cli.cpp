@@ -304,3 +304,41 @@ TEST(Cli, ValidateWarnsWhenDtExceedsTheStableStep) {
     EXPECT_EQ(r.out.find("exceeds the estimated stable step"), std::string::npos) << e.path() << "\n" << r.out;
   }
 }
+
+// OpenBLAS (under the cholmod plugin) runs the kernel set loom/blas_kernels.hpp names for this
+// CPU unless the user set OPENBLAS_CORETYPE: `loom` sets it before it loads a plugin. Expected
+// set from /proc/cpuinfo's flags (independent of the header's cpuid test): AVX-512 F, DQ, BW,
+// VL and CD: SkylakeX; else AVX2 and FMA: Haswell; else OpenBLAS's own choice (not checked).
+// OPENBLAS_VERBOSE=2 makes OpenBLAS print the set it runs ("Core: <name>").
+TEST(Cli, OpenBlasRunsTheKernelsOfTheCpuUnlessTheUserChose) {
+  if (run("plugins", false).out.find("cholmod") == std::string::npos) GTEST_SKIP() << "no cholmod plugin in this build";
+  std::ifstream info("/proc/cpuinfo");
+  std::string line, flags;
+  while (std::getline(info, line))
+    if (line.rfind("flags", 0) == 0) {
+      flags = line + " ";
+      break;
+    }
+  const auto has = [&](const char* f) { return flags.find(std::string(" ") + f + " ") != std::string::npos; };
+  std::string expected;
+  if (has("avx512f") && has("avx512dq") && has("avx512bw") && has("avx512vl") && has("avx512cd"))
+    expected = "SkylakeX";
+  else if (has("avx2") && has("fma"))
+    expected = "Haswell";
+  const auto dir = scratch("openblas");
+  std::ofstream(dir / "scene.yaml") << "mesh: {grid: {nx: 6, ny: 6, width: 0.5, height: 0.5}}\n"
+                                       "material: {type: mass_spring, stiffness: 200, density: 0.1}\n"
+                                       "integrator: {type: baraff_witkin, dt: 0.01}\n"
+                                       "solver: {type: cholmod}\npins: [top_edge]\nframes: 1\n";
+  const std::string args = "run " + (dir / "scene.yaml").string() + " --out " + (dir / "out").string() + " --quiet";
+  const Result chosen = loom_cli_test::run_loom_shell("env -u OPENBLAS_CORETYPE OPENBLAS_VERBOSE=2 " +
+                                                      std::string(LOOM_EXE) + " " + args);
+  ASSERT_EQ(chosen.code, 0) << chosen.out;
+  if (chosen.out.find("Core: ") == std::string::npos)   // an OpenBLAS built for one CPU (not Debian's) prints none
+    GTEST_SKIP() << "this OpenBLAS does not print the kernel set it runs: " << chosen.out;
+  if (!expected.empty()) EXPECT_NE(chosen.out.find("Core: " + expected), std::string::npos) << chosen.out;
+  const Result user = loom_cli_test::run_loom_shell("OPENBLAS_CORETYPE=Prescott OPENBLAS_VERBOSE=2 " +
+                                                    std::string(LOOM_EXE) + " " + args);
+  ASSERT_EQ(user.code, 0) << user.out;
+  EXPECT_NE(user.out.find("Core: Prescott"), std::string::npos) << user.out;
+}
