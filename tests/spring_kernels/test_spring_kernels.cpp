@@ -305,6 +305,55 @@ void expect_valid_pairing(const std::vector<loom::SpringSegment>& before, const 
   }
 }
 
+
+// window_segment_scatter_twin (a twin pair's two scatters in one pass, issue 16) against the two
+// portable two-pass scatters it replaces (F's, then F2's), bit for bit: stride 1 and 2, every
+// length 1..41, offsets with the upper range overlapping the lower one (k < len), touching it
+// and beyond (k >= len), odd offsets with stride 2 (disjoint slots), odd and even starts, -0 and
+// +0 among the values; the slots around the pair's range keep their -0 sentinel (a vector loop
+// that ran past the range would add +0 to them and show).
+template <int Step>
+void check_twin_scatter() {
+  constexpr Index Bk = 64;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  int cases = 0;
+  for (Index len = 1; len <= 41; ++len)
+    for (Index off : {1, 2, 3, 4, 6, 7, 10, 19, 64, 82, 129})
+      for (Index a : {0, 1, 5}) {
+        const Index slots = a + off + Step * (len - 1) + 1;
+        const Index n = slots + 16;
+        std::vector<double> F(3 * Bk), F2(3 * Bk);
+        for (double& f : F) f = U(rng);
+        for (double& f : F2) f = U(rng);
+        if (len > 2) F[1] = -0.0, F2[2] = 0.0;
+        if (len > 3) F[Bk + 2] = 0.0, F2[Bk + 1] = -0.0;
+        std::vector<double> A(3 * n);
+        for (Index q = 0; q < 3 * n; ++q) A[q] = (q % 5 == 0) ? 0.0 : U(rng);
+        for (int e = 0; e < 3; ++e) {
+          for (Index q = 0; q < a; ++q) A[e * n + q] = -0.0;
+          for (Index q = slots; q < n; ++q) A[e * n + q] = -0.0;
+        }
+        std::vector<double> B = A;
+        loom::window_segment_scatter_twin<double, Step, Bk>(len, a, off, A.data(), A.data() + n, A.data() + 2 * n,
+                                                             F.data(), F2.data());
+        loom::window_segment_scatter_from<double, Step, Bk>(0, len, a, off, B.data(), B.data() + n, B.data() + 2 * n,
+                                                              F.data());
+        loom::window_segment_scatter_from<double, Step, Bk>(0, len, a, off, B.data(), B.data() + n, B.data() + 2 * n,
+                                                              F2.data());
+        for (Index q = 0; q < 3 * n; ++q)
+          ASSERT_TRUE(same_bits(A[q], B[q])) << "step " << Step << " len " << len << " off " << off << " a " << a
+                                             << " slot " << q << ": " << A[q] << " vs " << B[q];
+        ++cases;
+      }
+  EXPECT_EQ(cases, 41 * 11 * 3);
+}
+
+TEST(SpringKernels, WindowScatterTwinEqualsTwoScattersBitwise) {
+  check_twin_scatter<1>();
+  check_twin_scatter<2>();
+}
+
 }  // namespace
 
 // pair_twin_segments (issue 16) makes segments over the same endpoints neighbours only where no

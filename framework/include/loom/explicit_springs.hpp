@@ -385,9 +385,8 @@ struct SpringSweep {
               sweep_segment_forces_twin<T, Damped, 1, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg,
                                                           K + G2.begin, L0 + G2.begin, Cg2, X, Y, Z, VX, VY, VZ, F,
                                                           F2);
-              if (fuse && G.off > 0) {   // overlapping ranges: one scatter pass each
-                window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, FX, FY, FZ, F);
-                window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, FX, FY, FZ, F2);
+              if (fuse && G.off > 0) {   // overlapping ranges: both scatters in one pass
+                window_segment_scatter_twin<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F, F2);
               } else {
                 window_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F);
                 window_segment_scatter<T, 1, Bk>(G.len, a, G.off, FX, FY, FZ, F2);
@@ -396,8 +395,12 @@ struct SpringSweep {
               sweep_segment_forces_twin<T, Damped, 2, Bk>(G.len, a, G.off, K + G.begin, L0 + G.begin, Cg,
                                                           K + G2.begin, L0 + G2.begin, Cg2, X, Y, Z, VX, VY, VZ, F,
                                                           F2);
-              window_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F);
-              window_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F2);
+              if (fuse) {   // both scatters in one pass
+                window_segment_scatter_twin<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F, F2);
+              } else {
+                window_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F);
+                window_segment_scatter<T, 2, Bk>(G.len, a, G.off, FX, FY, FZ, F2);
+              }
             }
             continue;
           }

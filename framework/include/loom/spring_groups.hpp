@@ -375,6 +375,88 @@ inline void window_segment_scatter_overlap(Index len, Index a, Index off, T* __r
   }
 }
 
+/// The scatters of a twin pair of segments (SpringSegment::twin: the same slots) in one pass:
+/// what window_segment_scatter<T, Step, Bk>(..., F) followed by the same with F2 gives, bit for
+/// bit (issue 16). When off is a multiple of Step (k = off / Step), slot a + Step t gets, in this
+/// order, + F[t] (t < len), - F[t - k] (k <= t < len + k), + F2[t], - F2[t - k]: the two
+/// two-pass scatters' additions into that slot in their order, since each of those passes adds to
+/// a slot at most once. Otherwise (stride 2, odd off) the lower and upper slots are disjoint and
+/// each gets its two additions, F's then F2's. One load and store per slot instead of four. In
+/// double with AVX2 the stride-2 loops add +0 to the odd slots between, as
+/// window_scatter_step2_avx2 does (a window sum is never -0), and stop while the highest slot a
+/// vector touches is still a slot of the pair's range.
+template <class T, int Step, Index Bk>
+inline void window_segment_scatter_twin(Index len, Index a, Index off, T* __restrict FX, T* __restrict FY,
+                                        T* __restrict FZ, const T* __restrict F, const T* __restrict F2) {
+  T* const S[3] = {FX + a, FY + a, FZ + a};
+  if (off % Step != 0) {   // stride 2, odd offset: the lower and upper slots are disjoint
+    for (int e = 0; e < 3; ++e) {
+      T* __restrict D = S[e];
+      const T* __restrict G = F + e * Bk;
+      const T* __restrict H = F2 + e * Bk;
+      for (Index t = 0; t < len; ++t) D[Step * t] = (D[Step * t] + G[t]) + H[t];
+      for (Index t = 0; t < len; ++t) D[off + Step * t] = (D[off + Step * t] - G[t]) - H[t];
+    }
+    return;
+  }
+  const Index k = off / Step, n = len + k;   // slots a + Step t, t < n
+  const Index lo_end = std::min(len, k);      // [0, lo_end): lower only
+  const Index both_end = len;                 // [k, len): both (when k < len)
+  const Index up_begin = std::max(len, k);    // [up_begin, n): upper only
+  for (int e = 0; e < 3; ++e) {
+    T* __restrict D = S[e];
+    const T* __restrict G = F + e * Bk;
+    const T* __restrict H = F2 + e * Bk;
+    Index t = 0;
+#if defined(__AVX2__)
+    if constexpr (Step == 2 && std::is_same_v<T, double>) {
+      // four slots (eight with the odd ones between) at a time while slot 2 t + 7 <= 2 (n - 1)
+      const __m256d zero = _mm256_setzero_pd();
+      const auto spread = [&](const double* g, __m256d& lo, __m256d& hi) {   // g0 0 g1 0 | g2 0 g3 0
+        const __m256d v = _mm256_permute4x64_pd(_mm256_loadu_pd(g), 0xD8);
+        lo = _mm256_unpacklo_pd(v, zero);
+        hi = _mm256_unpackhi_pd(v, zero);
+      };
+      const auto fits = [&](Index t0, Index end) { return t0 + 4 <= end && 2 * t0 + 7 <= 2 * (n - 1); };
+      __m256d gl, gh, hl, hh, ul, uh, vl, vh;
+      for (; fits(t, lo_end); t += 4) {
+        double* d = D + 2 * t;
+        spread(G + t, gl, gh);
+        spread(H + t, hl, hh);
+        _mm256_storeu_pd(d, _mm256_add_pd(_mm256_add_pd(_mm256_loadu_pd(d), gl), hl));
+        _mm256_storeu_pd(d + 4, _mm256_add_pd(_mm256_add_pd(_mm256_loadu_pd(d + 4), gh), hh));
+      }
+      for (; t < lo_end; ++t) D[2 * t] = (D[2 * t] + G[t]) + H[t];
+      t = std::max(t, k);
+      for (; fits(t, both_end); t += 4) {
+        double* d = D + 2 * t;
+        spread(G + t, gl, gh);
+        spread(G + t - k, ul, uh);
+        spread(H + t, hl, hh);
+        spread(H + t - k, vl, vh);
+        _mm256_storeu_pd(d, _mm256_sub_pd(_mm256_add_pd(_mm256_sub_pd(_mm256_add_pd(_mm256_loadu_pd(d), gl), ul), hl), vl));
+        _mm256_storeu_pd(d + 4,
+                         _mm256_sub_pd(_mm256_add_pd(_mm256_sub_pd(_mm256_add_pd(_mm256_loadu_pd(d + 4), gh), uh), hh), vh));
+      }
+      for (; t < both_end; ++t) D[2 * t] = (((D[2 * t] + G[t]) - G[t - k]) + H[t]) - H[t - k];
+      t = std::max(t, up_begin);
+      for (; fits(t, n); t += 4) {
+        double* d = D + 2 * t;
+        spread(G + t - k, ul, uh);
+        spread(H + t - k, vl, vh);
+        _mm256_storeu_pd(d, _mm256_sub_pd(_mm256_sub_pd(_mm256_loadu_pd(d), ul), vl));
+        _mm256_storeu_pd(d + 4, _mm256_sub_pd(_mm256_sub_pd(_mm256_loadu_pd(d + 4), uh), vh));
+      }
+      for (; t < n; ++t) D[2 * t] = (D[2 * t] - G[t - k]) - H[t - k];
+      continue;
+    }
+#endif
+    for (t = 0; t < lo_end; ++t) D[Step * t] = (D[Step * t] + G[t]) + H[t];
+    for (t = k; t < both_end; ++t) D[Step * t] = (((D[Step * t] + G[t]) - G[t - k]) + H[t]) - H[t - k];
+    for (t = up_begin; t < n; ++t) D[Step * t] = (D[Step * t] - G[t - k]) - H[t - k];
+  }
+}
+
 /// Before a block that reads vertices up to need - 1: when need lies beyond the window
 /// [ws, ws + cap), move the live vertices [qfin, fill) of the narr arrays A to the start (ws = qfin).
 template <class T>

@@ -543,12 +543,10 @@ void ho_step_impl(const SpringLayout& layout, const HoSprings<T>& s, T* x, T* v,
           const auto run2 = [&]<int Step>() {
             ho_window_impulses_twin<T, Vi, Table, Step, Bk>(G.len, a, G.off, CA, CB, X, Y, Z, VX, VY, VZ, Gb, Gb2,
                                                             Qb, Qb2);
-            if constexpr (Step == 1 && !kPos) {
-              if (s.fuse && G.off > 0) {   // off < len here: overlapping ranges, one scatter pass each
-                window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, DX, DY, DZ, Gb);
-                window_segment_scatter_overlap<T, Bk>(G.len, a, G.off, DX, DY, DZ, Gb2);
-                return;
-              }
+            if (s.fuse && (Step == 2 || G.off > 0)) {   // both segments' scatters in one pass per array
+              window_segment_scatter_twin<T, Step, Bk>(G.len, a, G.off, DX, DY, DZ, Gb, Gb2);
+              if constexpr (kPos) window_segment_scatter_twin<T, Step, Bk>(G.len, a, G.off, PX, PY, PZ, Qb, Qb2);
+              return;
             }
             window_segment_scatter<T, Step, Bk>(G.len, a, G.off, DX, DY, DZ, Gb);
             if constexpr (kPos) window_segment_scatter<T, Step, Bk>(G.len, a, G.off, PX, PY, PZ, Qb);
