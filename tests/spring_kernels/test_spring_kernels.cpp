@@ -14,6 +14,30 @@ using loom::Index;
 
 bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
 
+// A segment's force vectors (3 x Bk, uniform in [-1, 1]) with a -0 and a +0 among them
+// (positions depend on `shift`, so that two arrays differ), for lengths that reach them.
+std::vector<double> spring_vectors(std::mt19937& rng, loom::Index Bk, loom::Index len, int shift = 0) {
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  std::vector<double> F(3 * Bk);
+  for (double& f : F) f = U(rng);
+  if (len > 2) F[1 + shift] = shift ? 0.0 : -0.0;
+  if (len > 3) F[Bk + 2 - shift] = shift ? -0.0 : 0.0;
+  return F;
+}
+
+// Three window arrays of n slots each (x, y, z sums; some +0), the slots before a and from
+// `slots` on holding a -0 sentinel: -0 plus +0 reads +0, so a touched guard slot shows.
+std::vector<double> guarded_window(std::mt19937& rng, loom::Index a, loom::Index slots, loom::Index n) {
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  std::vector<double> A(3 * n);
+  for (loom::Index q = 0; q < 3 * n; ++q) A[q] = (q % 5 == 0) ? 0.0 : U(rng);
+  for (int e = 0; e < 3; ++e) {
+    for (loom::Index q = 0; q < a; ++q) A[e * n + q] = -0.0;
+    for (loom::Index q = slots; q < n; ++q) A[e * n + q] = -0.0;
+  }
+  return A;
+}
+
 // window_segment_scatter (AVX2 for stride 2 in double) against its
 // portable loop, window_segment_scatter_from(0, ...), bit for bit: the vector kernel adds +0 to
 // the odd slots, which leaves every value that is not -0 unchanged, and window sums are never -0
@@ -25,24 +49,14 @@ template <int Step>
 void check_scatter() {
   constexpr Index Bk = 64;
   std::mt19937 rng(7);
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
   int cases = 0;
   for (Index len = 0; len <= 41; ++len)
     for (Index off : {1, 2, 3, 64, 129})
       for (Index a : {0, 1, 5}) {
         const Index slots = a + off + Step * (len > 0 ? len - 1 : 0) + 1;
         const Index n = slots + 16;   // a guard band after the last slot
-        std::vector<double> F(3 * Bk);
-        for (double& f : F) f = U(rng);
-        if (len > 2) F[1] = -0.0;       // a -0 value and a +0 value among the springs' vectors
-        if (len > 3) F[Bk + 2] = 0.0;
-        std::vector<double> A(3 * n);
-        const double sentinel = -0.0;   // -0 plus +0 would read +0: a touched guard slot shows
-        for (Index q = 0; q < 3 * n; ++q) A[q] = (q % 5 == 0) ? 0.0 : U(rng);   // some +0 sums
-        for (int e = 0; e < 3; ++e) {
-          for (Index q = 0; q < a; ++q) A[e * n + q] = sentinel;
-          for (Index q = slots; q < n; ++q) A[e * n + q] = sentinel;
-        }
+        const std::vector<double> F = spring_vectors(rng, Bk, len);
+        std::vector<double> A = guarded_window(rng, a, slots, n);
         std::vector<double> B = A;
         loom::window_segment_scatter<double, Step, Bk>(len, a, off, A.data(), A.data() + n, A.data() + 2 * n, F.data());
         loom::window_segment_scatter_from<double, Step, Bk>(0, len, a, off, B.data(), B.data() + n, B.data() + 2 * n,
@@ -316,24 +330,14 @@ template <int Step>
 void check_twin_scatter() {
   constexpr Index Bk = 64;
   std::mt19937 rng(11);
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
   int cases = 0;
   for (Index len = 1; len <= 41; ++len)
     for (Index off : {1, 2, 3, 4, 6, 7, 10, 19, 64, 82, 129})
       for (Index a : {0, 1, 5}) {
         const Index slots = a + off + Step * (len - 1) + 1;
         const Index n = slots + 16;
-        std::vector<double> F(3 * Bk), F2(3 * Bk);
-        for (double& f : F) f = U(rng);
-        for (double& f : F2) f = U(rng);
-        if (len > 2) F[1] = -0.0, F2[2] = 0.0;
-        if (len > 3) F[Bk + 2] = 0.0, F2[Bk + 1] = -0.0;
-        std::vector<double> A(3 * n);
-        for (Index q = 0; q < 3 * n; ++q) A[q] = (q % 5 == 0) ? 0.0 : U(rng);
-        for (int e = 0; e < 3; ++e) {
-          for (Index q = 0; q < a; ++q) A[e * n + q] = -0.0;
-          for (Index q = slots; q < n; ++q) A[e * n + q] = -0.0;
-        }
+        const std::vector<double> F = spring_vectors(rng, Bk, len), F2 = spring_vectors(rng, Bk, len, 1);
+        std::vector<double> A = guarded_window(rng, a, slots, n);
         std::vector<double> B = A;
         loom::window_segment_scatter_twin<double, Step, Bk>(len, a, off, A.data(), A.data() + n, A.data() + 2 * n,
                                                              F.data(), F2.data());
