@@ -55,14 +55,16 @@ BendingOptions read_bending_options(const Params& p) {
 HingeSet::HingeSet(const Mesh& mesh, const BendingOptions& opt) : opt_(opt) {
   n_ = mesh.num_vertices();
   const Index nt = mesh.num_triangles();
-  const bool has_uv = mesh.uvs.size() == 2 * static_cast<std::size_t>(n_);
+  const bool has_uv = mesh.has_uvs();
   if (opt_.anisotropic && !has_uv)
     throw InputError("bending: anisotropic stiffness (weft != warp) needs texture coordinates to find each edge's "
                      "direction, but mesh " + mesh.source +
                      " has none. Fix: add vt coordinates to the OBJ, or give one isotropic stiffness.");
-  // Directed half-edges (lower, upper, opposite vertex), sorted: equal keys share an edge.
+  // Directed half-edges (lower, upper, opposite vertex), sorted: equal keys share an edge. Each
+  // keeps its triangle and the corners (0..2) of i and j in it, for the edge's texture direction.
   struct Half {
-    Index i, j, opp;
+    Index i, j, opp, t;
+    int ci, cj;
   };
   std::vector<Half> half;
   half.reserve(3 * static_cast<std::size_t>(nt));
@@ -70,13 +72,17 @@ HingeSet::HingeSet(const Mesh& mesh, const BendingOptions& opt) : opt_(opt) {
     const Index* tv = &mesh.triangles[3 * static_cast<std::size_t>(t)];
     for (int k = 0; k < 3; ++k) {
       const Index a = tv[k], b = tv[(k + 1) % 3], c = tv[(k + 2) % 3];
-      half.push_back({std::min(a, b), std::max(a, b), c});
+      if (a < b) half.push_back({a, b, c, t, k, (k + 1) % 3});
+      else half.push_back({b, a, c, t, (k + 1) % 3, k});
     }
   }
   std::sort(half.begin(), half.end(), [](const Half& x, const Half& y) {
-    return x.i != y.i ? x.i < y.i : (x.j != y.j ? x.j < y.j : x.opp < y.opp);
+    return x.i != y.i ? x.i < y.i : (x.j != y.j ? x.j < y.j : (x.opp != y.opp ? x.opp < y.opp : x.t < y.t));
   });
   std::vector<std::array<Index, 4>> hinges;
+  // Per hinge: the half-edge of its first triangle (the one with the lower opposite vertex),
+  // whose corner uvs give the edge's direction in texture space.
+  std::vector<Half> hinge_half;
   std::vector<std::string> bad;
   std::size_t nbad = 0;
   for (std::size_t s = 0; s < half.size();) {
@@ -85,6 +91,7 @@ HingeSet::HingeSet(const Mesh& mesh, const BendingOptions& opt) : opt_(opt) {
     const std::size_t m = e - s;
     if (m == 2) {
       hinges.push_back({half[s].i, half[s].j, half[s].opp, half[s + 1].opp});
+      hinge_half.push_back(half[s]);
     } else if (m > 2) {
       ++nbad;
       if (bad.size() < 10)
@@ -130,8 +137,13 @@ HingeSet::HingeSet(const Mesh& mesh, const BendingOptions& opt) : opt_(opt) {
     const double area2 = std::sqrt(bending::hinge_dot(nA, nA)) + std::sqrt(bending::hinge_dot(nB, nB));  // 2 (A0 + A1)
     double B = opt_.b_weft;
     if (opt_.anisotropic) {
-      const double* w0 = &mesh.uvs[2 * static_cast<std::size_t>(v[0])];
-      const double* w1 = &mesh.uvs[2 * static_cast<std::size_t>(v[1])];
+      // The edge's two corners in the hinge's first triangle (opposite vertex v[2]). Across a
+      // UV seam the other triangle's corners differ by a translation (the same direction) or a
+      // turn by pi (the opposite one); stiffness_at_edge_angle folds the angle into [0, pi/2],
+      // so either triangle gives the same B there (a mirror u -> -u too when weft_angle is 0).
+      const Half& hh = hinge_half[h];
+      const double* w0 = mesh.corner_uv(hh.t, hh.ci);
+      const double* w1 = mesh.corner_uv(hh.t, hh.cj);
       const double du = w1[0] - w0[0], dv = w1[1] - w0[1];
       if (!(du * du + dv * dv > 0))
         throw InputError("bending: edge (" + std::to_string(v[0]) + ", " + std::to_string(v[1]) + ") of " +

@@ -66,6 +66,7 @@ Mesh make_grid(Index nx, Index ny, double width, double height, GridPlane plane,
       }
     }
   }
+  // No corner_uvs: a grid has no seams, so Mesh::corner_uv() reads each corner's vertex uv.
   return m;
 }
 
@@ -109,7 +110,7 @@ Mesh read_obj(const std::string& path, double area_tolerance) {
   Mesh m;
   m.source = path;
   std::vector<double> vt;
-  std::vector<std::array<Index, 3>> tri_uv;  // unused, vertex uvs come from vt of the first use
+  std::vector<long long> corner_vt;  // vt index (0-based) of each triangle corner, -1 if the face gave none
   std::vector<Index> vt_of_vertex;
   std::vector<int> tri_line;
   std::string line;
@@ -192,6 +193,7 @@ Mesh read_obj(const std::string& path, double area_tolerance) {
       }
       for (std::size_t k = 1; k + 1 < poly.size(); ++k) {
         m.triangles.insert(m.triangles.end(), {poly[0], poly[k], poly[k + 1]});
+        corner_vt.insert(corner_vt.end(), {polyvt[0], polyvt[k], polyvt[k + 1]});
         tri_line.push_back(lineno);
       }
     }
@@ -258,12 +260,21 @@ Mesh read_obj(const std::string& path, double area_tolerance) {
     if (non_manifold > 3)
       std::cerr << "loom: warning: " << path << ": " << non_manifold << " non-manifold edges in all.\n";
   }
-  // UVs: only when every vertex got one.
+  // UVs: only when every vertex got one. Per vertex: the vt of its first use. Per corner: the
+  // face's own vt (different on either side of a UV seam), or the vertex's first-use vt for a
+  // corner whose face gave none.
   if (!vt.empty() && std::all_of(vt_of_vertex.begin(), vt_of_vertex.end(), [](Index t) { return t >= 0; })) {
     m.uvs.resize(2 * vt_of_vertex.size());
     for (std::size_t i = 0; i < vt_of_vertex.size(); ++i) {
       m.uvs[2 * i] = vt[2 * vt_of_vertex[i]];
       m.uvs[2 * i + 1] = vt[2 * vt_of_vertex[i] + 1];
+    }
+    m.corner_uvs.resize(2 * m.triangles.size());
+    for (std::size_t c = 0; c < m.triangles.size(); ++c) {
+      const std::size_t t = corner_vt[c] >= 0 ? static_cast<std::size_t>(corner_vt[c])
+                                               : static_cast<std::size_t>(vt_of_vertex[m.triangles[c]]);
+      m.corner_uvs[2 * c] = vt[2 * t];
+      m.corner_uvs[2 * c + 1] = vt[2 * t + 1];
     }
   }
   return m;

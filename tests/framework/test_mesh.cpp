@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "common/tube_obj.hpp"
 #include "loom/mesh.hpp"
 
 namespace {
@@ -61,6 +62,67 @@ TEST(Mesh, ObjReadsQuadsUvsAndNegativeIndices) {
   EXPECT_EQ(m.num_triangles(), 3);
   ASSERT_EQ(m.uvs.size(), 10u);
   EXPECT_DOUBLE_EQ(m.uvs[2 * 2], 1.0);
+}
+
+TEST(Mesh, ObjCornerUvsFollowEachFaceAcrossASeamAndVertexUvsKeepTheFirstUse) {
+  tube_test::Tube tube;
+  tube.N = 5;
+  tube.M = 3;
+  tube.shear = 0.25;
+  const loom::Mesh m = loom::read_obj(tube.write("loader"));
+  const int N = tube.N;
+  ASSERT_EQ(m.num_triangles(), 2 * N * (tube.M - 1));
+  ASSERT_EQ(m.uvs.size(), 2u * N * tube.M);
+  ASSERT_EQ(m.corner_uvs.size(), 6u * m.num_triangles());
+  EXPECT_TRUE(m.has_uvs());
+  // Quad (r, c) is fanned into triangles 2 (r N + c) (corners (r,c) (r,c+1) (r+1,c+1)) and
+  // 2 (r N + c) + 1 (corners (r,c) (r+1,c+1) (r+1,c)). Each corner carries the face's own vt:
+  // u = c / N, and u = 1 (v shifted by the shear) at column N on the closing quads.
+  for (int r = 0; r + 1 < tube.M; ++r)
+    for (int c = 0; c < N; ++c) {
+      const int corners[2][3][2] = {{{r, c}, {r, c + 1}, {r + 1, c + 1}}, {{r, c}, {r + 1, c + 1}, {r + 1, c}}};
+      for (int h = 0; h < 2; ++h) {
+        const loom::Index t = 2 * (r * N + c) + h;
+        for (int k = 0; k < 3; ++k) {
+          const int rr = corners[h][k][0], cc = corners[h][k][1];
+          EXPECT_EQ(m.triangles[3 * t + k], tube.vertex(rr, cc % N));
+          const double* w = m.corner_uv(t, k);
+          EXPECT_EQ(w[0], cc == N ? 1.0 : tube.u(cc)) << "triangle " << t << " corner " << k;
+          EXPECT_DOUBLE_EQ(w[1], tube.v(rr, cc)) << "triangle " << t << " corner " << k;
+        }
+      }
+    }
+  // One uv per vertex: the first use, u = 0 on the seam.
+  for (int r = 0; r < tube.M; ++r) {
+    EXPECT_EQ(m.uvs[2 * tube.vertex(r, 0)], 0.0);
+    EXPECT_DOUBLE_EQ(m.uvs[2 * tube.vertex(r, 0) + 1], tube.v(r, 0));
+  }
+  // A face without vt takes each vertex's first-use vt at its corners.
+  const loom::Mesh mix = loom::read_obj(write_temp("mixvt.obj",
+      "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0.5 0.25\nvt 0.75 0.25\nvt 0.75 0.5\nvt 0.9 0.9\n"
+      "f 1/1 2/2 3/3\nf 1 3 4/4\n"));
+  ASSERT_EQ(mix.corner_uvs.size(), 12u);
+  EXPECT_EQ(mix.corner_uv(1, 0)[0], 0.5);
+  EXPECT_EQ(mix.corner_uv(1, 1)[1], 0.5);
+  EXPECT_EQ(mix.corner_uv(1, 2)[0], 0.9);
+  // No vt at all: neither.
+  const loom::Mesh none = loom::read_obj(write_temp("novt.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n"));
+  EXPECT_TRUE(none.uvs.empty());
+  EXPECT_TRUE(none.corner_uvs.empty());
+  EXPECT_FALSE(none.has_uvs());
+}
+
+TEST(Mesh, GridCornerUvsAreTheVertexUvs) {
+  const loom::Mesh g = loom::make_grid(4, 3, 0.3, 0.2);
+  EXPECT_TRUE(g.corner_uvs.empty());  // no seams: corner_uv() reads the vertex uvs
+  ASSERT_TRUE(g.has_uvs());
+  for (loom::Index t = 0; t < g.num_triangles(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const loom::Index i = g.triangles[3 * t + k];
+      // uv = the in-plane position (x, y) of the XY grid
+      EXPECT_EQ(g.corner_uv(t, k)[0], g.positions[3 * i]);
+      EXPECT_EQ(g.corner_uv(t, k)[1], g.positions[3 * i + 1]);
+    }
 }
 
 TEST(Mesh, ObjErrorsNameFileLineAndFix) {

@@ -103,7 +103,7 @@ void GnatvMaterial::setup(const Mesh& mesh) {
   n_ = mesh.num_vertices();
   const Index nt = mesh.num_triangles();
   if (nt == 0) throw InputError("gnatv: mesh " + mesh.source + " has no triangles");
-  const bool has_uv = mesh.uvs.size() == 2 * static_cast<std::size_t>(n_);
+  const bool has_uv = mesh.has_uvs();
   GnatvOptions::Orientation orient = opt_.orientation;
   if (orient == GnatvOptions::Orientation::UV && !has_uv)
     throw InputError("gnatv: orientation: uv needs texture coordinates, but mesh " + mesh.source +
@@ -134,9 +134,11 @@ void GnatvMaterial::setup(const Mesh& mesh) {
     // Reference weft direction in 3D.
     V3 ref{1.0, 0.0, 0.0};
     if (orient == GnatvOptions::Orientation::UV) {
-      const double* w0 = &mesh.uvs[2 * static_cast<std::size_t>(tv[0])];
-      const double* w1 = &mesh.uvs[2 * static_cast<std::size_t>(tv[1])];
-      const double* w2 = &mesh.uvs[2 * static_cast<std::size_t>(tv[2])];
+      // The triangle's own corner uvs (a vertex on a UV seam has another uv in the triangles
+      // on the other side).
+      const double* w0 = mesh.corner_uv(t, 0);
+      const double* w1 = mesh.corner_uv(t, 1);
+      const double* w2 = mesh.corner_uv(t, 2);
       const double d1u = w1[0] - w0[0], d1v = w1[1] - w0[1], d2u = w2[0] - w0[0], d2v = w2[1] - w0[1];
       const double det = d1u * d2v - d2u * d1v;
       const double uvlen2 = std::max({d1u * d1u + d1v * d1v, d2u * d2u + d2v * d2v});
