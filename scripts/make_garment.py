@@ -42,7 +42,8 @@ triangles across the seam would span the whole texture: a squeezed stripe in ren
 hinges that read as weft-wise). Nothing physical changes with the fold: gnatv's weft
 direction depends only on the v differences within a triangle (dP/du up to its sign, which
 the material does not see), and a hinge's rigidity only on its angle to the weft up to a
-reflection.
+reflection. (The loader now keeps a vt per face corner, so a real seam would work too; this
+script keeps the fold so that the shipped mesh stays as it is.)
 """
 import math
 import os
