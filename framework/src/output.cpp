@@ -13,6 +13,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <stdexcept>
 
 #include "loom/common.hpp"
@@ -79,7 +80,12 @@ std::string obj_text(const Mesh& mesh, std::span<const double> x, const std::str
     num(s, x[i + 2]);
     s += '\n';
   }
-  if (uvs)
+  // Texture coordinates: one vt per vertex (vt i is vertex i's uv), then, for a mesh with UV
+  // seams (per-corner uvs that differ from their vertex's), one more vt per distinct such uv,
+  // in the order of first use; each face corner names its own. A mesh without seams writes the
+  // per-vertex list alone, with f v/v.
+  std::vector<long long> corner_vt;  // 1-based vt of each corner, when some corner differs
+  if (uvs) {
     for (std::size_t i = 0; i + 1 < mesh.uvs.size(); i += 2) {
       s += "vt ";
       num(s, mesh.uvs[i]);
@@ -87,6 +93,30 @@ std::string obj_text(const Mesh& mesh, std::span<const double> x, const std::str
       num(s, mesh.uvs[i + 1]);
       s += '\n';
     }
+    if (mesh.corner_uvs.size() == 2 * mesh.triangles.size()) {
+      std::map<std::pair<double, double>, long long> extra;
+      long long next = static_cast<long long>(mesh.uvs.size() / 2) + 1;
+      for (std::size_t c = 0; c < mesh.triangles.size(); ++c) {
+        const double* w = &mesh.corner_uvs[2 * c];
+        const double* vw = &mesh.uvs[2 * static_cast<std::size_t>(mesh.triangles[c])];
+        if (w[0] == vw[0] && w[1] == vw[1]) continue;
+        if (corner_vt.empty()) {
+          corner_vt.resize(mesh.triangles.size());
+          for (std::size_t k = 0; k < corner_vt.size(); ++k) corner_vt[k] = mesh.triangles[k] + 1;
+        }
+        const auto [it, fresh] = extra.emplace(std::make_pair(w[0], w[1]), next);
+        if (fresh) {
+          ++next;
+          s += "vt ";
+          num(s, w[0]);
+          s += ' ';
+          num(s, w[1]);
+          s += '\n';
+        }
+        corner_vt[c] = it->second;
+      }
+    }
+  }
   if (normals) {
     // Area-weighted vertex normals: the sum of the (unnormalised) cross products of the
     // triangles around a vertex, normalised.
@@ -120,7 +150,7 @@ std::string obj_text(const Mesh& mesh, std::span<const double> x, const std::str
       append_int(s, idx);
       if (uvs || normals) {
         s += '/';
-        if (uvs) append_int(s, idx);
+        if (uvs) append_int(s, corner_vt.empty() ? idx : corner_vt[t + k]);
         if (normals) {
           s += '/';
           append_int(s, idx);

@@ -4,9 +4,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "common/tube_obj.hpp"
 #include "loom/mesh.hpp"
+#include "loom/output.hpp"
 
 namespace {
 std::string write_temp(const std::string& name, const std::string& text) {
@@ -110,6 +112,50 @@ TEST(Mesh, ObjCornerUvsFollowEachFaceAcrossASeamAndVertexUvsKeepTheFirstUse) {
   EXPECT_TRUE(none.uvs.empty());
   EXPECT_TRUE(none.corner_uvs.empty());
   EXPECT_FALSE(none.has_uvs());
+}
+
+TEST(Mesh, ObjOutputKeepsUvSeamsAndReadsBackTheSameCornerUvs) {
+  // The tube's seam: M vertices (column 0) whose closing-quad corners carry u = 1 (and v
+  // shifted by the shear) where their first use has u = 0. Written with uvs, the OBJ must give
+  // those corners their own vt (M more than the N M per-vertex ones, by the construction) and
+  // read back to the same per-corner and per-vertex uvs, bit for bit with lossless numbers.
+  tube_test::Tube tube;
+  tube.N = 6;
+  tube.M = 4;
+  tube.shear = 0.25;
+  const loom::Mesh m = loom::read_obj(tube.write("writer"));
+  loom::ObjOptions o;
+  o.uvs = true;
+  o.lossless = true;
+  const std::string text = loom::obj_text(m, m.positions, "seam", o);
+  int vt = 0;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("vt ", 0) == 0) ++vt;
+  EXPECT_EQ(vt, tube.N * tube.M + tube.M);
+  const loom::Mesh back = loom::read_obj(write_temp("seam_back.obj", text));
+  EXPECT_EQ(back.triangles, m.triangles);
+  EXPECT_EQ(back.positions, m.positions);
+  EXPECT_EQ(back.uvs, m.uvs);
+  ASSERT_EQ(back.corner_uvs.size(), m.corner_uvs.size());
+  EXPECT_EQ(back.corner_uvs, m.corner_uvs);
+  // Spot check against the construction: the closing quad of ring 0 has u = 1 at column N.
+  const loom::Index t = 2 * (tube.N - 1);  // quad (0, N - 1), first triangle: (0,N-1) (0,N) (1,N)
+  EXPECT_EQ(back.corner_uv(t, 1)[0], 1.0);
+  EXPECT_EQ(back.corner_uv(t, 2)[0], 1.0);
+  EXPECT_EQ(back.uvs[2 * tube.vertex(0, 0)], 0.0);
+
+  // Without seams (a quad whose faces agree on every vertex's vt): one vt per vertex and f v/v,
+  // as before.
+  const loom::Mesh flat = loom::read_obj(write_temp("noseam.obj",
+      "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
+  const std::string flat_text = loom::obj_text(flat, flat.positions, "", o);
+  EXPECT_NE(flat_text.find("f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"), std::string::npos) << flat_text;
+  vt = 0;
+  std::istringstream in2(flat_text);
+  for (std::string line; std::getline(in2, line);)
+    if (line.rfind("vt ", 0) == 0) ++vt;
+  EXPECT_EQ(vt, 4);
 }
 
 TEST(Mesh, GridCornerUvsAreTheVertexUvs) {
