@@ -88,8 +88,8 @@ RunInput load_run(const std::string& run_dir_arg, const std::string& scene_arg, 
 }
 
 // Topology from the first frame (a full, validated OBJ read). Frames carry no texture
-// coordinates: take the scene mesh's own (an OBJ with vt) when it has them for the same
-// vertices; otherwise the renderer derives planar ones.
+// coordinates: take the scene mesh's own (an OBJ with vt, per vertex and per corner) when it
+// has them for the same vertices; otherwise the renderer derives planar ones.
 Mesh first_frame_mesh(const RunInput& in) {
   Mesh mesh = read_obj(in.frames.front().string(), 0.0);
   Params mesh_spec = in.root.child("mesh");
@@ -98,8 +98,13 @@ Mesh first_frame_mesh(const RunInput& in) {
     if (obj.is_relative() && !in.base_dir.empty()) obj = fs::path(in.base_dir) / obj;
     if (fs::exists(obj)) {
       Mesh source = read_obj(obj.string());
-      if (source.num_vertices() == mesh.num_vertices() && source.uvs.size() == 2 * std::size_t(mesh.num_vertices()))
+      if (source.num_vertices() == mesh.num_vertices() && source.uvs.size() == 2 * std::size_t(mesh.num_vertices())) {
         mesh.uvs = std::move(source.uvs);
+        // Per-corner uvs (UV seams) when the triangles are the same: the renderer splits the
+        // seam vertices so that each side keeps its texture coordinates.
+        mesh.corner_uvs.clear();
+        if (source.triangles == mesh.triangles) mesh.corner_uvs = std::move(source.corner_uvs);
+      }
     }
   }
   return mesh;

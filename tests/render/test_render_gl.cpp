@@ -10,6 +10,7 @@
 #include <sstream>
 #include <string>
 
+#include "common/tube_obj.hpp"
 #include "gl_renderer.hpp"
 #include "loom/common.hpp"
 #include "loom/mesh.hpp"
@@ -244,6 +245,60 @@ TEST(GlRenderer, VertexFramesOfAFlatGrid) {
     const auto uv2 = texture_coords(bare);
     for (std::size_t k = 0; k < g.uvs.size(); ++k) EXPECT_NEAR(uv2[k], g.uvs[k], 1e-6);
   }
+}
+
+TEST(GlRenderer, DrawMeshKeepsEachSideOfAUvSeamAndOneNormalAcrossIt) {
+  // The seamed tube (tests/common/tube_obj.hpp): the closing quads' corners at column N carry
+  // u = 1 where the seam vertices' first use has u = 0, one distinct uv per ring, so the drawn
+  // mesh must have exactly M copies (one per ring, of the column-0 vertex).
+  tube_test::Tube tube;
+  tube.N = 6;
+  tube.M = 4;
+  tube.shear = 0.25;
+  const Mesh m = read_obj(tube.write("draw"));
+  const Index n = m.num_vertices();
+  const DrawMesh d = draw_mesh(m);
+  ASSERT_EQ(d.source.size(), std::size_t(n + tube.M));
+  ASSERT_EQ(d.uv.size(), 2 * d.source.size());
+  ASSERT_EQ(d.triangles.size(), m.triangles.size());
+  for (Index i = 0; i < n; ++i) EXPECT_EQ(d.source[std::size_t(i)], i);
+  for (std::size_t i = std::size_t(n); i < d.source.size(); ++i) EXPECT_EQ(d.source[i] % tube.N, 0) << i;  // column 0
+  for (Index t = 0; t < m.num_triangles(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const Index c = d.triangles[3 * std::size_t(t) + k];
+      EXPECT_EQ(d.source[std::size_t(c)], m.triangles[3 * std::size_t(t) + k]);
+      EXPECT_EQ(d.uv[2 * std::size_t(c)], float(m.corner_uv(t, k)[0])) << t << " " << k;
+      EXPECT_EQ(d.uv[2 * std::size_t(c) + 1], float(m.corner_uv(t, k)[1])) << t << " " << k;
+    }
+  // Normals: the merged copies equal the area-weighted normals of the unsplit mesh (computed
+  // here on the mesh's own triangles), so a seam leaves no shading edge.
+  std::vector<float> x(3 * d.source.size());
+  for (std::size_t i = 0; i < d.source.size(); ++i)
+    for (int k = 0; k < 3; ++k) x[3 * i + k] = float(m.positions[3 * std::size_t(d.source[i]) + k]);
+  std::vector<float> nd(x.size()), td(x.size());
+  vertex_frames(x, d.uv, d.triangles, nd, td);
+  merge_seam_normals(d.source, n, nd);
+  const std::vector<float> xm(m.positions.begin(), m.positions.end());
+  const auto uvm = texture_coords(m);
+  std::vector<float> nm(xm.size()), tm(xm.size());
+  vertex_frames(xm, uvm, m.triangles, nm, tm);
+  for (std::size_t i = 0; i < d.source.size(); ++i)
+    for (int k = 0; k < 3; ++k)
+      EXPECT_NEAR(nd[3 * i + k], nm[3 * std::size_t(d.source[i]) + k], 1e-6f) << "drawn vertex " << i;
+  // The seam copies' tangents follow their own side's uv: dP/du points around the tube (+angle
+  // direction) on both sides of the seam at column 0.
+  for (std::size_t i = std::size_t(n); i < d.source.size(); ++i) {
+    const glm::vec3 tc = glm::normalize(glm::vec3(td[3 * i], td[3 * i + 1], td[3 * i + 2]));
+    EXPECT_GT(tc.y, 0.5f) << "copy " << i;  // at angle 0 the tube's +angle direction is +y (the shear tilts it along z)
+    const std::size_t s0 = std::size_t(d.source[i]);
+    const glm::vec3 ts = glm::normalize(glm::vec3(td[3 * s0], td[3 * s0 + 1], td[3 * s0 + 2]));
+    EXPECT_GT(ts.y, 0.5f) << "vertex " << s0;
+  }
+  // A grid (no corner uvs) is drawn as it is.
+  const Mesh g = make_grid(5, 4, 2.0, 1.0);
+  const DrawMesh dg = draw_mesh(g);
+  EXPECT_EQ(dg.source.size(), std::size_t(g.num_vertices()));
+  EXPECT_EQ(dg.triangles, g.triangles);
 }
 
 // ---- bad input ------------------------------------------------------------------------------

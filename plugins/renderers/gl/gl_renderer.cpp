@@ -229,9 +229,11 @@ void GlRenderer::begin(const Mesh& mesh) {
     egl_->make_current();
   }
   num_vertices_ = mesh.num_vertices();
-  triangles_ = mesh.triangles;
-  uv_ = texture_coords(mesh);
-  pos_.assign(3 * std::size_t(num_vertices_), 0.0f);
+  DrawMesh dm = draw_mesh(mesh);
+  triangles_ = std::move(dm.triangles);
+  uv_ = std::move(dm.uv);
+  draw_source_ = std::move(dm.source);
+  pos_.assign(3 * draw_source_.size(), 0.0f);
   normals_.assign(pos_.size(), 0.0f);
   tangents_.assign(pos_.size(), 0.0f);
   glm::vec3 lo(1e30f), hi(-1e30f);
@@ -290,7 +292,7 @@ void GlRenderer::create_gl_objects() {
     glGenRenderbuffers(1, &rb_depth_);
   }
   glBindVertexArray(vao_);
-  const std::size_t n3 = 3 * std::size_t(num_vertices_) * sizeof(float);
+  const std::size_t n3 = pos_.size() * sizeof(float);  // drawn vertices: the mesh's and its seam copies
   for (int a = 0; a < 3; ++a) {
     glBindBuffer(GL_ARRAY_BUFFER, vbo_[a]);
     glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(n3), nullptr, GL_DYNAMIC_DRAW);
@@ -375,12 +377,15 @@ void GlRenderer::set_obstacles(std::span<const float> positions, std::span<const
 
 void GlRenderer::upload(std::span<const double> x) {
   if (!begun_) throw std::logic_error("gl renderer: render() before begin()");
-  if (x.size() != pos_.size())
+  if (x.size() != 3 * std::size_t(num_vertices_))
     throw InputError("gl renderer: got " + std::to_string(x.size() / 3) + " vertices, the mesh has " +
                      std::to_string(num_vertices_) + ".");
   if (egl_) egl_->make_current();
   for (std::size_t i = 0; i < x.size(); ++i) pos_[i] = float(x[i]);
+  for (std::size_t i = std::size_t(num_vertices_); i < draw_source_.size(); ++i)
+    for (int k = 0; k < 3; ++k) pos_[3 * i + k] = float(x[3 * std::size_t(draw_source_[i]) + k]);
   vertex_frames(pos_, uv_, triangles_, normals_, tangents_);
+  merge_seam_normals(draw_source_, num_vertices_, normals_);
   const std::vector<float>* attrs[3] = {&pos_, &normals_, &tangents_};
   for (int a = 0; a < 3; ++a) {
     glBindBuffer(GL_ARRAY_BUFFER, vbo_[a]);

@@ -85,6 +85,19 @@ void vertex_frames(std::span<const float> x, std::span<const float> uv, std::spa
 /// Texture coordinates: the mesh's if it has them, else planar from the positions (the two
 /// longest bounding-box axes, in the mesh's units, origin at the box corner).
 std::vector<float> texture_coords(const Mesh& mesh);
+/// The mesh as drawn: one drawn vertex per mesh vertex (the first num_vertices, in order, with
+/// texture_coords' uv), then one per distinct (vertex, corner uv) where a corner's uv differs
+/// from its vertex's (a UV seam: each side keeps its own texture coordinates). `source[i]` is
+/// the mesh vertex of drawn vertex i; `triangles` are the mesh's, renumbered per corner.
+struct DrawMesh {
+  std::vector<float> uv;
+  std::vector<Index> triangles, source;
+};
+DrawMesh draw_mesh(const Mesh& mesh);
+/// After vertex_frames on a DrawMesh: every drawn copy of a mesh vertex gets the sum of the
+/// copies' normals (the surface is continuous across a seam: no shading edge there); the
+/// tangents stay per copy (they follow each side's uv). No allocation.
+void merge_seam_normals(std::span<const Index> source, Index num_mesh_vertices, std::span<float> normals);
 
 class EglContext;
 
@@ -135,7 +148,8 @@ class GlRenderer final : public Renderer {
   Camera camera_;
   glm::vec3 light_dir_{0.0f, 0.0f, 1.0f};
   Index num_vertices_ = 0;
-  std::vector<Index> triangles_;
+  std::vector<Index> triangles_;    ///< DrawMesh::triangles
+  std::vector<Index> draw_source_;  ///< DrawMesh::source
   std::vector<float> uv_, pos_, normals_, tangents_;
   std::vector<unsigned char> readback_, image_;
   unsigned program_ = 0, vao_ = 0, vbo_[4] = {0, 0, 0, 0}, ebo_ = 0, fbo_ = 0, rb_color_ = 0, rb_depth_ = 0;

@@ -13,6 +13,9 @@
 
 #include "gl_renderer.hpp"
 
+#include <map>
+#include <tuple>
+
 namespace fs = std::filesystem;
 
 namespace loom::render {
@@ -381,6 +384,38 @@ void vertex_frames(std::span<const float> x, std::span<const float> uv, std::spa
       }
     }
   }
+}
+
+DrawMesh draw_mesh(const Mesh& mesh) {
+  DrawMesh d;
+  const Index n = mesh.num_vertices();
+  d.uv = texture_coords(mesh);
+  d.triangles = mesh.triangles;
+  d.source.resize(std::size_t(n));
+  for (Index i = 0; i < n; ++i) d.source[std::size_t(i)] = i;
+  if (mesh.uvs.size() != 2 * std::size_t(n) || mesh.corner_uvs.size() != 2 * mesh.triangles.size()) return d;
+  std::map<std::tuple<Index, double, double>, Index> copies;
+  for (std::size_t c = 0; c < mesh.triangles.size(); ++c) {
+    const Index v = mesh.triangles[c];
+    const double* w = &mesh.corner_uvs[2 * c];
+    if (w[0] == mesh.uvs[2 * std::size_t(v)] && w[1] == mesh.uvs[2 * std::size_t(v) + 1]) continue;
+    const auto [it, fresh] = copies.emplace(std::make_tuple(v, w[0], w[1]), Index(d.source.size()));
+    if (fresh) {
+      d.source.push_back(v);
+      d.uv.push_back(float(w[0]));
+      d.uv.push_back(float(w[1]));
+    }
+    d.triangles[c] = it->second;
+  }
+  return d;
+}
+
+void merge_seam_normals(std::span<const Index> source, Index num_mesh_vertices, std::span<float> normals) {
+  const std::size_t n = std::size_t(num_mesh_vertices);
+  for (std::size_t i = n; i < source.size(); ++i)
+    for (int k = 0; k < 3; ++k) normals[3 * std::size_t(source[i]) + k] += normals[3 * i + k];
+  for (std::size_t i = n; i < source.size(); ++i)
+    for (int k = 0; k < 3; ++k) normals[3 * i + k] = normals[3 * std::size_t(source[i]) + k];
 }
 
 std::vector<float> texture_coords(const Mesh& mesh) {
