@@ -114,6 +114,16 @@ TEST(Mesh, ObjCornerUvsFollowEachFaceAcrossASeamAndVertexUvsKeepTheFirstUse) {
   EXPECT_FALSE(none.has_uvs());
 }
 
+namespace {
+int count_vt_lines(const std::string& obj) {
+  int vt = 0;
+  std::istringstream in(obj);
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("vt ", 0) == 0) ++vt;
+  return vt;
+}
+}  // namespace
+
 TEST(Mesh, ObjOutputKeepsUvSeamsAndReadsBackTheSameCornerUvs) {
   // The tube's seam: M vertices (column 0) whose closing-quad corners carry u = 1 (and v
   // shifted by the shear) where their first use has u = 0. Written with uvs, the OBJ must give
@@ -128,11 +138,7 @@ TEST(Mesh, ObjOutputKeepsUvSeamsAndReadsBackTheSameCornerUvs) {
   o.uvs = true;
   o.lossless = true;
   const std::string text = loom::obj_text(m, m.positions, "seam", o);
-  int vt = 0;
-  std::istringstream in(text);
-  for (std::string line; std::getline(in, line);)
-    if (line.rfind("vt ", 0) == 0) ++vt;
-  EXPECT_EQ(vt, tube.N * tube.M + tube.M);
+  EXPECT_EQ(count_vt_lines(text), tube.N * tube.M + tube.M);
   const loom::Mesh back = loom::read_obj(write_temp("seam_back.obj", text));
   EXPECT_EQ(back.triangles, m.triangles);
   EXPECT_EQ(back.positions, m.positions);
@@ -151,11 +157,7 @@ TEST(Mesh, ObjOutputKeepsUvSeamsAndReadsBackTheSameCornerUvs) {
       "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"));
   const std::string flat_text = loom::obj_text(flat, flat.positions, "", o);
   EXPECT_NE(flat_text.find("f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"), std::string::npos) << flat_text;
-  vt = 0;
-  std::istringstream in2(flat_text);
-  for (std::string line; std::getline(in2, line);)
-    if (line.rfind("vt ", 0) == 0) ++vt;
-  EXPECT_EQ(vt, 4);
+  EXPECT_EQ(count_vt_lines(flat_text), 4);
 }
 
 TEST(Mesh, GridCornerUvsAreTheVertexUvs) {
