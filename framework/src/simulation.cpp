@@ -184,16 +184,26 @@ void Simulation::check_state(bool check_strain) {
   Index bad = std::numeric_limits<Index>::max();
   const double* x = st.x.data();
   const double* v = st.v.data();
-#pragma omp parallel for reduction(min : bad) schedule(static) if (n >= kParallelMinVertices)
-  for (Index i = 0; i < n; ++i) {
+  // NaN fails every comparison: !(v2 <= vmax2) catches NaN and Inf too.
+  auto bad_at = [&](Index i) {
     const double a = x[3 * i] + x[3 * i + 1] + x[3 * i + 2];
     const double v2 = v[3 * i] * v[3 * i] + v[3 * i + 1] * v[3 * i + 1] + v[3 * i + 2] * v[3 * i + 2];
-    // NaN fails every comparison: !(v2 <= vmax2) catches NaN and Inf too.
-    if (!(v2 <= vmax2) || !std::isfinite(a)) bad = std::min(bad, i);
+    return !(v2 <= vmax2) || !std::isfinite(a);
+  };
+  if (n < kParallelMinVertices || omp_get_max_threads() == 1) {
+    // No region for a small cloth: a region of one thread still ends with a futex wake (a
+    // system call), about as much as the check itself.
+    for (Index i = 0; i < n && bad == std::numeric_limits<Index>::max(); ++i)
+      if (bad_at(i)) bad = i;
+  } else {
+#pragma omp parallel for reduction(min : bad) schedule(static)
+    for (Index i = 0; i < n; ++i)
+      if (bad_at(i)) bad = std::min(bad, i);
   }
-  const std::string when = "step " + std::to_string(st.step) + " (t = " + fmt(st.time) + " s)";
-  const std::string fix = " Fix: reduce integrator.dt (or raise substeps), add damping, or choose a more stable "
-                          "integrator (baraff_witkin); raise guard.max_velocity only if such speeds are real.";
+  // Built only when needed (not on every step).
+  auto when = [&] { return "step " + std::to_string(st.step) + " (t = " + fmt(st.time) + " s)"; };
+  const char* fix = " Fix: reduce integrator.dt (or raise substeps), add damping, or choose a more stable "
+                    "integrator (baraff_witkin); raise guard.max_velocity only if such speeds are real.";
   if (bad != std::numeric_limits<Index>::max()) {
     const double* xi = &x[3 * bad];
     const double* vi = &v[3 * bad];
@@ -205,12 +215,12 @@ void Simulation::check_state(bool check_strain) {
       what = "velocity (" + fmt(vi[0]) + ", " + fmt(vi[1]) + ", " + fmt(vi[2]) + ") is not finite";
     else
       what = "speed " + fmt(speed) + " m/s exceeds guard.max_velocity = " + fmt(guard_.max_velocity) + " m/s";
-    throw DivergenceError("diverged at " + when + ": vertex " + std::to_string(bad) + ": " + what + "." + fix);
+    throw DivergenceError("diverged at " + when() + ": vertex " + std::to_string(bad) + ": " + what + "." + fix);
   }
   if (check_strain) {
     const double s = scene_->material->max_strain(st.x);
     if (!(s <= guard_.max_strain))
-      throw DivergenceError("diverged at " + when + ": the largest strain is " + fmt(s) + ", beyond guard.max_strain = " +
+      throw DivergenceError("diverged at " + when() + ": the largest strain is " + fmt(s) + ", beyond guard.max_strain = " +
                             fmt(guard_.max_strain) + "." + fix);
   }
 }
