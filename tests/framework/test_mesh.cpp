@@ -67,10 +67,7 @@ TEST(Mesh, ObjReadsQuadsUvsAndNegativeIndices) {
 }
 
 TEST(Mesh, ObjCornerUvsFollowEachFaceAcrossASeamAndVertexUvsKeepTheFirstUse) {
-  tube_test::Tube tube;
-  tube.N = 5;
-  tube.M = 3;
-  tube.shear = 0.25;
+  const tube_test::Tube tube{.N = 5, .M = 3, .shear = 0.25};
   const loom::Mesh m = loom::read_obj(tube.write("loader"));
   const int N = tube.N;
   ASSERT_EQ(m.num_triangles(), 2 * N * (tube.M - 1));
@@ -129,10 +126,7 @@ TEST(Mesh, ObjOutputKeepsUvSeamsAndReadsBackTheSameCornerUvs) {
   // shifted by the shear) where their first use has u = 0. Written with uvs, the OBJ must give
   // those corners their own vt (M more than the N M per-vertex ones, by the construction) and
   // read back to the same per-corner and per-vertex uvs, bit for bit with lossless numbers.
-  tube_test::Tube tube;
-  tube.N = 6;
-  tube.M = 4;
-  tube.shear = 0.25;
+  const tube_test::Tube tube{.N = 6, .M = 4, .shear = 0.25};
   const loom::Mesh m = loom::read_obj(tube.write("writer"));
   loom::ObjOptions o;
   o.uvs = true;

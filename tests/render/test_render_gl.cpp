@@ -251,10 +251,7 @@ TEST(GlRenderer, DrawMeshKeepsEachSideOfAUvSeamAndOneNormalAcrossIt) {
   // The seamed tube (tests/common/tube_obj.hpp): the closing quads' corners at column N carry
   // u = 1 where the seam vertices' first use has u = 0, one distinct uv per ring, so the drawn
   // mesh must have exactly M copies (one per ring, of the column-0 vertex).
-  tube_test::Tube tube;
-  tube.N = 6;
-  tube.M = 4;
-  tube.shear = 0.25;
+  const tube_test::Tube tube{.N = 6, .M = 4, .shear = 0.25};
   const Mesh m = read_obj(tube.write("draw"));
   const Index n = m.num_vertices();
   const DrawMesh d = draw_mesh(m);
