@@ -127,12 +127,17 @@ Compared compare(const ColliderSet& cols, Cloth cloth, Index nx, double y0, doub
 // landings, vertices in contact with friction on a moving surface, and releases (steps solved
 // twice). 20x20 vertices instead of 64x64 keeps the test fast.
 //
-// The horizon: the contact rule is discontinuous at distance 0 (a vertex left exactly on the
-// surface by the previous step is in contact when its distance rounds to <= 0). The two
-// backends' states differ by ~1e-13 (the order of the reductions), so such a tie can go
-// either way and then the runs part by a whole contact. Measured: the first tie comes at step
-// 26 here (at step 12 from 3 mm above), at step 23 in the test below; the comparisons stop
-// before them. The CPU run with another thread count parts the same way.
+// The horizon. The two backends' states differ by ~1e-13 (the order of the reductions). Until
+// 2026-11-30 the contact rule was discontinuous at distance 0: a vertex left on the surface
+// by the previous step (distance a rounding error, either sign) was in contact when its
+// distance rounded to <= 0, so the runs parted by a whole contact at the first such tie (step
+// 26 here; on a real GPU, whose rounding differs more, earlier). The rule now counts every
+// vertex within BaraffWitkin::kContactTolerance (1 nm) as on the surface, and no tie is left
+// in these runs. Measured on the stand-in (2026-11-30): with friction inside the solve, x
+// and v agree to 2.0e-12 over 60 steps; with the friction correction after the solve the
+// difference grows smoothly by about 1.3x per step from step 12 (no jump: that rule's step
+// amplifies a perturbation while vertices bounce in and out of contact), 1.4e-10 at step 39,
+// so that rule is compared over 30 steps.
 TEST(CudaBwColliders, ShippedDrapedBallGnatvBwMatchesTheCpuBackend) {
   const Params scene = scene_file("draped_ball_gnatv_bw.yaml");
   const ColliderSet ball = ColliderSet::parse(scene.child("colliders"));
@@ -148,7 +153,7 @@ TEST(CudaBwColliders, ShippedDrapedBallGnatvBwMatchesTheCpuBackend) {
   for (const bool implicit : {true, false}) {
     SCOPED_TRACE(implicit ? "implicit_friction: true" : "implicit_friction: false");
     o.implicit_friction = implicit;
-    const Compared r = compare(ball, Cloth::Wool, 20, top + 0.001, -0.3, h, 24, o);
+    const Compared r = compare(ball, Cloth::Wool, 20, top + 0.001, -0.3, h, implicit ? 60 : 30, o);
     EXPECT_LE(r.err, 1e-10);
     EXPECT_GT(r.contacts, 40);  // vertices in contact over the run (4 at a time near the top)
     EXPECT_GT(r.releases, 0);
@@ -174,7 +179,7 @@ TEST(CudaBwColliders, MovingPlaneAndSphereMatchTheCpuBackend) {
   for (const bool implicit : {true, false}) {
     SCOPED_TRACE(implicit ? "implicit_friction: true" : "implicit_friction: false");
     o.implicit_friction = implicit;
-    const Compared r = compare(cols, Cloth::Springs, 12, 0.0, -0.8, 1e-3, 21, o, true);
+    const Compared r = compare(cols, Cloth::Springs, 12, 0.0, -0.8, 1e-3, 60, o, true);
     EXPECT_LE(r.err, 1e-10);
     EXPECT_GT(r.contacts, 40);
     x[implicit] = r.x;

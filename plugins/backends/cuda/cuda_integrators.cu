@@ -524,9 +524,10 @@ struct BwConstraintKernel {  // S_i, z_i and the contact of vertex i; returns 1 
       T n0[3], v0[3], n1[3], v1[3];
       T d0 = device_query(s0[c], xi, kDeviceQueryCutoff, n0, v0);
       const T d1 = device_query(s1[c], xp, kDeviceQueryCutoff, n1, v1);
-      if (d1 <= T(0) && d0 >= static_cast<T>(kDeviceQueryCutoff)) d0 = device_query(s0[c], xi, INFINITY, n0, v0);
+      const T band = static_cast<T>(kDeviceContactTolerance);  // as BaraffWitkin::set_constraints
+      if (d1 <= band && d0 >= static_cast<T>(kDeviceQueryCutoff)) d0 = device_query(s0[c], xi, INFINITY, n0, v0);
       const T d = d0 < d1 ? d0 : d1;
-      if (d <= T(0) && (best < 0 || d < depth)) {
+      if (d <= band && (best < 0 || d < depth)) {
         best = c;
         const bool next = d1 < d0;
         for (int k = 0; k < 3; ++k) {

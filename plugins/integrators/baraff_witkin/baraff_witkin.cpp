@@ -179,14 +179,18 @@ void BaraffWitkin::set_constraints(const Scene& scene, double h) {
     double depth = 0;
     for (std::size_t ci = 0; ci < cols.size(); ++ci) {
       const Collider& c = cols[ci];
-      // Only distances <= 0 make a contact: ask with a cutoff (exact below it, a lower bound
-      // above; a mesh skips its far parts), and again without it for the start distance of a
-      // vertex predicted to land, whose target velocity needs it exactly.
+      // Only distances <= kContactTolerance make a contact: ask with a cutoff (exact below it,
+      // a lower bound above; a mesh skips its far parts), and again without it for the start
+      // distance of a vertex predicted to land, whose target velocity needs it exactly.
+      // The tolerance, not 0: a vertex that the last step left on the surface (projected, or
+      // sliding) starts at a distance of a rounding error, either sign; with 0 as the limit
+      // that sign decided whether it stayed in contact, so the same run on another thread
+      // count or backend could part by a whole contact (test_cuda_mesh_colliders.cpp).
       Collider::Contact now = c.query(frames0_[ci], x, kQueryCutoff);
       const Collider::Contact next = c.query(frames1_[ci], xp, kQueryCutoff);
-      if (next.distance <= 0 && now.distance >= kQueryCutoff) now = c.query(frames0_[ci], x);
+      if (next.distance <= kContactTolerance && now.distance >= kQueryCutoff) now = c.query(frames0_[ci], x);
       const double d = std::min(now.distance, next.distance);
-      if (d <= 0 && (!best || d < depth)) {
+      if (d <= kContactTolerance && (!best || d < depth)) {
         best = &c;
         bc = next.distance < now.distance ? next : now;
         bc.distance = now.distance;
