@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
+#include <limits>
 #include <memory>
 #include <random>
 #include <sstream>
@@ -117,29 +119,41 @@ TEST_P(CudaHoRun, MatchesTheCpuBackend) {
   HoIntegrator ci(static_cast<HoVariant>(variant));
   auto di = lc::make_cuda_ho(static_cast<lc::HoVariantD>(variant), lc::Precision::Double);
   // The device gathers per vertex in its own spring order, the CPU scatters in its layout order,
-  // so x differs by an ulp (1e-16). The stiff springs turn that into a velocity difference of
-  // about w k h ulp(x) per step (omega^2 h = 400/s here), so v parts at 1e-12 relative after
-  // 50-100 steps (measured) while x stays within 1e-15. Both backends sum a vertex's spring
-  // impulses unweighted and scale the sum by its inverse mass once, so only the summation order
-  // differs (measured after 50 steps: v 3e-16, 2e-13, 2e-14 for the three variants; after 300:
-  // x <= 1.8e-15, v <= 6.4e-12): 50 steps are compared at 1e-12, and a longer run below with a
-  // looser bound on v.
+  // and the two compilers contract a*b+c into fused multiply-adds and evaluate sin/cos
+  // differently, so x differs by a few ulps each step. The stiff springs turn that into a
+  // velocity difference of about omega^2 h ulp(x) per step (omega^2 h = 400/s here), so after N
+  // steps |dv| <= N * 400/s * 4 eps max|x| (4 ulps a step, summed without cancellation). That
+  // rounding bound, relative to max|v|, is what v is held to; x stays within 1e-12. Measured
+  // (v after 50 steps, the three variants): 3e-16, 2e-13, 2e-14 on the Thrust-OpenMP stand-in
+  // (one compiler); 9.3e-12, 3.8e-12, 2.5e-12 on an H200 (nvcc, 2026-11-30), against the bound's
+  // 2.6e-10, 2.6e-10, 3.2e-11.
   const double h = 1e-4;
   run(ci, *cpu, h, 50);
   run(*di, *dev, h, 50);
   EXPECT_EQ(dev->state.step, 50);
   EXPECT_DOUBLE_EQ(dev->state.time, cpu->state.time);
+  auto max_abs = [](const std::vector<double>& a) {
+    double m = 0;
+    for (double e : a) m = std::max(m, std::fabs(e));
+    return m;
+  };
+  auto rounding_bound = [&](int steps) {
+    return steps * 400.0 * 4 * std::numeric_limits<double>::epsilon() * max_abs(cpu->state.x) /
+           max_abs(cpu->state.v);
+  };
   // The run did something: the cloth moved and has velocity.
   EXPECT_GT(rel_diff(cpu->state.x, cpu->mesh.positions), 1e-4);
   EXPECT_LE(rel_diff(dev->state.x, cpu->state.x), 1e-12);
-  EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), 1e-12);
+  EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), rounding_bound(50));
+  std::printf("[ measured ] HO variant %d, 50 steps: x %.2e, v %.2e relative (bound %.2e)\n", variant,
+              rel_diff(dev->state.x, cpu->state.x), rel_diff(dev->state.v, cpu->state.v), rounding_bound(50));
   // Longer: 250 more steps, positions still agree to 1e-12.
   for (int k = 0; k < 250; ++k) {
     ci.step(*cpu, h);
     di->step(*dev, h);
   }
   EXPECT_LE(rel_diff(dev->state.x, cpu->state.x), 1e-12);
-  EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), 1e-10);
+  EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), rounding_bound(300));
   // Fixed pins stay exactly where they are.
   for (Index i : dev->state.pin_list)
     for (int a = 0; a < 3; ++a) EXPECT_EQ(dev->state.x[3 * i + a], dev->mesh.positions[3 * i + a]);
