@@ -378,6 +378,7 @@ int main(int argc, char** argv) {
     }
     if (tty) std::printf("\n");
     if (show) {
+      sim.sync_state();  // run() ended on a frame's check, which synced; this keeps the summary right regardless
       const auto& st = sim;
       const double el = loom::seconds_since(t0);
       const auto f = st.measure(st.frames());

@@ -453,8 +453,9 @@ const ParamSpec& device_keys_spec() {
     ParamSpec s("device execution");
     s.choice("precision", "double", {"double", "float"}).backends({"cuda"}).help(
       "device arrays in double or float (coefficients are computed in double and rounded once)");
-  s.integer("host_sync_every", 1).range(ParamRange::closed(1, 1000000)).units("steps").backends({"cuda"}).help(
-      "copy x and v back to the host after every n-th step (1 = every step)");
+  s.integer("host_sync_every", 0).range(ParamRange::closed(0, 1000000)).units("steps").backends({"cuda"}).help(
+      "0: copy x and v back to the host only when the framework reads them (guards on the device, stats and "
+      "output once a frame); n: also after every n-th step (1 = every step)");
     return s;
   }();
   return s;

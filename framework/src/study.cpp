@@ -104,6 +104,7 @@ class Runner {
         r.note = e.what();
         return r;
       }
+      sim->sync_state();  // x and v as the integrator has them (the CUDA backend keeps them on the device)
       Snapshot s;
       s.x = sim->scene().state.x;
       s.energy = total_energy(*sim);
@@ -403,6 +404,7 @@ StepOutcome try_step(const StabilityPlan& plan, const std::string& scene, Plugin
     for (long long k = 0; k < n; ++k) {
       sim.step();
       if ((k & 255) == 255 || k == n - 1) {
+        sim.sync_state();
         const double s = sim.scene().material->max_strain(sim.scene().state.x);
         if (!(s <= plan.max_strain)) {
           why = "strain " + fmt(s) + " > " + fmt(plan.max_strain) + " at t = " + fmt(sim.scene().state.time);

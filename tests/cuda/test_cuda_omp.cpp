@@ -229,6 +229,53 @@ TEST(CudaHo, HostSyncEveryNthStep) {
   EXPECT_EQ(a->state.v, b->state.v);
 }
 
+// host_sync_every: 0 (the scene files' default): the host copy is brought up to date only when
+// the framework asks (sync_to_host), and the per-step guard runs on the device.
+TEST(CudaHo, LazyHostCopyAndTheGuardOnTheDevice) {
+  auto a = make_scene(Mat::DampedSprings, 8, 8);
+  auto b = make_scene(Mat::DampedSprings, 8, 8);
+  auto ia = lc::make_cuda_ho(lc::HoVariantD::Velocity, lc::Precision::Double, 1);
+  auto ib = lc::make_cuda_ho(lc::HoVariantD::Velocity, lc::Precision::Double, 0);
+  // Before the first prepare nothing is on the device: the framework checks the host copy.
+  EXPECT_EQ(ib->first_unguarded_vertex(1e6), -2);
+  run(*ia, *a, 1e-4, 7);
+  run(*ib, *b, 1e-4, 7);
+  EXPECT_NE(a->state.x, b->state.x);  // b's host copy was not touched ...
+  EXPECT_EQ(b->state.step, 7);        // ... but the bookkeeping is current
+  EXPECT_EQ(ib->first_unguarded_vertex(1e6), -1);  // checked on the device: nothing wrong
+  ib->sync_to_host(*b);
+  EXPECT_EQ(a->state.x, b->state.x);  // the same run, bit for bit
+  EXPECT_EQ(a->state.v, b->state.v);
+  EXPECT_EQ(ib->first_unguarded_vertex(1e6), -2);  // the host copy is current: checked there
+  // The guard's rule on the device, against the host's (Simulation::check_state): the lowest
+  // vertex whose squared speed is not <= vmax^2.
+  ib->step(*b, 1e-4);
+  ia->step(*a, 1e-4);
+  Index expect = -1;
+  const double limit = 0.5 * [&] {
+    double m = 0;
+    for (Index i = 0; i < a->state.size(); ++i) {
+      const double* v = &a->state.v[3 * i];
+      m = std::max(m, v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    }
+    return m;
+  }();
+  for (Index i = 0; i < a->state.size() && expect < 0; ++i) {
+    const double* v = &a->state.v[3 * i];
+    if (!(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= limit)) expect = i;
+  }
+  ASSERT_GE(expect, 0);
+  EXPECT_EQ(ib->first_unguarded_vertex(limit), expect);
+  EXPECT_EQ(ib->first_unguarded_vertex(std::numeric_limits<double>::infinity()), -1);
+  // A NaN in the device state is found by the device guard (NaN fails every comparison).
+  auto ic = lc::make_cuda_ho(lc::HoVariantD::Velocity, lc::Precision::Double, 0);
+  auto c = make_scene(Mat::DampedSprings, 8, 8);
+  c->state.v[3 * 13 + 1] = std::numeric_limits<double>::quiet_NaN();
+  run(*ic, *c, 1e-4, 1);
+  EXPECT_LE(ic->first_unguarded_vertex(1e6), 13);
+  EXPECT_GE(ic->first_unguarded_vertex(1e6), 0);
+}
+
 // ---------------------------------------------------------------- RK4
 class CudaRk4Run : public ::testing::TestWithParam<Mat> {};
 
@@ -482,7 +529,8 @@ TEST(CudaParams, DeviceIntegratorsUseTheCpuSpecs) {
                           "host_sync_every: 2}")));
   EXPECT_THROW(lc::make_cuda_baraff_witkin(Params::from_string("{max_halvings: 0}")), InputError);
   EXPECT_THROW(lc::make_cuda_ho(Params::from_string("{variant: velocty}")), InputError);
-  EXPECT_THROW(lc::make_cuda_rk4(Params::from_string("{host_sync_every: 0}")), InputError);
+  EXPECT_THROW(lc::make_cuda_rk4(Params::from_string("{host_sync_every: -1}")), InputError);
+  EXPECT_EQ(loom::device_keys_spec().find("host_sync_every")->default_text, "0");  // lazy by default
   EXPECT_TRUE(loom::baraff_witkin_spec().find("precision") != nullptr);
   EXPECT_TRUE(loom::harmonic_oscillation_spec().find("host_sync_every") != nullptr);
   EXPECT_TRUE(loom::rk4_spec().find("precision") != nullptr);

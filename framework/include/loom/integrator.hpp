@@ -45,6 +45,16 @@ class Integrator {
   virtual std::vector<double> restart_state() const { return {}; }
   /// Restore what restart_state() returned (after prepare()); false when it does not fit.
   virtual bool set_restart_state(const std::vector<double>& s) { return s.empty(); }
+  /// For an integrator that keeps its own copy of x and v (the CUDA backend keeps them on the
+  /// device): bring scene.state.x and .v up to date with it. The framework calls this before
+  /// it reads them (the guards, the stats, the output, a study's measurement). Default: nothing
+  /// to do, scene.state is the state.
+  virtual void sync_to_host(Scene&) {}
+  /// The per-step guard on the integrator's own copy, without bringing it to the host: the
+  /// lowest vertex whose squared speed is not <= vmax2 or whose position is not finite (the
+  /// test of Simulation::check_state), -1 when there is none. -2 (the default): not checked
+  /// here; the framework calls sync_to_host and checks scene.state itself.
+  virtual Index first_unguarded_vertex(double /*vmax2*/) { return -2; }
 };
 
 /// Shared helper: advance time bookkeeping after a step of size h.

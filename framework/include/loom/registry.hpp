@@ -27,7 +27,7 @@
 namespace loom {
 
 /// Bumped whenever an interface in framework/include/loom changes incompatibly.
-constexpr int kPluginAbiVersion = 5;  // 2: LinearSolver::set_coordinates; 3: Integrator::restart_state; 4: Material::describe_device; 5: PluginInfo::params
+constexpr int kPluginAbiVersion = 6;  // 2: LinearSolver::set_coordinates; 3: Integrator::restart_state; 4: Material::describe_device; 5: PluginInfo::params; 6: Integrator::sync_to_host, first_unguarded_vertex
 
 enum class PluginKind { Material, Integrator, Solver, Renderer };
 const char* to_string(PluginKind k);

@@ -59,8 +59,13 @@ class Simulation {
   /// Print notes (ignored solver section, solver fallback) to stderr while building (default on).
   static void set_notes(bool on);
 
+  /// The scene. Its state's x and v are those of the last sync_state() (or of a guard check,
+  /// stats or output, which sync): call sync_state() after step() before reading them.
   Scene& scene() { return *scene_; }
   const Scene& scene() const { return *scene_; }
+  /// Bring scene().state.x and .v up to date with the integrator's own copy (the CUDA backend
+  /// keeps them on the device; on the CPU backend this does nothing).
+  void sync_state() { integrator_->sync_to_host(*scene_); }
   Integrator& integrator() { return *integrator_; }
   double dt() const { return dt_; }
   int substeps() const { return substeps_; }

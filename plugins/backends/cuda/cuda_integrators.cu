@@ -114,17 +114,62 @@ std::size_t explicit_bytes(const Scene& scene, int vectors) {
          DeviceMeshes::bytes(scene.colliders);
 }
 
-/// Reads host_sync_every (>= 1): copy x, v back into scene.state after every n-th step.
+/// Reads host_sync_every: 0 (the scene files' default) copies x, v back into scene.state only
+/// when the framework asks (Integrator::sync_to_host); n >= 1 after every n-th step as well.
+/// Without parameters (integrators made in code): 1, every step.
 int parse_sync_every(const Params& p) {
   if (!p.valid()) return 1;
   return ParamReader(p, device_keys_spec()).int32("host_sync_every");
 }
 
-/// Copy back after the step that makes state.step a multiple of `every` (call before finish_step).
+/// Copy back after the step that makes state.step a multiple of `every` (call before finish_step);
+/// returns whether it did (every = 0: never, the framework asks for it).
 template <class T>
-void sync_after_step(DeviceState<T>& ds, State& s, int every) {
-  if (every <= 1 || (s.step + 1) % every == 0) ds.download(s);
+bool sync_after_step(DeviceState<T>& ds, State& s, int every) {
+  if (every == 1 || (every > 1 && (s.step + 1) % every == 0)) {
+    ds.download(s);
+    return true;
+  }
+  return false;
 }
+
+/// The guard's test (Simulation::check_state) on device data: vertex i when its position is not
+/// finite or its squared speed is not <= vmax2 (NaN fails every comparison), `none` otherwise.
+/// Sums in double, as the host does on the downloaded values (float converts exactly).
+template <class T>
+struct GuardTerm {
+  const T *x, *v;
+  double vmax2;
+  Index none;
+  LOOM_HD Index operator()(Index i) const {
+    const T* xi = x + 3LL * i;
+    const T* vi = v + 3LL * i;
+    const double a = static_cast<double>(xi[0]) + static_cast<double>(xi[1]) + static_cast<double>(xi[2]);
+    const double v0 = vi[0], v1 = vi[1], v2 = vi[2];
+    const double s2 = v0 * v0 + v1 * v1 + v2 * v2;
+    return (!(s2 <= vmax2) || !(a - a == 0.0)) ? i : none;  // a - a is NaN for a NaN or infinite a
+  }
+};
+
+/// What every device integrator does with its copy of the state between steps: the lazy copy
+/// back (host_sync_every: 0) and the guard on the device.
+template <class T>
+struct HostMirror {
+  bool stale = false;  ///< scene.state.x/v are older than the device's
+  void after_step(DeviceState<T>& ds, State& s, int every) { stale = !sync_after_step(ds, s, every); }
+  void sync(DeviceState<T>& ds, State& s) {
+    if (!stale || ds.n != s.size()) return;
+    ds.download(s);
+    stale = false;
+  }
+  /// -2 while the host copy is current (the framework checks it there) or nothing is on the device.
+  Index first_unguarded(DeviceState<T>& ds, double vmax2) const {
+    if (!stale || ds.n == 0) return -2;
+    const Index none = ds.n;
+    const Index i = reduce_min_index(ds.n, GuardTerm<T>{raw(ds.x), raw(ds.v), vmax2, none}, none);
+    return i == none ? -1 : i;
+  }
+};
 
 // ======================= harmonic oscillation =======================
 
@@ -194,8 +239,11 @@ class CudaHo final : public Integrator {
   std::string name() const override { return "harmonic_oscillation"; }
   IntegratorNeeds needs() const override { return {true, false, false}; }
   bool handles_contacts() const override { return true; }  // on the device
+  void sync_to_host(Scene& scene) override { mirror_.sync(ds_, scene.state); }
+  Index first_unguarded_vertex(double vmax2) override { return mirror_.first_unguarded(ds_, vmax2); }
 
   void prepare(Scene& scene, double h) override {
+    mirror_.sync(ds_, scene.state);  // a repeated prepare uploads the current state, not a stale host copy
     check_device_scene(scene, "harmonic_oscillation", true);
     require_device_memory(explicit_bytes<T>(scene, 4), scene.source, "harmonic_oscillation");
     colliders_.prepare(scene);
@@ -233,6 +281,7 @@ class CudaHo final : public Integrator {
     G_.assign(3 * static_cast<std::size_t>(S), T(0));
     P_.assign(variant_ == HoVariantD::AnalyticPosition ? 3 * static_cast<std::size_t>(S) : 0, T(0));
     ds_.upload(scene.state);
+    mirror_.stale = false;
     coefficients(scene.state, h);
   }
 
@@ -245,7 +294,7 @@ class CudaHo final : public Integrator {
       case HoVariantD::KangCho2011: run<HoVariantD::KangCho2011>(scene, h); break;
     }
     if (colliders_.active()) colliders_.resolve(ds_, scene.state.time + h, h);
-    sync_after_step(ds_, scene.state, sync_every_);
+    mirror_.after_step(ds_, scene.state, sync_every_);
     finish_step(scene.state, h);
   }
 
@@ -296,6 +345,7 @@ class CudaHo final : public Integrator {
   HoVariantD variant_;
   int sync_every_ = 1;
   DeviceState<T> ds_;
+  HostMirror<T> mirror_;  // the host copy of x and v against ds_ (lazy copy, device guard)
   DeviceColliders<T> colliders_;
   std::vector<Index> hi_, hj_;
   std::vector<double> hk_, hc_;
@@ -334,13 +384,17 @@ class CudaRk4 final : public Integrator {
   explicit CudaRk4(int sync_every) : sync_every_(sync_every) {}
   std::string name() const override { return "rk4"; }
   bool handles_contacts() const override { return true; }  // on the device
+  void sync_to_host(Scene& scene) override { mirror_.sync(ds_, scene.state); }
+  Index first_unguarded_vertex(double vmax2) override { return mirror_.first_unguarded(ds_, vmax2); }
   void prepare(Scene& scene, double) override {
+    mirror_.sync(ds_, scene.state);  // a repeated prepare uploads the current state, not a stale host copy
     check_device_scene(scene, "rk4", true);
     require_device_memory(explicit_bytes<T>(scene, 9), scene.source, "rk4");
     colliders_.prepare(scene);
     if (!scene.material) throw InputError(scene.source + ": rk4 needs a material; add a 'material:' section");
     model_.build(scene, nullptr);
     ds_.upload(scene.state);
+    mirror_.stale = false;
     const std::size_t m = 3 * static_cast<std::size_t>(ds_.n);
     xs_.assign(m, T(0));
     vs_.assign(m, T(0));
@@ -368,7 +422,7 @@ class CudaRk4 final : public Integrator {
     model_.forces(xs_, vs_, f_);
     stage(2, h);
     if (colliders_.active()) colliders_.resolve(ds_, scene.state.time + hd, hd);
-    sync_after_step(ds_, scene.state, sync_every_);
+    mirror_.after_step(ds_, scene.state, sync_every_);
     finish_step(scene.state, hd);
   }
   StepStats last_step() const override { return stats_; }
@@ -376,6 +430,7 @@ class CudaRk4 final : public Integrator {
  private:
   int sync_every_ = 1;
   DeviceState<T> ds_;
+  HostMirror<T> mirror_;  // the host copy of x and v against ds_ (lazy copy, device guard)
   DeviceColliders<T> colliders_;
   DeviceForceModel<T> model_;
   DVec<T> xs_, vs_, f_, ax_, av_;
@@ -405,7 +460,10 @@ class CudaSe final : public Integrator {
   explicit CudaSe(int sync_every) : sync_every_(sync_every) {}
   std::string name() const override { return "symplectic_euler"; }
   bool handles_contacts() const override { return true; }  // on the device
+  void sync_to_host(Scene& scene) override { mirror_.sync(ds_, scene.state); }
+  Index first_unguarded_vertex(double vmax2) override { return mirror_.first_unguarded(ds_, vmax2); }
   void prepare(Scene& scene, double h) override {
+    mirror_.sync(ds_, scene.state);  // a repeated prepare uploads the current state, not a stale host copy
     check_device_scene(scene, "symplectic_euler", true);
     if (!scene.material)
       throw InputError(scene.source + ": symplectic_euler needs a material; add a material: section to the scene");
@@ -414,6 +472,7 @@ class CudaSe final : public Integrator {
     colliders_.prepare(scene);
     model_.build(scene, nullptr);
     ds_.upload(scene.state);
+    mirror_.stale = false;
     f_.assign(3 * static_cast<std::size_t>(ds_.n), T(0));
     stats_ = {};
     stats_.force_evaluations = 1;
@@ -425,7 +484,7 @@ class CudaSe final : public Integrator {
                                           static_cast<T>(scene.gravity[0]), static_cast<T>(scene.gravity[1]),
                                           static_cast<T>(scene.gravity[2])});
     if (colliders_.active()) colliders_.resolve(ds_, scene.state.time + hd, hd);
-    sync_after_step(ds_, scene.state, sync_every_);
+    mirror_.after_step(ds_, scene.state, sync_every_);
     finish_step(scene.state, hd);
   }
   StepStats last_step() const override { return stats_; }
@@ -435,6 +494,7 @@ class CudaSe final : public Integrator {
  private:
   int sync_every_ = 1;
   DeviceState<T> ds_;
+  HostMirror<T> mirror_;  // the host copy of x and v against ds_ (lazy copy, device guard)
   DeviceColliders<T> colliders_;
   DeviceForceModel<T> model_;
   DVec<T> f_;
@@ -729,8 +789,11 @@ class CudaBw final : public Integrator {
   /// Sphere, plane and mesh contacts are constraints of the solve (the framework must not resolve
   /// them again on the host).
   bool handles_contacts() const override { return true; }
+  void sync_to_host(Scene& scene) override { mirror_.sync(ds_, scene.state); }
+  Index first_unguarded_vertex(double vmax2) override { return mirror_.first_unguarded(ds_, vmax2); }
 
   void prepare(Scene& scene, double h) override {
+    mirror_.sync(ds_, scene.state);  // a repeated prepare uploads the current state, not a stale host copy
     check_device_scene(scene, "baraff_witkin", true);
     if (!(h > 0) || !std::isfinite(h))
       throw InputError("baraff_witkin: the time step must be positive and finite; set integrator.dt");
@@ -778,6 +841,7 @@ class CudaBw final : public Integrator {
     cuda::upload(s.pin_list, pins_);
     pcg_.analyze(n);
     ds_.upload(s);
+    mirror_.stale = false;
     // Sphere, plane and mesh colliders: contacts are constraints of the solve, as on the CPU.
     colliders_ = scene.colliders.empty() ? nullptr : &scene.colliders;
     if (colliders_) {
@@ -805,7 +869,7 @@ class CudaBw final : public Integrator {
     StepStats st;
     t0_ = scene.state.time;
     advance(scene, h, 0, st);
-    sync_after_step(ds_, scene.state, opt_.host_sync_every);
+    mirror_.after_step(ds_, scene.state, opt_.host_sync_every);
     finish_step(scene.state, h);
     last_ = st;
   }
@@ -956,6 +1020,7 @@ class CudaBw final : public Integrator {
 
   BwOptionsD opt_;
   DeviceState<T> ds_;
+  HostMirror<T> mirror_;  // the host copy of x and v against ds_ (lazy copy, device guard)
   DeviceForceModel<T> model_;
   std::unique_ptr<BsrPattern> pattern_;
   DeviceBsr<T> A_;

@@ -121,6 +121,25 @@ T reduce_sum(Index n, const F& f) {
 #endif
 }
 
+/// min_i f(i) over [0, n) on the device (f returns an Index); `none` when n <= 0.
+template <class F>
+Index reduce_min_index(Index n, const F& f, Index none) {
+  if (n <= 0) return none;
+#ifdef LOOM_CUDA_OMP_STANDIN
+  Index m = none;  // an OpenMP reduction of our own, as in reduce_sum
+  if (n < omp_serial_below()) {
+    for (Index i = 0; i < n; ++i) m = f(i) < m ? f(i) : m;
+    return m;
+  }
+#pragma omp parallel for reduction(min : m) schedule(static)
+  for (Index i = 0; i < n; ++i) m = f(i) < m ? f(i) : m;
+  return m;
+#else
+  return thrust::transform_reduce(LOOM_CUDA_REDUCE_POLICY, thrust::counting_iterator<Index>(0),
+                                  thrust::counting_iterator<Index>(n), f, none, thrust::minimum<Index>());
+#endif
+}
+
 /// One term a[i] * b[i] of a dot product, over raw pointers.
 template <class T>
 struct DotTerm {
