@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <string>
 #include <utility>
@@ -174,4 +175,39 @@ TEST(DeviceFilteredPcg, DeprecatedNamesStillWork) {
   EXPECT_EQ(EigenPcg().name(), "filtered_pcg");
   // sa_amg is a cpu preconditioner: the device key table does not offer it.
   EXPECT_THROW(lc::CusparsePcg(Params::from_string("{preconditioner: sa_amg}")), InputError);
+}
+
+// Float vectors (precision: float on the device): rounding keeps the true residual above a tight
+// tolerance while the recursive one reaches it, and the report says so with the fix, instead
+// of "not converged, raise max_iterations". Seen on an H200 (2026-11-30): the float Baraff-
+// Witkin wool step stalled at 2.0e-5 (32^2) to 3.8e-3 (512^2) relative against 1e-5.
+TEST(DeviceFilteredPcg, FloatRoundingFloorIsReportedWithTheFix) {
+  const ts::System s = system_with_contacts();
+  lc::DeviceBsr<float> A;
+  A.set_pattern(s.A.pattern());
+  lc::upload(s.A.values(), A.values);
+  lc::DeviceFilter<float> S;
+  S.upload(s.S);
+  lc::DVec<float> b, z, dv;
+  lc::upload(s.b, b);
+  lc::upload(s.z, z);
+  dv.assign(s.b.size(), 0.0f);
+  lc::PcgOptions o;
+  o.tolerance = 1e-11;  // far below float's reach on any system
+  o.max_iterations = 100000;
+  lc::DevicePcg<float> pcg(o);
+  pcg.analyze(s.n);
+  SolveReport rep;
+  ASSERT_TRUE(pcg.factorize(A, S, rep)) << rep.message;
+  rep = pcg.solve(A, S, b, z, dv);
+  EXPECT_FALSE(rep.converged);
+  EXPECT_GT(rep.residual, 1e-11);
+  EXPECT_LT(rep.iterations, 100000) << "stopped by the rule, not by the cap";
+  EXPECT_NE(rep.message.find("rounding limits"), std::string::npos) << rep.message;
+  EXPECT_NE(rep.message.find("use precision: double"), std::string::npos) << rep.message;
+  std::printf("[ measured ] float: %d iterations, relative residual %.3g: %s\n", rep.iterations, rep.residual,
+              rep.message.c_str());
+  // The same system in double reaches 1e-11.
+  const PcgRun d = run_dev(s, PcgPreconditioner::BlockJacobi, 1e-11, 100000);
+  EXPECT_TRUE(d.rep.converged) << d.rep.message;
 }

@@ -26,6 +26,7 @@
 #include <cmath>
 #include <concepts>
 #include <cstdio>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -67,7 +68,10 @@ struct Settings {
 inline constexpr double kDefaultTolerance = 1e-5;
 
 /// The status of one run of the iteration.
-enum class Status { Converged = 0, IterationCap = 1, NonPositiveCurvature = 2, NonPositivePreconditioner = 3 };
+/// RoundingFloor: the preconditioned residual norm r^T P^-1 r came out <= 0 but within rounding
+/// of zero (|r^T P^-1 r| <= 64 eps of its starting value): the iteration has reached what the
+/// precision can resolve, not an indefinite preconditioner.
+enum class Status { Converged = 0, IterationCap = 1, NonPositiveCurvature = 2, NonPositivePreconditioner = 3, RoundingFloor = 4 };
 
 namespace detail {
 inline std::string format(const char* fmt, double a, double b = 0, double c = 0) {
@@ -85,6 +89,7 @@ int iterate(Ops& ops, typename Ops::Vec& dv, typename Ops::Vec& r, typename Ops:
             Status& status, double& curvature) {
   using Real = typename Ops::Real;
   Real delta = ops.precondition(r, s);
+  const double delta0 = std::fabs(static_cast<double>(delta));
   ops.copy(s, c);
   int it = 0;
   status = Status::IterationCap;
@@ -93,7 +98,10 @@ int iterate(Ops& ops, typename Ops::Vec& dv, typename Ops::Vec& r, typename Ops:
     if (rr <= threshold2) { status = Status::Converged; break; }
     if (it >= max_iterations) { status = Status::IterationCap; break; }
     if (!(delta > Real(0)) || !std::isfinite(static_cast<double>(delta))) {
-      status = Status::NonPositivePreconditioner;
+      const bool rounding = std::isfinite(static_cast<double>(delta)) && it > 0 &&
+                            std::fabs(static_cast<double>(delta)) <=
+                                64.0 * std::numeric_limits<Real>::epsilon() * delta0;
+      status = rounding ? Status::RoundingFloor : Status::NonPositivePreconditioner;
       curvature = static_cast<double>(delta);
       break;
     }
@@ -188,6 +196,16 @@ SolveReport solve(Ops& ops, const Settings& settings, typename Ops::Vec& dv, typ
           ": the preconditioned residual norm r^T P^-1 r = %.3g is not positive at iteration %.0f "
           "(relative residual %.3g): the preconditioner or the system is not positive definite",
           curvature, total, rel);
+    else if (status == Status::Converged || status == Status::RoundingFloor) {
+      // The recursive residual got there three times (the true one did not), or r^T P^-1 r fell
+      // to rounding level: either way the precision, not the iteration count, is the limit.
+      const std::string fmt = std::string(
+          ": the true relative residual stays at %.3g > tolerance %.3g after %.0f iterations, at the "
+          "rounding floor of this solve: rounding limits what it can reach (") +
+          (sizeof(Real) < sizeof(double) ? "float vectors); use precision: double, or raise the tolerance above it"
+                                         : "double vectors); raise the tolerance above it");
+      rep.message = nm + detail::format(fmt.c_str(), rel, tol, total);
+    }
     else
       rep.message = nm + detail::format(
           ": not converged in %.0f iterations (relative residual %.3g > tolerance %.3g); raise "
