@@ -181,11 +181,12 @@ void Simulation::check_state(bool check_strain) {
   const double vmax2 = guard_.max_velocity * guard_.max_velocity;
   // An integrator with its own copy of the state (the CUDA backend) checks it where it is; the
   // host copy is brought up to date only to report a divergence or to measure the strain.
-  if (integrator_->first_unguarded_vertex(vmax2) == -1 && !check_strain) return;
+  const Index checked = integrator_->first_unguarded_vertex(vmax2);  // -2: not checked there
+  if (checked == -1 && !check_strain) return;
   integrator_->sync_to_host(*scene_);
   const State& st = scene_->state;
   const Index n = st.size();
-  Index bad = std::numeric_limits<Index>::max();
+  Index bad = checked >= 0 ? checked : std::numeric_limits<Index>::max();
   const double* x = st.x.data();
   const double* v = st.v.data();
   // NaN fails every comparison: !(v2 <= vmax2) catches NaN and Inf too.
@@ -194,12 +195,13 @@ void Simulation::check_state(bool check_strain) {
     const double v2 = v[3 * i] * v[3 * i] + v[3 * i + 1] * v[3 * i + 1] + v[3 * i + 2] * v[3 * i + 2];
     return !(v2 <= vmax2) || !std::isfinite(a);
   };
-  if (n < kParallelMinVertices || omp_get_max_threads() == 1) {
+  // (checked >= -1: the integrator's copy was checked by the same rule; no second pass here.)
+  if (checked == -2 && (n < kParallelMinVertices || omp_get_max_threads() == 1)) {
     // No region for a small cloth: a region of one thread still ends with a futex wake (a
     // system call), about as much as the check itself.
     for (Index i = 0; i < n && bad == std::numeric_limits<Index>::max(); ++i)
       if (bad_at(i)) bad = i;
-  } else {
+  } else if (checked == -2) {
 #pragma omp parallel for reduction(min : bad) schedule(static)
     for (Index i = 0; i < n; ++i)
       if (bad_at(i)) bad = std::min(bad, i);

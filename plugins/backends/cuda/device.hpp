@@ -13,6 +13,7 @@
 #include <thrust/iterator/counting_iterator.h>
 #include <thrust/transform_reduce.h>
 
+#include <algorithm>
 #include <new>
 #include <string>
 #include <vector>
@@ -128,11 +129,11 @@ Index reduce_min_index(Index n, const F& f, Index none) {
 #ifdef LOOM_CUDA_OMP_STANDIN
   Index m = none;  // an OpenMP reduction of our own, as in reduce_sum
   if (n < omp_serial_below()) {
-    for (Index i = 0; i < n; ++i) m = f(i) < m ? f(i) : m;
+    for (Index i = 0; i < n; ++i) m = std::min(m, f(i));
     return m;
   }
 #pragma omp parallel for reduction(min : m) schedule(static)
-  for (Index i = 0; i < n; ++i) m = f(i) < m ? f(i) : m;
+  for (Index i = 0; i < n; ++i) m = std::min(m, f(i));
   return m;
 #else
   return thrust::transform_reduce(LOOM_CUDA_REDUCE_POLICY, thrust::counting_iterator<Index>(0),
