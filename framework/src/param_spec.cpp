@@ -406,6 +406,42 @@ ParamReader ParamReader::section(const std::string& key) const {
   return ParamReader(node(key), *d.fields);
 }
 
+void check_params(const Params& p, const ParamSpec& spec) {
+  if (!p.valid()) return;
+  if (!p.is_map()) p.fail("expected a mapping of '" + spec.name() + "' keys, like {key: value}.");
+  const ParamReader r(p, spec);
+  for (const ParamDecl& d : spec.decls()) {
+    if (!r.has(d.name)) {
+      if (d.required && !d.framework) {  // a section's own required keys (type) are the framework's business
+        if (d.type == ParamType::Map || d.type == ParamType::List) r.node(d.name);
+        else if (d.type == ParamType::Number) r.number(d.name);
+        else if (d.type == ParamType::Int) r.integer(d.name);
+        else if (d.type == ParamType::Bool) r.flag(d.name);
+        else if (d.type == ParamType::Vec3) r.vec3(d.name);
+        else r.text(d.name);
+      }
+      continue;
+    }
+    switch (d.type) {
+      case ParamType::Number: r.number(d.name); break;
+      case ParamType::Int: r.integer(d.name); break;
+      case ParamType::Bool: r.flag(d.name); break;
+      case ParamType::String:
+      case ParamType::Enum: r.text(d.name); break;
+      case ParamType::Vec3: r.vec3(d.name); break;
+      case ParamType::List: r.node(d.name); break;
+      case ParamType::Map: {
+        const Params c = r.node(d.name);
+        if (d.number_or_map && c.is_scalar()) r.number(d.name);
+        else if (d.fields) check_params(c, *d.fields);
+        // an open map (no declared keys) is checked by the code that reads it
+        break;
+      }
+    }
+  }
+  r.params().check_unused();
+}
+
 // ---- the framework's own sections ----
 
 const ParamSpec& material_section_spec() {

@@ -268,6 +268,32 @@ IntegratorChoice integrator(const Params& root, Scene& sc, PluginLoader& loader,
   return c;
 }
 
+namespace {
+
+// The blocks of the solvers in `solver:` that this run does not use (a fallback of the type list
+// on a build that has the first choice, or a block kept for --set solver.type=...), checked
+// against their solver's declared keys as if it ran: a typo or a value out of range there is an
+// error now, with its line, not on the machine that falls back to it. A solver whose module is
+// not in this build (or does not load) cannot be checked and is left to that machine.
+void check_other_solver_blocks(const Params& solver, const std::string& chosen, const std::string& backend,
+                               PluginLoader& loader) {
+  for (const auto& k : solver.keys()) {
+    if (k == "type" || k == chosen || !loader.available(PluginKind::Solver, k)) continue;
+    const Params block = solver.child(k);
+    if (!block.valid()) continue;  // `name: null` removes a block
+    try {
+      loader.ensure(PluginKind::Solver, k);
+    } catch (const InputError&) {
+      continue;
+    }
+    const std::string be = loader.registry().has(PluginKind::Solver, k, backend) ? backend : "cpu";
+    if (!loader.registry().has(PluginKind::Solver, k, be)) continue;
+    if (const ParamSpec* spec = loader.registry().params(PluginKind::Solver, k, be)) check_params(block.with_spec(spec), *spec);
+  }
+}
+
+}  // namespace
+
 std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const IntegratorNeeds& needs,
                    const std::string& integrator_name, bool notes) {
   if (needs.linear_solver) {
@@ -325,6 +351,7 @@ std::string solver(const Params& root, Scene& sc, PluginLoader& loader, const In
       solver.check_unused(loader.names(PluginKind::Solver));
     }
     sc.solver = loader.registry().make_solver(chosen, sc.backend, sp);
+    if (solver.is_map()) check_other_solver_blocks(solver, chosen, sc.backend, loader);
     return chosen;
   } else if (const Params solver = root.child("solver"); solver.valid()) {  // ignored: its keys are not read
     if (solver.is_map())

@@ -131,6 +131,46 @@ TEST(ParamSpec, UnknownKeySuggestsADeclaredKeyThatWasNotRead) {
   EXPECT_NE(e.find("did you mean 'warm_start'"), std::string::npos) << e;
 }
 
+// check_params reads a whole block as a plugin's factory would, without the plugin (a fallback
+// solver's block): every error kind of the reader, with the key's own line, and unknown keys.
+TEST(ParamSpec, CheckParamsReportsWhatTheReaderWould) {
+  const ParamSpec s = example_spec();
+  auto check = [&](const std::string& yaml) {
+    const Params p = Params::from_string(yaml, "scene.yaml").with_spec(&s);
+    return error_of([&] { loom::check_params(p, s); });
+  };
+  EXPECT_EQ(check("tolerance: 0.1\nmax_iterations: 5\nwarm_start: false\npreconditioner: none\nup: [1, 0, 0]\n"
+                  "rayleigh: {alpha: 0.5}\nprecision: float\n"),
+            "");
+  EXPECT_EQ(check("{}"), "");
+  std::string e = check("warm_start: true\ntolerance: 0.7\n");
+  EXPECT_NE(e.find("scene.yaml:2"), std::string::npos) << e;
+  EXPECT_NE(e.find("[1e-16, 0.5]"), std::string::npos) << e;
+  e = check("max_iterations: 2.5\n");
+  EXPECT_NE(e.find("integer"), std::string::npos) << e;
+  e = check("preconditioner: jacobbi\n");
+  EXPECT_NE(e.find("did you mean 'jacobi'"), std::string::npos) << e;
+  e = check("up: [0, 1]\n");
+  EXPECT_NE(e.find("3 numbers"), std::string::npos) << e;
+  e = check("warm_start: maybe\n");
+  EXPECT_NE(e.find("scene.yaml:1"), std::string::npos) << e;
+  e = check("tolerance: 0.1\nrayleigh: {alpha: -1}\n");  // a nested map's keys, with their line
+  EXPECT_NE(e.find("scene.yaml:2"), std::string::npos) << e;
+  EXPECT_NE(e.find(">= 0"), std::string::npos) << e;
+  e = check("rayleigh: {alhpa: 1}\n");
+  EXPECT_NE(e.find("did you mean 'alpha'"), std::string::npos) << e;
+  e = check("tolerance: 0.1\ntolerence: 0.1\n");  // unknown keys, suggested from the declared ones
+  EXPECT_NE(e.find("scene.yaml:2"), std::string::npos) << e;
+  EXPECT_NE(e.find("unknown key 'tolerence'"), std::string::npos) << e;
+  e = check("5\n");
+  EXPECT_NE(e.find("expected a mapping"), std::string::npos) << e;
+  ParamSpec req("needs_one");
+  req.number("width", 0).required().help("required");
+  const Params empty = Params::from_string("{other: 1}\n", "scene.yaml").with_spec(&req);
+  e = error_of([&] { loom::check_params(empty, req); });
+  EXPECT_NE(e.find("missing required key 'width'"), std::string::npos) << e;
+}
+
 TEST(ParamSpec, KeyOfAnotherBackendIsNamedAsSuch) {
   const ParamSpec s = example_spec();
   const Params p = Params::from_string("precision: float\n", "scene.yaml").with_spec(&s);
@@ -289,6 +329,37 @@ TEST(PluginSpecs, EveryDeclaredKeyIsReadAndNoOtherKey) {
     const std::string err = construct(info, base + "definitely_not_a_key: 1\n");
     EXPECT_NE(err.find("unknown key 'definitely_not_a_key'"), std::string::npos) << info.name << ": " << err;
   }
+}
+
+// check_params (what `solver:` applies to the blocks of the solvers a run does not use) accepts
+// every declared key that the plugin itself accepts, and refuses a key no spec declares: it is
+// never stricter than the plugin, and it catches what check_unused would.
+TEST(PluginSpecs, CheckParamsAcceptsWhatThePluginAccepts) {
+  auto& l = plugins();
+  int checked = 0;
+  for (const auto& info : l.reg.list()) {
+    const ParamSpec* spec = l.reg.params(info.kind, info.name, info.backend);
+    if (!spec) continue;
+    auto check = [&](const std::string& yaml) {
+      const Params p = Params::from_string(yaml, "scene.yaml").with_spec(spec);
+      return error_of([&] { loom::check_params(p, *spec); });
+    };
+    const std::string base = required_keys(info);
+    EXPECT_EQ(check(base.empty() ? "{}" : base), "") << info.name;
+    for (const auto& d : info.params->decls()) {
+      if (base.rfind(d.name + ":", 0) == 0) continue;
+      const std::string id = info.name + "." + d.name;
+      const std::string comp = kCompanions.count(id) ? kCompanions.at(id) : "";
+      const std::string yaml = base + comp + d.name + ": " + value_for(d) + "\n";
+      if (construct(info, yaml).empty()) {
+        EXPECT_EQ(check(yaml), "") << id << ": " << yaml;
+        ++checked;
+      }
+    }
+    const std::string err = check(base + "definitely_not_a_key: 1\n");
+    EXPECT_NE(err.find("unknown key 'definitely_not_a_key'"), std::string::npos) << info.name << ": " << err;
+  }
+  EXPECT_GT(checked, 20);
 }
 
 TEST(PluginSpecs, TypoGetsDidYouMean) {
@@ -572,6 +643,44 @@ TEST(SectionSpecs, TopLevelAndSolverReadOnlyTheirDeclaredKeys) {
                          "eigen_ldlt", "[eigen_ldlt]", "{type: eigen_ldlt, eigen_ldlt: {}}"}}},
               [&](const std::string& v) { return implicit + "solver: " + v + "\n"; },
               "{type: eigen_ldlt, definitely_not_a_key: 1}");
+}
+
+// The block of a solver that the run does not use (a fallback of the type list, or a block kept
+// for --set solver.type=...) is checked against that solver's declared keys: a typo or a value
+// out of range is an error at its own line, as if that solver ran. A block of a solver that is
+// not in this build cannot be checked and stays allowed.
+TEST(SectionSpecs, BlocksOfSolversNotChosenAreChecked) {
+  using loom::PluginKind;
+  if (!has_plugins({{PluginKind::Material, "mass_spring"}, {PluginKind::Integrator, "baraff_witkin"},
+                    {PluginKind::Solver, "eigen_ldlt"}, {PluginKind::Solver, "filtered_pcg"}}))
+    GTEST_SKIP() << "needs mass_spring, baraff_witkin, eigen_ldlt and filtered_pcg";
+  loom::Simulation::set_notes(false);
+  const std::string implicit = kGrid + "material: {type: mass_spring}\nintegrator: {type: baraff_witkin, dt: 0.001}\n";
+  auto error = [&](const std::string& solver) { return build_scene(implicit + "solver:\n" + solver); };
+  // valid fallback blocks build; the chosen solver is the first of the list
+  EXPECT_EQ(error("  type: [eigen_ldlt, filtered_pcg]\n  filtered_pcg: {tolerance: 1.0e-6, preconditioner: sa_amg, "
+                  "sa_amg: {smoothing_sweeps: 2}}\n"),
+            "");
+  EXPECT_EQ(error("  type: [not_a_solver_here, eigen_ldlt]\n  not_a_solver_here: {anything: 1}\n"), "");
+  const std::string head = "  type: [eigen_ldlt, filtered_pcg]\n";
+  const int line = static_cast<int>(std::count(implicit.begin(), implicit.end(), '\n')) + 3;  // the block's line
+  const std::string at = "scene.yaml:" + std::to_string(line);
+  std::string e = error(head + "  filtered_pcg: {tolerence: 1.0e-6}\n");
+  EXPECT_NE(e.find(at), std::string::npos) << e;
+  EXPECT_NE(e.find("did you mean 'tolerance'"), std::string::npos) << e;
+  e = error(head + "  filtered_pcg: {tolerance: 5}\n");
+  EXPECT_NE(e.find(at), std::string::npos) << e;
+  EXPECT_NE(e.find("solver.filtered_pcg.tolerance"), std::string::npos) << e;
+  EXPECT_NE(e.find("[1e-16, 0.5]"), std::string::npos) << e;
+  e = error(head + "  filtered_pcg: {preconditioner: sa_amgg}\n");
+  EXPECT_NE(e.find("did you mean 'sa_amg'"), std::string::npos) << e;
+  e = error(head + "  filtered_pcg: {sa_amg: {smoothing_sweeps: 50}}\n");
+  EXPECT_NE(e.find("smoothing_sweeps"), std::string::npos) << e;
+  // a block kept for another solver of the build, not in the list
+  e = error("  type: filtered_pcg\n  eigen_ldlt: {pivot_tolerence: 1e-12}\n");
+  EXPECT_NE(e.find("did you mean 'pivot_tolerance'"), std::string::npos) << e;
+  e = error("  type: filtered_pcg\n  eigen_ldlt: 5\n");
+  EXPECT_NE(e.find("expected a mapping"), std::string::npos) << e;
 }
 
 // Every shipped scene builds without a read of an undeclared key (each stage reads through the

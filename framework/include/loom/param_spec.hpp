@@ -179,6 +179,14 @@ class ParamReader {
   const ParamSpec* spec_;
 };
 
+/// Reads every key that `p` gives through `spec`, as a plugin's factory would: types, ranges,
+/// choices, required keys (not the framework's: `type`), the keys of nested maps that declare theirs, then rejects keys the spec
+/// does not declare (with the "did you mean" of check_unused). Errors go through Params::fail
+/// (InputError with file:line and the fix). For a block that the run does not read itself, such
+/// as a fallback solver's in `solver: {type: [cholmod, filtered_pcg], filtered_pcg: {...}}`, so
+/// that a typo there is reported where it is written, not on the machine that falls back to it.
+void check_params(const Params& p, const ParamSpec& spec);
+
 /// The declared keys of the framework's own sections of a scene (scene builder, renderer
 /// command), merged before a plugin's keys in `loom plugins --params` and in the registry.
 const ParamSpec& material_section_spec();
