@@ -68,7 +68,7 @@ const ParamFields<OutputOptions>& output_section_fields() {
     f.flag("stats", &O::stats).framework().help("stats.csv: energies, strain, cost per frame");
     f.integer("every", &O::every).range(ParamRange::closed(1, 1e9)).framework().help("write every n-th frame");
     f.flag("pc2", &O::pc2).framework().help("run.pc2 point cache beside rest.obj (Blender)");
-    f.flag("uvs", &O::uvs).framework().help("OBJ frames carry texture coordinates (vt)");
+    f.flag("uvs", &O::uvs).framework().help("OBJ frames carry texture coordinates (vt); ParaView frames the point data uv (meshes without UV seams)");
     f.flag("normals", &O::normals).framework().help("OBJ frames carry normals (vn)");
     f.flag("lossless", &O::lossless).framework().help("OBJ coordinates in full double precision");
     f.flag("vtk", &O::vtk).framework().help("ParaView frames (frame_NNNNN.vtu) and run.pvd");

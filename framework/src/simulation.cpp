@@ -379,7 +379,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   std::optional<VtkSeriesWriter> vtk;
   std::vector<double> gap_work;  // per-vertex collider gap for the ParaView frames
   if (write && output_.vtk) {
-    vtk.emplace(output_.dir, scene_->mesh);
+    vtk.emplace(output_.dir, scene_->mesh, output_.uvs);
     if (resuming) vtk->adopt_existing(first_frame);
   }
   auto emit = [&](int frame) {

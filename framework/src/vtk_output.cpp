@@ -49,13 +49,25 @@ void put_array(std::string& s, const char* name, int comps, std::span<const doub
 
 }  // namespace
 
+bool uv_seam_free(const Mesh& mesh) {
+  const std::size_t n = static_cast<std::size_t>(mesh.num_vertices());
+  if (n == 0 || mesh.uvs.size() != 2 * n) return false;
+  if (mesh.corner_uvs.size() != 2 * mesh.triangles.size()) return true;  // no per-corner uvs: none differ
+  for (std::size_t c = 0; c < mesh.triangles.size(); ++c) {
+    const std::size_t v = 2 * static_cast<std::size_t>(mesh.triangles[c]);
+    if (mesh.corner_uvs[2 * c] != mesh.uvs[v] || mesh.corner_uvs[2 * c + 1] != mesh.uvs[v + 1]) return false;
+  }
+  return true;
+}
+
 std::string vtu_frame_name(int frame) {
   char name[32];
   std::snprintf(name, sizeof(name), "frame_%05d.vtu", frame);
   return name;
 }
 
-VtkSeriesWriter::VtkSeriesWriter(const std::string& dir, const Mesh& mesh) : dir_(dir), mesh_(mesh) {
+VtkSeriesWriter::VtkSeriesWriter(const std::string& dir, const Mesh& mesh, bool uvs)
+    : dir_(dir), mesh_(mesh), uvs_(uvs && uv_seam_free(mesh)) {
   edges_ = mesh.edges();
   rest_length_.resize(edges_.size());
   const auto& p = mesh.positions;
@@ -81,7 +93,7 @@ std::string VtkSeriesWriter::vtu_text(double time, std::span<const double> x, st
     for (Index k : edges_[e]) strain_[static_cast<std::size_t>(k)] = std::max(strain_[static_cast<std::size_t>(k)], s);
   }
   std::string s;
-  s.reserve(n * (v.empty() ? 80 : 150) + m * 24 + 1024);
+  s.reserve(n * (v.empty() ? 80 : 150) + (uvs_ ? n * 40 : 0) + m * 24 + 1024);
   s += "<?xml version=\"1.0\"?>\n"
        "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
        "  <UnstructuredGrid>\n"
@@ -94,8 +106,10 @@ std::string VtkSeriesWriter::vtu_text(double time, std::span<const double> x, st
   put_int(s, static_cast<long long>(m));
   s += "\">\n      <PointData Scalars=\"strain\"";
   if (!v.empty()) s += " Vectors=\"velocity\"";
+  if (uvs_) s += " TCoords=\"uv\"";
   s += ">\n";
   put_array(s, "strain", 1, strain_);
+  if (uvs_) put_array(s, "uv", 2, mesh_.uvs);
   if (!v.empty()) put_array(s, "velocity", 3, v);
   if (!gap.empty()) {
     put_array(s, "collider_gap", 1, gap);

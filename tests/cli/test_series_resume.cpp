@@ -252,6 +252,62 @@ TEST(ParaView, ContactFieldIsTheGapToTheColliders) {
   EXPECT_EQ(read_vtu(dir2 / "o" / "frame_00001.vtu").arrays.count("collider_gap"), 0u);
 }
 
+// uvs: true gives the ParaView frames the mesh's material coordinates as point data `uv`,
+// marked as the texture coordinates (TCoords). Expected values from the mesh's definition: a
+// grid's uv is the vertex's position in the flat sheet (the XY grid's rest x and y here); an
+// OBJ's uv is the vt its faces give the vertex. An OBJ with a UV seam cannot be described by one
+// uv per point and gets no array; neither does a run without uvs: true.
+TEST(ParaView, UvsAreTheTextureCoordinatesOfASeamFreeMesh) {
+  auto pointdata_tcoords = [](const fs::path& vtu) {
+    const auto pd = tags(slurp(vtu), "PointData");
+    return pd.size() == 1 && pd[0].attr.count("TCoords") ? pd[0].attr.at("TCoords") : std::string();
+  };
+  const auto dir = scratch("vtk_uv");
+  const std::string out = (dir / "out").string();
+  Result r = run("run " + scene(dir, 2, "output: {vtk: true, uvs: true, lossless: true}\n") + " --quiet --out " + out);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const auto rest = obj_numbers(fs::path(out) / "frame_00000.obj", "v ");
+  ASSERT_EQ(rest.size(), 90u);
+  for (const char* name : {"frame_00000.vtu", "frame_00002.vtu"}) {
+    const Vtu v = read_vtu(fs::path(out) / name);
+    ASSERT_EQ(v.arrays.count("uv"), 1u) << name;
+    EXPECT_EQ(v.components.at("uv"), 2);
+    EXPECT_EQ(pointdata_tcoords(fs::path(out) / name), "uv");
+    const auto& uv = v.arrays.at("uv");
+    ASSERT_EQ(uv.size(), 60u);
+    for (int i = 0; i < 30; ++i) {
+      EXPECT_EQ(uv[2 * i], rest[3 * i]) << name << " vertex " << i;
+      EXPECT_EQ(uv[2 * i + 1], rest[3 * i + 1]) << name << " vertex " << i;
+    }
+  }
+  // without uvs: true, no array
+  const auto dir0 = scratch("vtk_no_uv");
+  r = run("run " + scene(dir0, 1, "output: {vtk: true}\n") + " --quiet --out " + (dir0 / "o").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(read_vtu(dir0 / "o" / "frame_00001.vtu").arrays.count("uv"), 0u);
+  EXPECT_EQ(pointdata_tcoords(dir0 / "o" / "frame_00001.vtu"), "");
+  // OBJ meshes: a square of two triangles, its vt agreeing at every vertex, then with a seam
+  // (vertex 1 has another vt in the second face)
+  auto obj_run = [&](const std::string& name, const std::string& second_face, const std::string& extra_vt) {
+    const auto d = scratch(name);
+    std::ofstream(d / "square.obj") << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                     "vt 0.1 0.2\nvt 0.9 0.2\nvt 0.9 0.8\nvt 0.1 0.8\n" + extra_vt +
+                                     "f 1/1 2/2 3/3\n" + second_face + "\n";
+    std::ofstream(d / "scene.yaml") << "mesh: {obj: square.obj}\nmaterial: {type: test_gravity_only}\n"
+                                       "integrator: {type: test_explicit_euler, dt: 0.01}\nframes: 1\n"
+                                       "output: {vtk: true, uvs: true}\n";
+    const Result rr = run("run " + (d / "scene.yaml").string() + " --quiet --out " + (d / "o").string());
+    EXPECT_EQ(rr.code, 0) << rr.out;
+    return read_vtu(d / "o" / "frame_00001.vtu");
+  };
+  const Vtu plain = obj_run("vtk_uv_obj", "f 1/1 3/3 4/4", "");
+  ASSERT_EQ(plain.arrays.count("uv"), 1u);
+  EXPECT_EQ(plain.arrays.at("uv"), (std::vector<double>{0.1, 0.2, 0.9, 0.2, 0.9, 0.8, 0.1, 0.8}));
+  const Vtu seam = obj_run("vtk_uv_seam", "f 1/5 3/3 4/4", "vt 0.5 0.5\n");
+  EXPECT_EQ(seam.points, 4);
+  EXPECT_EQ(seam.arrays.count("uv"), 0u);
+}
+
 TEST(ParaView, VelocitiesNeedAFormatThatCarriesThem) {
   const auto dir = scratch("vel_alone");
   const Result r = run("run " + scene(dir, 2, "output: {velocities: true}\n") + " --quiet --out " + (dir / "o").string());

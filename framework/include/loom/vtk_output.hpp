@@ -21,8 +21,13 @@ namespace loom {
 ///   - "velocity" (3 components, m/s), when velocities are given.
 class VtkSeriesWriter {
  public:
-  /// dir: the output folder; mesh: topology and rest shape (for strain).
-  VtkSeriesWriter(const std::string& dir, const Mesh& mesh);
+  /// dir: the output folder; mesh: topology and rest shape (for strain). uvs: write the mesh's
+  /// material coordinates as the point data `uv` (the texture coordinates, TCoords) when it has
+  /// one uv per vertex and no seam (uv_seam_free); a mesh with seams gets no `uv` array.
+  VtkSeriesWriter(const std::string& dir, const Mesh& mesh, bool uvs = false);
+
+  /// True when the frames carry the `uv` array.
+  bool writes_uvs() const { return uvs_; }
 
   /// Keep the entries of an earlier run's run.pvd with frame <= last_frame (for --resume).
   /// Returns how many were kept.
@@ -49,6 +54,7 @@ class VtkSeriesWriter {
 
   std::string dir_;
   const Mesh& mesh_;
+  bool uvs_ = false;
   std::vector<std::array<Index, 2>> edges_;
   std::vector<double> rest_length_;
   std::vector<double> strain_;  // work array, n
@@ -59,6 +65,11 @@ class VtkSeriesWriter {
   };
   std::vector<Entry> entries_;
 };
+
+/// True when the mesh has one uv per vertex and every triangle corner has its vertex's uv (no UV
+/// seam), so that one texture coordinate per point describes it exactly: a generated grid, or an
+/// OBJ whose `vt` never differ at a vertex. False without uvs.
+bool uv_seam_free(const Mesh& mesh);
 
 /// "frame_NNNNN.vtu" (the name the series uses for a frame).
 std::string vtu_frame_name(int frame);
