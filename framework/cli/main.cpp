@@ -56,10 +56,12 @@ usage:
   loom plot RUN_DIR [--out FILE.png]
       Plot RUN_DIR/stats.csv (energies, largest strain, solver iterations, time per step
       against simulated time) to FILE (default RUN_DIR/stats.png); needs python3-matplotlib.
-  loom check RUN_DIR [--allow] [--list] [--quiet]
+  loom check RUN_DIR [--allow] [--list] [--distance] [--quiet]
       Count the intersecting non-adjacent triangle pairs of every frame of a run (exact
       test; touching counts). Exit 5 when any frame has some, unless --allow; --list
-      prints the pairs (triangle indices, from 0).
+      prints the pairs (triangle indices, from 0). --distance: also each frame's closest
+      approach of non-adjacent elements (vertex-triangle, edge-edge), in m and as a
+      fraction of the run's self_collision thickness.
   loom plugins [--params NAME [--markdown]]
       List the plugins on the plugin path (kind, name, backend, version, description).
       --params NAME: the keys plugin NAME accepts (type, default, range, units, backends,
@@ -91,7 +93,7 @@ struct Args {
   bool stability = false;
   bool render = false;
   bool overwrite = false;
-  bool allow = false, list = false;
+  bool allow = false, list = false, distance = false;
   std::vector<std::string> sets;
   std::string params;   // plugins --params NAME
   bool markdown = false;
@@ -157,8 +159,8 @@ Args parse_args(int argc, char** argv) {
       a.params = value("--params");
     } else if (a.command == "plugins" && s == "--markdown") {
       a.markdown = true;
-    } else if (a.command == "check" && (s == "--allow" || s == "--list")) {
-      (s == "--allow" ? a.allow : a.list) = true;
+    } else if (a.command == "check" && (s == "--allow" || s == "--list" || s == "--distance")) {
+      (s == "--allow" ? a.allow : s == "--list" ? a.list : a.distance) = true;
     } else if (a.command == "study" && s == "--stability") {
       a.stability = true;
     } else if (s == "--quiet" || s == "-q") {
@@ -250,7 +252,7 @@ int main(int argc, char** argv) {
       return loom::cli::render_command(r);
     }
     if (args.command == "plot") return loom::cli::plot_command(args.scene, args.out, args.quiet);
-    if (args.command == "check") return loom::cli::check_command({args.scene, args.allow, args.list, args.quiet});
+    if (args.command == "check") return loom::cli::check_command({args.scene, args.allow, args.list, args.quiet, args.distance});
     if (args.command == "view") {
       loom::cli::RenderArgs r{args.scene, args.render_scene, args.out, args.sets, args.quiet};
       return loom::cli::view_command(r);

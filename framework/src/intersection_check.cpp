@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdint>
 #include <string>
+#include <utility>
 
 namespace loom {
 
@@ -319,23 +320,33 @@ bool triangles_intersect(const double* a0, const double* a1, const double* a2, c
   return false;
 }
 
-std::size_t count_intersecting_pairs(const Mesh& mesh, std::span<const double> xs,
-                                     std::vector<std::array<Index, 2>>* pairs) {
-  const Index nt = mesh.num_triangles();
+namespace {
+
+// The positions to use (x, or the mesh's own when x is empty), checked: one per vertex, finite.
+const double* checked_positions(const Mesh& mesh, std::span<const double> xs, const char* who) {
   const double* x = xs.empty() ? mesh.positions.data() : xs.data();
   const std::size_t nx = xs.empty() ? mesh.positions.size() : xs.size();
   if (nx != 3 * static_cast<std::size_t>(mesh.num_vertices()))
-    throw InputError("count_intersecting_pairs: " + std::to_string(nx / 3) + " positions for a mesh of " +
+    throw InputError(std::string(who) + ": " + std::to_string(nx / 3) + " positions for a mesh of " +
                      std::to_string(mesh.num_vertices()) + " vertices");
   for (std::size_t k = 0; k < nx; ++k)
     if (!std::isfinite(x[k]))
-      throw InputError("count_intersecting_pairs: vertex " + std::to_string(k / 3) +
-                       " has a NaN or Inf coordinate: the intersection count is undefined");
-  if (pairs) pairs->clear();
-  if (nt < 2) return 0;
-  const Index* T = mesh.triangles.data();
+      throw InputError(std::string(who) + ": vertex " + std::to_string(k / 3) +
+                       " has a NaN or Inf coordinate: the answer is undefined");
+  return x;
+}
 
-  // Bounding boxes and the grid: cells about the mean triangle size, at most ~4 per triangle.
+// The broad phase of both checks: pair(local, ti, tj, lo, hi) is called once for every pair of
+// triangles whose bounding boxes, grown by `grow` on every side, overlap (closed), on OpenMP
+// threads, each with its own copy `local` of `init`; join(local) then receives the copies one
+// at a time. lo, hi: the boxes (3 per triangle, not grown). A uniform grid over the grown boxes,
+// cells about the mean triangle size (at least 2 grow), at most ~4 cells per triangle; each
+// pair is visited in the cell that holds the lower corner of the boxes' overlap.
+template <class Local, class Pair, class Join>
+void for_each_box_pair(const Mesh& mesh, const double* x, double grow, const Local& init, Pair&& pair, Join&& join) {
+  const Index nt = mesh.num_triangles();
+  if (nt < 2) return;
+  const Index* T = mesh.triangles.data();
   std::vector<double> lo(3 * static_cast<std::size_t>(nt)), hi(3 * static_cast<std::size_t>(nt));
   double glo[3] = {INFINITY, INFINITY, INFINITY}, ghi[3] = {-INFINITY, -INFINITY, -INFINITY};
   double mean_size = 0;
@@ -346,9 +357,9 @@ std::size_t count_intersecting_pairs(const Mesh& mesh, std::span<const double> x
       const double l = std::min({p, q, r}), h = std::max({p, q, r});
       lo[3 * t + k] = l;
       hi[3 * t + k] = h;
-      glo[k] = std::min(glo[k], l);
-      ghi[k] = std::max(ghi[k], h);
-      size = std::max(size, h - l);
+      glo[k] = std::min(glo[k], l - grow);
+      ghi[k] = std::max(ghi[k], h + grow);
+      size = std::max(size, h - l + 2 * grow);
     }
     mean_size += size / nt;
   }
@@ -375,9 +386,9 @@ std::size_t count_intersecting_pairs(const Mesh& mesh, std::span<const double> x
 
   std::vector<std::int64_t> start(ncell + 1, 0);
   auto for_cells = [&](Index t, auto&& fn) {
-    const std::int64_t i0 = cell_of(lo[3 * t], 0), i1 = cell_of(hi[3 * t], 0);
-    const std::int64_t j0 = cell_of(lo[3 * t + 1], 1), j1 = cell_of(hi[3 * t + 1], 1);
-    const std::int64_t k0 = cell_of(lo[3 * t + 2], 2), k1 = cell_of(hi[3 * t + 2], 2);
+    const std::int64_t i0 = cell_of(lo[3 * t] - grow, 0), i1 = cell_of(hi[3 * t] + grow, 0);
+    const std::int64_t j0 = cell_of(lo[3 * t + 1] - grow, 1), j1 = cell_of(hi[3 * t + 1] + grow, 1);
+    const std::int64_t k0 = cell_of(lo[3 * t + 2] - grow, 2), k1 = cell_of(hi[3 * t + 2] + grow, 2);
     for (std::int64_t k = k0; k <= k1; ++k)
       for (std::int64_t j = j0; j <= j1; ++j)
         for (std::int64_t i = i0; i <= i1; ++i) fn(flat(i, j, k));
@@ -390,44 +401,223 @@ std::size_t count_intersecting_pairs(const Mesh& mesh, std::span<const double> x
     for (Index t = 0; t < nt; ++t) for_cells(t, [&](std::int64_t c) { items[fill[c]++] = t; });
   }
 
-  std::vector<std::array<Index, 2>> found;
 #pragma omp parallel
   {
-    std::vector<std::array<Index, 2>> mine;
+    Local mine = init;
 #pragma omp for schedule(dynamic, 64)
     for (std::int64_t c = 0; c < ncell; ++c) {
       for (std::int64_t a = start[c]; a < start[c + 1]; ++a) {
         const Index ti = items[a];
         for (std::int64_t b = a + 1; b < start[c + 1]; ++b) {
           const Index tj = items[b];
-          // Bounding boxes overlap (closed)?
+          // Grown boxes overlap (closed)?
           double m[3];
           bool overlap = true;
           for (int k = 0; k < 3 && overlap; ++k) {
-            overlap = lo[3 * ti + k] <= hi[3 * tj + k] && lo[3 * tj + k] <= hi[3 * ti + k];
-            m[k] = std::max(lo[3 * ti + k], lo[3 * tj + k]);
+            overlap = lo[3 * ti + k] - grow <= hi[3 * tj + k] + grow && lo[3 * tj + k] - grow <= hi[3 * ti + k] + grow;
+            m[k] = std::max(lo[3 * ti + k], lo[3 * tj + k]) - grow;
           }
           if (!overlap) continue;
-          // Test each pair once: in the cell holding the lower corner of the boxes' overlap.
+          // Visit each pair once: in the cell holding the lower corner of the grown boxes' overlap.
           if (flat(cell_of(m[0], 0), cell_of(m[1], 1), cell_of(m[2], 2)) != c) continue;
-          const Index* A = T + 3 * ti;
-          const Index* B = T + 3 * tj;
-          bool adjacent = false;
-          for (int p = 0; p < 3; ++p)
-            for (int q = 0; q < 3; ++q) adjacent = adjacent || A[p] == B[q];
-          if (adjacent) continue;
-          if (triangles_intersect(x + 3 * A[0], x + 3 * A[1], x + 3 * A[2], x + 3 * B[0], x + 3 * B[1], x + 3 * B[2]))
-            mine.push_back({std::min(ti, tj), std::max(ti, tj)});
+          pair(mine, ti, tj, lo.data(), hi.data());
         }
       }
     }
 #pragma omp critical
-    found.insert(found.end(), mine.begin(), mine.end());
+    join(mine);
   }
+}
+
+bool share_vertex(const Index* A, const Index* B) {
+  for (int p = 0; p < 3; ++p)
+    for (int q = 0; q < 3; ++q)
+      if (A[p] == B[q]) return true;
+  return false;
+}
+
+}  // namespace
+
+std::size_t count_intersecting_pairs(const Mesh& mesh, std::span<const double> xs,
+                                     std::vector<std::array<Index, 2>>* pairs) {
+  const double* x = checked_positions(mesh, xs, "count_intersecting_pairs");
+  if (pairs) pairs->clear();
+  const Index* T = mesh.triangles.data();
+  std::vector<std::array<Index, 2>> found;
+  for_each_box_pair(
+      mesh, x, 0.0, std::vector<std::array<Index, 2>>(),
+      [&](std::vector<std::array<Index, 2>>& mine, Index ti, Index tj, const double*, const double*) {
+        const Index* A = T + 3 * ti;
+        const Index* B = T + 3 * tj;
+        if (share_vertex(A, B)) return;
+        if (triangles_intersect(x + 3 * A[0], x + 3 * A[1], x + 3 * A[2], x + 3 * B[0], x + 3 * B[1], x + 3 * B[2]))
+          mine.push_back({std::min(ti, tj), std::max(ti, tj)});
+      },
+      [&](const std::vector<std::array<Index, 2>>& mine) { found.insert(found.end(), mine.begin(), mine.end()); });
   std::sort(found.begin(), found.end());
   const std::size_t count = found.size();
   if (pairs) *pairs = std::move(found);
   return count;
+}
+
+// ---- closest approach ----
+
+namespace distance {
+
+namespace {
+inline double dot(const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline void sub(const double* a, const double* b, double* r) {
+  r[0] = a[0] - b[0];
+  r[1] = a[1] - b[1];
+  r[2] = a[2] - b[2];
+}
+// Lexicographic order of points: the distance functions sort their arguments by it, so that
+// their result does not depend on the order of the vertices or of the two elements (bit for bit).
+inline bool before(const double* a, const double* b) {
+  return a[0] != b[0] ? a[0] < b[0] : a[1] != b[1] ? a[1] < b[1] : a[2] < b[2];
+}
+inline double dist_to(const double* p, const double* q0, const double* d, double t) {
+  const double c[3] = {q0[0] + t * d[0] - p[0], q0[1] + t * d[1] - p[1], q0[2] + t * d[2] - p[2]};
+  return std::sqrt(dot(c, c));
+}
+}  // namespace
+
+double point_segment(const double* p, const double* a, const double* b) {
+  if (before(b, a)) std::swap(a, b);
+  double d[3], ap[3];
+  sub(b, a, d);
+  sub(p, a, ap);
+  const double dd = dot(d, d);
+  const double t = dd > 0 ? std::clamp(dot(ap, d) / dd, 0.0, 1.0) : 0.0;
+  return dist_to(p, a, d, t);
+}
+
+// The closest point by the triangle's Voronoi regions (vertices, edges, face); every candidate is
+// a point of the triangle, so each distance is at least the true one, and the minimum with the
+// three edges' distances is the true one also when the triangle is degenerate (a segment or a
+// point), where the face region's barycentric division is 0 / 0.
+double point_triangle(const double* p, const double* a, const double* b, const double* c) {
+  if (before(b, a)) std::swap(a, b);
+  if (before(c, b)) std::swap(b, c);
+  if (before(b, a)) std::swap(a, b);
+  const double edges = std::min({point_segment(p, a, b), point_segment(p, b, c), point_segment(p, c, a)});
+  double ab[3], ac[3], ap[3];
+  sub(b, a, ab);
+  sub(c, a, ac);
+  sub(p, a, ap);
+  const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+  double bp[3], cp[3];
+  sub(p, b, bp);
+  sub(p, c, cp);
+  const double d3 = dot(ab, bp), d4 = dot(ac, bp), d5 = dot(ab, cp), d6 = dot(ac, cp);
+  const double va = d3 * d6 - d5 * d4, vb = d5 * d2 - d1 * d6, vc = d1 * d4 - d3 * d2;
+  // Outside the face region (some barycentric negative): the closest point is on an edge or a vertex.
+  if (va < 0 || vb < 0 || vc < 0) return edges;
+  const double den = va + vb + vc;
+  if (!(den > 0)) return edges;
+  const double v = vb / den, w = vc / den;
+  const double q[3] = {a[0] + v * ab[0] + w * ac[0] - p[0], a[1] + v * ab[1] + w * ac[1] - p[1],
+                       a[2] + v * ab[2] + w * ac[2] - p[2]};
+  return std::min(edges, std::sqrt(dot(q, q)));
+}
+
+// The interior stationary point of |p0 + s d0 - q0 - t d1| when the segments are not parallel,
+// clamped (each clamp keeps a point of both segments), and the four endpoint-to-segment
+// distances: every candidate is a distance between points of the two segments, and the true
+// minimum is one of them (interior-interior for crossing directions, else an endpoint), also
+// when the segments are parallel or degenerate.
+double segment_segment(const double* p0, const double* p1, const double* q0, const double* q1) {
+  if (before(p1, p0)) std::swap(p0, p1);
+  if (before(q1, q0)) std::swap(q0, q1);
+  if (before(q0, p0) || (!before(p0, q0) && before(q1, p1))) {
+    std::swap(p0, q0);
+    std::swap(p1, q1);
+  }
+  double best = std::min({point_segment(p0, q0, q1), point_segment(p1, q0, q1), point_segment(q0, p0, p1),
+                          point_segment(q1, p0, p1)});
+  double d0[3], d1[3], r[3];
+  sub(p1, p0, d0);
+  sub(q1, q0, d1);
+  sub(p0, q0, r);
+  const double a = dot(d0, d0), e = dot(d1, d1), b = dot(d0, d1), c = dot(d0, r), f = dot(d1, r);
+  const double den = a * e - b * b;
+  if (a > 0 && e > 0 && den > 1e-12 * a * e) {
+    const double s = std::clamp((b * f - c * e) / den, 0.0, 1.0);
+    const double t = std::clamp((b * s + f) / e, 0.0, 1.0);
+    const double g[3] = {p0[0] + s * d0[0] - q0[0] - t * d1[0], p0[1] + s * d0[1] - q0[1] - t * d1[1],
+                         p0[2] + s * d0[2] - q0[2] - t * d1[2]};
+    best = std::min(best, std::sqrt(dot(g, g)));
+  }
+  return best;
+}
+
+}  // namespace distance
+
+namespace {
+
+// Candidate (distance, kind, indices) ordered so that equal distances pick the same pair on any
+// thread count: vertex-triangle before edge-edge, then by indices.
+bool closer(const ClosestApproach& a, const ClosestApproach& b) {
+  if (a.distance != b.distance) return a.distance < b.distance;
+  if (a.vertex_triangle != b.vertex_triangle) return a.vertex_triangle;
+  return a.v < b.v;
+}
+
+}  // namespace
+
+ClosestApproach closest_approach(const Mesh& mesh, std::span<const double> xs, double within) {
+  const double* x = checked_positions(mesh, xs, "closest_approach");
+  if (!(within > 0) || !std::isfinite(within))
+    throw InputError("closest_approach: the search distance must be finite and > 0");
+  const Index* T = mesh.triangles.data();
+  ClosestApproach best;
+  best.distance = within;  // pairs at `within` or farther are not looked for
+  auto consider = [](ClosestApproach& mine, double d, bool vt, std::array<Index, 4> v) {
+    ClosestApproach c;
+    c.distance = d;
+    c.vertex_triangle = vt;
+    c.v = v;
+    if (closer(c, mine)) mine = c;
+  };
+  for_each_box_pair(
+      mesh, x, 0.5 * within, best,
+      [&](ClosestApproach& mine, Index ti, Index tj, const double* lo, const double* hi) {
+        // No element pair of the two triangles is closer than their boxes' gap (in any norm).
+        double gap = 0;
+        for (int k = 0; k < 3; ++k)
+          gap = std::max({gap, lo[3 * ti + k] - hi[3 * tj + k], lo[3 * tj + k] - hi[3 * ti + k]});
+        if (gap > mine.distance) return;
+        const Index* A = T + 3 * ti;
+        const Index* B = T + 3 * tj;
+        auto P = [&](Index v) { return x + 3 * static_cast<std::size_t>(v); };
+        auto in = [](Index v, const Index* t) { return v == t[0] || v == t[1] || v == t[2]; };
+        for (int side = 0; side < 2; ++side) {
+          const Index* U = side ? B : A;
+          const Index* V = side ? A : B;
+          for (int k = 0; k < 3; ++k)
+            if (!in(U[k], V))
+              consider(mine, distance::point_triangle(P(U[k]), P(V[0]), P(V[1]), P(V[2])), true,
+                       {U[k], V[0], V[1], V[2]});
+        }
+        for (int i = 0; i < 3; ++i) {
+          const Index a0 = A[i], a1 = A[(i + 1) % 3];
+          for (int j = 0; j < 3; ++j) {
+            const Index b0 = B[j], b1 = B[(j + 1) % 3];
+            if (a0 == b0 || a0 == b1 || a1 == b0 || a1 == b1) continue;
+            consider(mine, distance::segment_segment(P(a0), P(a1), P(b0), P(b1)), false,
+                     {std::min(a0, a1), std::max(a0, a1), std::min(b0, b1), std::max(b0, b1)});
+          }
+        }
+      },
+      [&](const ClosestApproach& mine) {
+        if (closer(mine, best)) best = mine;
+      });
+  if (!(best.distance < within)) return ClosestApproach{};
+  if (!best.vertex_triangle && best.v[2] < best.v[0]) {  // the edge pair in a fixed order
+    std::swap(best.v[0], best.v[2]);
+    std::swap(best.v[1], best.v[3]);
+  }
+  return best;
 }
 
 }  // namespace loom

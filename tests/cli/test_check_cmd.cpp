@@ -88,3 +88,58 @@ TEST(CheckCmd, BadInputExitsWith2) {
   EXPECT_NE(nn.out.find("frame_00001.obj:7: NaN or Inf"), std::string::npos) << nn.out;
   EXPECT_EQ(loom("check").code, 2);
 }
+
+namespace {
+
+// Two 3 x 3 sheets of spacing 0.01 m, the upper one `gap` above the lower and shifted in its
+// plane: their closest approach is the gap (the sheets' own non-adjacent pairs are 0.0071 m apart).
+void write_sheets(const fs::path& dir, int frame, double gap) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%05d.obj", frame);
+  std::ofstream f(dir / name);
+  f.precision(17);
+  for (int layer = 0; layer < 2; ++layer)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i)
+        f << "v " << 0.01 * i + 0.003 * layer << " " << 0.01 * j + 0.004 * layer << " " << gap * layer << "\n";
+  for (int layer = 0; layer < 2; ++layer)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) {
+        const int a = 9 * layer + 3 * j + i + 1, b = a + 1, c = a + 3, d = a + 4;
+        f << "f " << a << " " << b << " " << d << "\nf " << a << " " << d << " " << c << "\n";
+      }
+}
+
+}  // namespace
+
+// --distance: each frame's closest approach of non-adjacent elements, in m and, with the run's
+// self_collision thickness (its scene.yaml), as a fraction of it; the summary names the frame
+// and the pair. The exit code still follows the intersections only.
+TEST(CheckCmd, DistanceReportsTheClosestApproachPerFrame) {
+  const fs::path d = scratch("distance");
+  write_sheets(d, 0, 0.004);
+  write_sheets(d, 1, 0.0025);
+  write_sheets(d, 2, 0.003);
+  std::ofstream(d / "scene.yaml") << "# The scene as it ran\nmesh: {obj: x.obj}\nself_collision: {thickness: 0.002, friction: 0.3}\n";
+  const Result r = loom("check " + d.string() + " --distance");
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("CLOSEST_M"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("CLOSEST/THICKNESS"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0.004          2"), std::string::npos) << r.out;    // frame 0: 0.004 m, 2 thicknesses
+  EXPECT_NE(r.out.find("0.0025         1.25"), std::string::npos) << r.out;  // frame 1
+  EXPECT_NE(r.out.find("closest approach 0.0025 m (1.25 of the thickness 0.002 m) in frame_00001.obj: vertex"),
+            std::string::npos)
+      << r.out;
+  // without a scene.yaml: metres only
+  fs::remove(d / "scene.yaml");
+  const Result m = loom("check " + d.string() + " --distance --quiet");
+  EXPECT_EQ(m.code, 0) << m.out;
+  EXPECT_EQ(m.out.find("THICKNESS"), std::string::npos) << m.out;
+  EXPECT_NE(m.out.find("closest approach 0.0025 m in frame_00001.obj"), std::string::npos) << m.out;
+  // sheets far apart: the closest approach is a pair of elements of one sheet
+  const fs::path far = scratch("distance_far");
+  write_sheets(far, 0, 0.5);
+  const Result f = loom("check " + far.string() + " --distance");
+  EXPECT_EQ(f.code, 0) << f.out;
+  EXPECT_NE(f.out.find("closest approach 0.00707107 m"), std::string::npos) << f.out;  // in-sheet: 0.01 / sqrt(2)
+}

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <span>
 #include <vector>
@@ -42,5 +43,34 @@ bool triangles_intersect(const double* a0, const double* a1, const double* a2, c
 /// bounding boxes, each overlapping pair tested once.
 std::size_t count_intersecting_pairs(const Mesh& mesh, std::span<const double> x,
                                      std::vector<std::array<Index, 2>>* pairs = nullptr);
+
+/// Distances between the elements of a cloth (loom check --distance), written for the check and
+/// independent of the collision code, like the intersection test above. Each result is the same
+/// double whatever the order of the vertices and of the two elements.
+namespace distance {
+/// Distance from point p to the closed segment ab (a point when a == b).
+double point_segment(const double* p, const double* a, const double* b);
+/// Distance from point p to the closed triangle abc (also when it is degenerate).
+double point_triangle(const double* p, const double* a, const double* b, const double* c);
+/// Distance between the closed segments p0p1 and q0q1 (also parallel or degenerate ones).
+double segment_segment(const double* p0, const double* p1, const double* q0, const double* q1);
+}  // namespace distance
+
+/// The closest approach of two non-adjacent elements of a cloth: a vertex and a triangle that
+/// does not have it as a corner, or two edges that share no vertex (the pairs self-collision
+/// keeps a thickness apart, and whose smallest distance in the cloth as built bounds the
+/// thickness a scene may ask for).
+struct ClosestApproach {
+  double distance = INFINITY;    ///< INFINITY: no pair closer than the search distance
+  bool vertex_triangle = true;   ///< the pair: vertex v[0] and triangle (v[1], v[2], v[3]), or
+  std::array<Index, 4> v{-1, -1, -1, -1};  ///< ... edges (v[0], v[1]) and (v[2], v[3]) (each i < j)
+};
+
+/// The closest approach of non-adjacent elements of `mesh` at positions x (the mesh's own when
+/// empty), among the pairs closer than `within` (> 0): distance INFINITY when there is none.
+/// Broad phase: the grid of count_intersecting_pairs over the triangles' boxes grown by
+/// within / 2, each overlapping triangle pair once, its non-adjacent element pairs measured.
+/// The distance and the pair do not depend on the thread count.
+ClosestApproach closest_approach(const Mesh& mesh, std::span<const double> x, double within);
 
 }  // namespace loom
