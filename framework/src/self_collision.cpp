@@ -554,13 +554,20 @@ std::string crossing_pairs(const Mesh& mesh, const std::vector<double>& x) {
 
 }  // namespace
 
-void SelfCollision::refuse_crossing_state(const Mesh& mesh, const std::vector<double>& x, const std::string& where) {
+void SelfCollision::refuse_crossing_state(const Mesh& mesh, const std::vector<double>& x, const std::string& where,
+                                          bool program) {
   const std::string crossing = crossing_pairs(mesh, x);
-  if (!crossing.empty())
-    throw InputError(where + ": the cloth in this state intersects itself (" + crossing + "), and the scene has "
-                     "self_collision: " + kCannotUndo + " Fix: rerun the scene from its start with --overwrite "
-                     "(self-collision keeps a cloth that starts without crossings free of them), or remove "
-                     "self_collision from the run's scene.yaml to continue without it.");
+  if (crossing.empty()) return;
+  if (program)
+    throw InputError("the state set through Scene::state intersects itself (" + crossing +
+                     "), and the scene has self_collision: " + kCannotUndo +
+                     " Fix: start from a state without crossings (loom::count_intersecting_pairs finds them; a state "
+                     "saved from a run with self-collision has none), or call Simulation::accept_state() to run "
+                     "self-collision on it anyway (the crossing then stays), or remove self_collision.");
+  throw InputError(where + ": the cloth in this state intersects itself (" + crossing + "), and the scene has "
+                   "self_collision: " + kCannotUndo + " Fix: rerun the scene from its start with --overwrite "
+                   "(self-collision keeps a cloth that starts without crossings free of them), or remove "
+                   "self_collision from the run's scene.yaml to continue without it.");
 }
 
 std::unique_ptr<SelfCollision> SelfCollision::parse(const Params& p, const Mesh& mesh, const std::vector<double>& x) {

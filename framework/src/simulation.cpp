@@ -134,6 +134,10 @@ void Simulation::build(const Params& scene, const std::string& base_dir, PluginL
 
   integrator_->prepare(sc, dt_);
   prepared_ = true;
+  if (sc.self_collision) {  // the state as built has passed the crossing check (SelfCollision::parse)
+    checked_x_ = sc.state.x;
+    state_check_pending_ = true;
+  }
   if (auto_threads) {  // the count the steps start on (loom/thread_start.hpp)
     thread_ctl_ = auto_threads->finish(usable_cores(), static_cast<long long>(sc.state.x.size() / 3));
     sc.threads = auto_threads->start().threads;
@@ -236,9 +240,23 @@ volatile std::sig_atomic_t g_stop_requested = 0;
 }
 void Simulation::request_stop() { g_stop_requested = 1; }
 
+void Simulation::accept_state() {
+  state_check_pending_ = false;
+  std::vector<double>().swap(checked_x_);
+}
+
+void Simulation::check_program_state() {
+  state_check_pending_ = false;
+  const bool changed = scene_->state.x != checked_x_;
+  std::vector<double>().swap(checked_x_);
+  if (changed && scene_->self_collision)
+    SelfCollision::refuse_crossing_state(scene_->mesh, scene_->state.x, "", true);
+}
+
 void Simulation::step() {
   if (g_stop_requested)
     throw Interrupted("interrupted at step " + std::to_string(scene_->state.step) + " (t = " + fmt(scene_->state.time) + " s)");
+  if (state_check_pending_) check_program_state();
   const auto t0 = Clock::now();
   if (scene_->self_collision) scene_->self_collision->begin_step(scene_->state);
   integrator_->step(*scene_, dt_);
@@ -502,6 +520,7 @@ int Simulation::resume(int frames) {
     if (!std::isfinite(r.x[i]) || !std::isfinite(r.v[i])) throw InputError(where + ": holds non-finite values. Fix: rerun with --overwrite.");
   if (scene_->self_collision) SelfCollision::refuse_crossing_state(scene_->mesh, r.x, where);  // as a start mesh
   st.x = r.x;
+  if (state_check_pending_) checked_x_ = r.x;  // checked just above
   st.v = r.v;
   st.time = r.time;
   st.step = r.step;

@@ -403,6 +403,62 @@ TEST_F(SelfCollisionScenes, AResumedStateThatCrossesItselfIsRefused) {
   fs::remove_all(dir);
 }
 
+// A state that a program sets through Scene::state gets the same crossing check at the first
+// step (the scene's own start and a resumed state are checked when they are read): the crossing
+// two sheets are refused with one InputError naming the count of the exact check and the fix;
+// Simulation::accept_state() runs self-collision on them anyway (the benchmark of a tangled
+// start); a state that does not cross passes, and only the first step pays for the check.
+TEST_F(SelfCollisionScenes, AStateSetByAProgramThatCrossesItselfIsRefused) {
+  const fs::path dir = fs::temp_directory_path() / "loom_selfcol_program_state";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string obj = write_two_sheets(dir / "sheets.obj", two_sheets(false, 0.02));
+  const std::string yaml = "mesh: {obj: " + obj + "}\n" +
+                           "material: {type: mass_spring, stencil: mesh_edges, stiffness: 300, density: 0.2}\n"
+                           "integrator: {type: symplectic_euler, dt: 1.0e-4, substeps: 20}\nthreads: 1\n"
+                           "gravity: [0, -9.81, 0]\nself_collision: {thickness: 0.005}\n";
+  const std::vector<double> crossing = two_sheets(true, 0);
+  {
+    auto sim = make(yaml);
+    const std::size_t ncross = loom::count_intersecting_pairs(sim->scene().mesh, crossing);
+    ASSERT_GT(ncross, 0u);
+    sim->scene().state.x = crossing;
+    try {
+      sim->step();
+      ADD_FAILURE() << "a crossing state set by the program was stepped";
+    } catch (const loom::InputError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find("the state set through Scene::state intersects itself (" + std::to_string(ncross) +
+                       " pairs of non-adjacent triangles"),
+                std::string::npos)
+          << m;
+      EXPECT_NE(m.find("Fix:"), std::string::npos) << m;
+      EXPECT_NE(m.find("accept_state"), std::string::npos) << m;
+    }
+    EXPECT_EQ(sim->scene().state.step, 0);  // nothing was stepped
+  }
+  {  // accepted: it runs, and the response keeps the crossing rather than adding to it
+    auto sim = make(yaml);
+    sim->scene().state.x = crossing;
+    sim->accept_state();
+    for (int k = 0; k < 5; ++k) EXPECT_NO_THROW(sim->step());
+    EXPECT_EQ(sim->scene().state.step, 5);
+  }
+  {  // another state without crossings (the layers 10 mm apart): stepped
+    auto sim = make(yaml);
+    sim->scene().state.x = two_sheets(false, 0.01);
+    for (int k = 0; k < 5; ++k) EXPECT_NO_THROW(sim->step());
+    ASSERT_EQ(loom::count_intersecting_pairs(sim->scene().mesh, sim->scene().state.x), 0u);
+  }
+  {  // set after the first step: not checked any more (documented: only the first step checks)
+    auto sim = make(yaml);
+    sim->step();
+    sim->scene().state.x = crossing;
+    EXPECT_NO_THROW(sim->step());
+  }
+  fs::remove_all(dir);
+}
+
 TEST_F(SelfCollisionScenes, CliExitsWithCode2OnABadThickness) {
   const fs::path dir = fs::temp_directory_path() / "loom_selfcol_cli";
   fs::remove_all(dir);

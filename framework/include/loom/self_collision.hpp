@@ -271,7 +271,10 @@ class SelfCollision {
   /// of intersecting non-adjacent triangle pairs at x (the exact check of `loom check`), one
   /// pair and the fix when there is one. Layers closer than the thickness are accepted here
   /// (the response pushes them apart; a run with self-collision may stop with such a pair).
-  static void refuse_crossing_state(const Mesh& mesh, const std::vector<double>& x, const std::string& where);
+  /// program: the state was set by a program through Scene::state (Simulation::step's first
+  /// step); the message and its fix say so instead of naming a file.
+  static void refuse_crossing_state(const Mesh& mesh, const std::vector<double>& x, const std::string& where,
+                                    bool program = false);
 
   const Options& options() const { return opt_; }
   /// Save the start-of-step positions.

@@ -98,7 +98,15 @@ class Simulation {
   void set_step_callback(std::function<void()> cb) { on_step_ = std::move(cb); }
 
   /// One step of size dt with guards. Throws DivergenceError naming step, vertex and value.
+  /// With self_collision, the first step checks a state that the program set itself (scene().state
+  /// changed since the scene was built or resumed) for crossings, as the scene's own start and a
+  /// resumed state are checked: a cloth that intersects itself throws InputError (self-collision
+  /// keeps each pair on the side it starts on, so it cannot undo a crossing; docs/CONTACT.md).
   void step();
+  /// Take scene().state as it is now for self-collision, without the first step's crossing
+  /// check: for a program that starts from a crossing state on purpose (the benchmark of a
+  /// tangled start), knowing that the crossing stays.
+  void accept_state();
   /// One frame = substeps steps.
   void advance_frame();
 
@@ -144,6 +152,11 @@ class Simulation {
   int frames_ = 1;
   bool prepared_ = false;
   int resume_frame_ = -1;
+  /// With self_collision: the positions already checked for crossings (as built, or resumed),
+  /// until the first step compares scene().state with them (then released).
+  std::vector<double> checked_x_;
+  bool state_check_pending_ = false;
+  void check_program_state();
   OutputOptions output_;
   GuardOptions guard_;
   long long force_evals_ = 0, linear_iters_ = 0;
