@@ -337,6 +337,23 @@ void write_restart_file(const fs::path& path, const loom::RestartData& r) {
   std::ofstream(path, std::ios::binary) << loom_test::restart_file_bytes(r);
 }
 
+// An empty folder `name` in the temporary directory.
+fs::path fresh_dir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+// The scene of the two sheets 20 mm apart (written to dir/sheets.obj), with self-collision.
+std::string two_sheets_scene(const fs::path& dir) {
+  const std::string obj = write_two_sheets(dir / "sheets.obj", two_sheets(false, 0.02));
+  return "mesh: {obj: " + obj + "}\n" +
+         "material: {type: mass_spring, stencil: mesh_edges, stiffness: 300, density: 0.2}\n"
+         "integrator: {type: symplectic_euler, dt: 1.0e-4, substeps: 20}\nthreads: 1\n"
+         "gravity: [0, -9.81, 0]\nself_collision: {thickness: 0.005}\n";
+}
+
 }  // namespace
 
 // `loom run --resume` gives the restored state the start mesh's crossing check: a restart.bin
@@ -346,14 +363,8 @@ void write_restart_file(const fs::path& path, const loom::RestartData& r) {
 // own restart point, re-encoded by this test, resumes (and stays free of crossings by `loom
 // check`), and so does a state whose layers are closer than the thickness without crossing.
 TEST_F(SelfCollisionScenes, AResumedStateThatCrossesItselfIsRefused) {
-  const fs::path dir = fs::temp_directory_path() / "loom_selfcol_resume";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  const std::string obj = write_two_sheets(dir / "sheets.obj", two_sheets(false, 0.02));
-  const std::string yaml = "mesh: {obj: " + obj + "}\n" +
-                           "material: {type: mass_spring, stencil: mesh_edges, stiffness: 300, density: 0.2}\n"
-                           "integrator: {type: symplectic_euler, dt: 1.0e-4, substeps: 20}\nthreads: 1\n"
-                           "gravity: [0, -9.81, 0]\nself_collision: {thickness: 0.005}\n";
+  const fs::path dir = fresh_dir("loom_selfcol_resume");
+  const std::string yaml = two_sheets_scene(dir);
   std::ofstream(dir / "scene.yaml") << yaml;
   const std::string exe = std::string(LOOM_EXE), run = (dir / "run").string();
   auto [rc0, out0] = run_command(exe + " run " + (dir / "scene.yaml").string() + " --quiet --frames 1 --out " + run);
@@ -409,14 +420,8 @@ TEST_F(SelfCollisionScenes, AResumedStateThatCrossesItselfIsRefused) {
 // Simulation::accept_state() runs self-collision on them anyway (the benchmark of a tangled
 // start); a state that does not cross passes, and only the first step pays for the check.
 TEST_F(SelfCollisionScenes, AStateSetByAProgramThatCrossesItselfIsRefused) {
-  const fs::path dir = fs::temp_directory_path() / "loom_selfcol_program_state";
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  const std::string obj = write_two_sheets(dir / "sheets.obj", two_sheets(false, 0.02));
-  const std::string yaml = "mesh: {obj: " + obj + "}\n" +
-                           "material: {type: mass_spring, stencil: mesh_edges, stiffness: 300, density: 0.2}\n"
-                           "integrator: {type: symplectic_euler, dt: 1.0e-4, substeps: 20}\nthreads: 1\n"
-                           "gravity: [0, -9.81, 0]\nself_collision: {thickness: 0.005}\n";
+  const fs::path dir = fresh_dir("loom_selfcol_program_state");
+  const std::string yaml = two_sheets_scene(dir);
   const std::vector<double> crossing = two_sheets(true, 0);
   {
     auto sim = make(yaml);
