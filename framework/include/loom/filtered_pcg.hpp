@@ -69,8 +69,10 @@ inline constexpr double kDefaultTolerance = 1e-5;
 
 /// The status of one run of the iteration.
 /// RoundingFloor: the preconditioned residual norm r^T P^-1 r came out <= 0 but within rounding
-/// of zero (|r^T P^-1 r| <= 64 eps of its starting value): the iteration has reached what the
-/// precision can resolve, not an indefinite preconditioner.
+/// of zero (|r^T P^-1 r| <= 64 eps of its starting value), or r^T P^-1 r or the curvature c^T A c
+/// came out <= 0 once the residual was already within 64 eps of the right-hand side's (|r| <= 64
+/// eps |S(b - A z)|): the iteration has reached what the precision can resolve, not an indefinite
+/// preconditioner or system.
 enum class Status { Converged = 0, IterationCap = 1, NonPositiveCurvature = 2, NonPositivePreconditioner = 3, RoundingFloor = 4 };
 
 namespace detail {
@@ -82,11 +84,12 @@ inline std::string format(const char* fmt, double a, double b = 0, double c = 0)
 }  // namespace detail
 
 /// Iterates from dv with r = S(b - A dv) (|r|^2 = rr) until |r|^2 <= threshold2 or a failure.
-/// r, c, q, s are work vectors; returns the iterations taken.
+/// r, c, q, s are work vectors; returns the iterations taken. floor2: |r|^2 at which a breakdown
+/// counts as rounding (Status::RoundingFloor; 0: never by this rule).
 template <FilteredPcgOps Ops>
 int iterate(Ops& ops, typename Ops::Vec& dv, typename Ops::Vec& r, typename Ops::Vec& c, typename Ops::Vec& q,
             typename Ops::Vec& s, typename Ops::Real& rr, typename Ops::Real threshold2, int max_iterations,
-            Status& status, double& curvature) {
+            Status& status, double& curvature, double floor2 = 0) {
   using Real = typename Ops::Real;
   Real delta = ops.precondition(r, s);
   const double delta0 = std::fabs(static_cast<double>(delta));
@@ -99,15 +102,18 @@ int iterate(Ops& ops, typename Ops::Vec& dv, typename Ops::Vec& r, typename Ops:
     if (it >= max_iterations) { status = Status::IterationCap; break; }
     if (!(delta > Real(0)) || !std::isfinite(static_cast<double>(delta))) {
       const bool rounding = std::isfinite(static_cast<double>(delta)) && it > 0 &&
-                            std::fabs(static_cast<double>(delta)) <=
-                                64.0 * std::numeric_limits<Real>::epsilon() * delta0;
+                            (std::fabs(static_cast<double>(delta)) <=
+                                 64.0 * std::numeric_limits<Real>::epsilon() * delta0 ||
+                             static_cast<double>(rr) <= floor2);
       status = rounding ? Status::RoundingFloor : Status::NonPositivePreconditioner;
       curvature = static_cast<double>(delta);
       break;
     }
     const Real cq = ops.apply_operator(c, q);
     if (!(cq > Real(0)) || !std::isfinite(static_cast<double>(cq))) {
-      status = Status::NonPositiveCurvature;
+      status = std::isfinite(static_cast<double>(cq)) && it > 0 && static_cast<double>(rr) <= floor2
+                   ? Status::RoundingFloor
+                   : Status::NonPositiveCurvature;
       curvature = static_cast<double>(cq);
       break;
     }
@@ -163,11 +169,15 @@ SolveReport solve(Ops& ops, const Settings& settings, typename Ops::Vec& dv, typ
   }
   const double tol = settings.tolerance;
   const Real threshold2 = static_cast<Real>(tol * tol * bhat2);
+  // A breakdown with the residual already within 64 eps of |bh| is rounding (Status::RoundingFloor).
+  const double eps64 = 64.0 * std::numeric_limits<Real>::epsilon();
+  const double floor2 = eps64 * eps64 * bhat2;
   int total = 0;
   Status status = Status::IterationCap;
   double curvature = 0, rel = 0;
   for (int attempt = 0; attempt < 3; ++attempt) {
-    total += iterate(ops, dv, *pr, c, *pq, s, rr, threshold2, settings.max_iterations - total, status, curvature);
+    total += iterate(ops, dv, *pr, c, *pq, s, rr, threshold2, settings.max_iterations - total, status, curvature,
+                     floor2);
     if (status != Status::Converged) break;
     // The recursive residual has converged; check the true one (and restart from it if
     // rounding let the two drift apart).

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <type_traits>
 
 #include "loom/incidence.hpp"
 #include "loom/kernels/bsr_ops.hpp"
@@ -804,7 +805,7 @@ class CudaBw final : public Integrator {
       throw InputError(scene.source + ": baraff_witkin on backend cuda solves on the device with filtered_pcg, but the "
                        "scene's solver is '" + (scene.solver ? scene.solver->name() : std::string("none")) +
                        "'. Fix: set solver: {type: filtered_pcg} (or backend: cpu for the CPU solvers).");
-    pcg_ = DevicePcg<T>(solver->options());
+    pcg_ = DevicePcg<double, T>(solver->options());
     pcg_.set_name(solver->name());
     State& s = scene.state;
     const Index n = s.size();
@@ -834,6 +835,11 @@ class CudaBw final : public Integrator {
     b_.assign(N, T(0));
     z_.assign(N, T(0));
     dv_.assign(N, T(0));
+    if constexpr (!std::is_same_v<T, double>) {   // the mixed-precision solve's double vectors
+      bd_.assign(N, 0.0);
+      zd_.assign(N, 0.0);
+      dvd_.assign(N, 0.0);
+    }
     Filter S;
     S.reset(n);
     for (Index i : s.pin_list) S.constrain_all(i);
@@ -904,7 +910,21 @@ class CudaBw final : public Integrator {
       return contacts;
     }
     bool factorize(SolveReport& rep) { return bw.pcg_.factorize(bw.A_, bw.S_, rep); }
-    SolveReport solve() { return bw.pcg_.solve(bw.A_, bw.S_, bw.b_, bw.z_, bw.dv_); }
+    SolveReport solve() {
+      if constexpr (std::is_same_v<T, double>) {
+        return bw.pcg_.solve(bw.A_, bw.S_, bw.b_, bw.z_, bw.dv_);
+      } else {
+        // precision: float: the system (A, S, b, z) as assembled in float, solved by CG in double
+        // (float vectors stall above the tolerance: their rounding floor), dv rounded back.
+        const Index N = 3 * bw.ds_.n;
+        parallel_for(N, ConvertKernel<T, double>{raw(bw.b_), raw(bw.bd_)});
+        parallel_for(N, ConvertKernel<T, double>{raw(bw.z_), raw(bw.zd_)});
+        parallel_for(N, ConvertKernel<T, double>{raw(bw.dv_), raw(bw.dvd_)});
+        SolveReport rep = bw.pcg_.solve(bw.A_, bw.S_, bw.bd_, bw.zd_, bw.dvd_);
+        parallel_for(N, ConvertKernel<double, T>{raw(bw.dvd_), raw(bw.dv_)});
+        return rep;
+      }
+    }
     void zero_dv() { fill(bw.dv_, T(0)); }
     bool release_pulling_contacts(double) { return bw.release_pulling_contacts(); }
     // No self-contact on the device; with implicit_friction (default) the contacts' dampers join
@@ -1027,7 +1047,8 @@ class CudaBw final : public Integrator {
   DVec<T> dfdx_, dfdv_, degree_, f_, b_, z_, dv_;
   DVec<Index> pins_;
   DeviceFilter<T> S_;
-  DevicePcg<T> pcg_;
+  DevicePcg<double, T> pcg_;   // vectors in double for either precision (mixed with float: DevicePcg)
+  DVec<double> bd_, zd_, dvd_;   // precision: float: b, z and dv in double for the solve
   const ColliderSet* colliders_ = nullptr;
   DeviceMeshes meshes_;
   DVec<std::uint8_t> pinned_, in_contact_, flag_, cstick_;

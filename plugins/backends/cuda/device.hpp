@@ -149,6 +149,14 @@ struct DotTerm {
   LOOM_HD T operator()(Index i) const { return a[i] * b[i]; }
 };
 
+/// out[i] = in[i] converted to another scalar (the mixed-precision solve's float <-> double copies).
+template <class From, class To>
+struct ConvertKernel {
+  const From* in;
+  To* out;
+  LOOM_HD void operator()(Index i) const { out[i] = static_cast<To>(in[i]); }
+};
+
 /// a . b over the whole vectors (0 for empty vectors). It reduces over raw pointers: Thrust's
 /// inner_product on device iterators converts device references through a null system pointer
 /// on the OpenMP system, and an empty vector's begin() is null (UBSan reports both as a

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <type_traits>
 
 #include "loom/filtered_pcg.hpp"
 #include "loom/clock.hpp"
@@ -92,34 +93,50 @@ void DeviceFilter<T>::rebuild_constrained() {
 
 namespace {
 
-template <class T>
+// The 9 values of a block (or projector) in M, as T (exact when M = T or M = float, T = double).
+template <class T, class M>
+LOOM_HD inline void load_block(const M* in, T* out) {
+  for (int e = 0; e < 9; ++e) out[e] = static_cast<T>(in[e]);
+}
+
+// y <- S_i y with S_i stored in M (kernels::filter_vec3 on the projector converted to T).
+template <class T, class M>
+LOOM_HD inline void filter_vec3_from(int free_dofs, const M* proj, T* y) {
+  if (free_dofs == 3) return;
+  T P[9];
+  load_block(proj, P);
+  kernels::filter_vec3(free_dofs, P, y);
+}
+
+template <class T, class M>
 struct AddPrescribed {  // dv <- S dv + z on the constrained vertices (free ones keep their guess)
   const Index* cons;
   const unsigned char* free;
-  const T* proj;
+  const M* proj;
   const T* z;
   T* dv;
   LOOM_HD void operator()(Index k) const {
     const Index i = cons[k];
     T* d = dv + 3LL * i;
-    kernels::filter_vec3(static_cast<int>(free[i]), proj + 9LL * i, d);
+    filter_vec3_from(static_cast<int>(free[i]), proj + 9LL * i, d);
     d[0] += z[3LL * i];
     d[1] += z[3LL * i + 1];
     d[2] += z[3LL * i + 2];
   }
 };
 
-template <class T>
+template <class T, class Mat>
 struct Preconditioner {  // P_i = S_i M_i^-1 S_i as on the CPU; returns 1 for a vertex whose (block) diagonal is not SPD
   const Index* diag;
-  const T* A;
+  const Mat* A;
   const unsigned char* free;
-  const T* proj;
+  const Mat* proj;
   int kind;  // 0 none, 1 jacobi, 2 block
   T* pinv;
   LOOM_HD int operator()(Index i) const {
-    const T* D = A + 9LL * diag[i];
-    const T* Si = proj + 9LL * i;
+    T D[9], Si[9];   // the diagonal block and the projector in T
+    load_block(A + 9LL * diag[i], D);
+    load_block(proj + 9LL * i, Si);
     const int f = static_cast<int>(free[i]);
     T* P = pinv + 9LL * i;
     for (int e = 0; e < 9; ++e) P[e] = T(0);
@@ -192,34 +209,67 @@ struct Xpby {  // c <- s + beta c (s is in range(S), so c stays there)
   LOOM_HD void operator()(Index d) const { c[d] = s[d] + beta * c[d]; }
 };
 
-template <class T>
+template <class T, class M>
 struct RowResidual {  // out_i = S_i (b_i - out_i) with out = A x on entry; returns |out_i|^2
   const unsigned char* free;
-  const T* proj;
+  const M* proj;
   const T* b;
   T* out;
   LOOM_HD T operator()(Index i) const {
     const long long o = 3LL * i;
     for (int a = 0; a < 3; ++a) out[o + a] = b[o + a] - out[o + a];
-    const int f = static_cast<int>(free[i]);
-    if (f != 3) kernels::filter_vec3(f, proj + 9LL * i, out + o);
+    filter_vec3_from(static_cast<int>(free[i]), proj + 9LL * i, out + o);
     return kernels::dot3(out + o, out + o);
   }
 };
 
-template <class T>
+template <class T, class M>
 struct FilteredDot {  // q_i <- S_i q_i; returns c_i . q_i
   const unsigned char* free;
-  const T* proj;
+  const M* proj;
   const T* c;
   T* q;
   LOOM_HD T operator()(Index i) const {
     const long long o = 3LL * i;
-    const int f = static_cast<int>(free[i]);
-    if (f != 3) kernels::filter_vec3(f, proj + 9LL * i, q + o);
+    filter_vec3_from(static_cast<int>(free[i]), proj + 9LL * i, q + o);
     return kernels::dot3(c + o, q + o);
   }
 };
+
+// y_i = sum_k B_k x_col(k) for block row i, with the blocks in M and x, y and the sums in T: the
+// SpMV of the mixed-precision PCG (kernels::bsr_row_multiply's order of operations).
+template <class T, class M>
+struct MixedSpmvRow {
+  const Index* row_ptr;
+  const Index* col;
+  const M* values;
+  const T* x;
+  T* y;
+  LOOM_HD void operator()(Index i) const {
+    T y0 = T(0), y1 = T(0), y2 = T(0);
+    for (Index k = row_ptr[i]; k < row_ptr[i + 1]; ++k) {
+      const M* B = values + 9LL * k;
+      const T* xj = x + 3LL * col[k];
+      const T x0 = xj[0], x1 = xj[1], x2 = xj[2];
+      y0 += T(B[0]) * x0 + T(B[1]) * x1 + T(B[2]) * x2;
+      y1 += T(B[3]) * x0 + T(B[4]) * x1 + T(B[5]) * x2;
+      y2 += T(B[6]) * x0 + T(B[7]) * x1 + T(B[8]) * x2;
+    }
+    y[3LL * i] = y0;
+    y[3LL * i + 1] = y1;
+    y[3LL * i + 2] = y2;
+  }
+};
+
+// out = A x: cuSPARSE (through the seam) when the matrix and the vectors share a type, else the
+// mixed row product.
+template <class T, class M>
+void multiply(const DeviceBsr<M>& A, const T* x, T* out) {
+  if constexpr (std::is_same_v<T, M>)
+    A.multiply(x, out);
+  else
+    parallel_for(A.n, MixedSpmvRow<T, M>{raw(A.row_ptr), raw(A.col), raw(A.values), x, out});
+}
 
 template <class T>
 struct Copy {
@@ -228,25 +278,25 @@ struct Copy {
   LOOM_HD void operator()(Index d) const { b[d] = a[d]; }
 };
 
-/// The device operations of the filtered PCG (loom/filtered_pcg.hpp).
-template <class T>
+/// The device operations of the filtered PCG (loom/filtered_pcg.hpp): vectors in T, A and S in M.
+template <class T, class M>
 struct DevicePcgOps {
   using Real = T;
   using Vec = DVec<T>;
-  const DeviceBsr<T>& A;
-  const DeviceFilter<T>& S;
+  const DeviceBsr<M>& A;
+  const DeviceFilter<M>& S;
   const DVec<T>& b;
   const DVec<T>& z;
   const DVec<T>& pinv;
   Index n;
 
   T residual(const Vec& x, Vec& out) const {
-    A.multiply(raw(x), raw(out));
-    return reduce_sum<T>(n, RowResidual<T>{raw(S.free), raw(S.proj), raw(b), raw(out)});
+    multiply(A, raw(x), raw(out));
+    return reduce_sum<T>(n, RowResidual<T, M>{raw(S.free), raw(S.proj), raw(b), raw(out)});
   }
   T apply_operator(const Vec& c, Vec& q) const {
-    A.multiply(raw(c), raw(q));
-    return reduce_sum<T>(n, FilteredDot<T>{raw(S.free), raw(S.proj), raw(c), raw(q)});
+    multiply(A, raw(c), raw(q));
+    return reduce_sum<T>(n, FilteredDot<T, M>{raw(S.free), raw(S.proj), raw(c), raw(q)});
   }
   T precondition(const Vec& r, Vec& s) const { return reduce_sum<T>(n, PrecondDot<T>{raw(pinv), raw(r), raw(s)}); }
   T update(T alpha, const Vec& c, const Vec& q, Vec& x, Vec& r) const {
@@ -254,7 +304,7 @@ struct DevicePcgOps {
   }
   void xpby(const Vec& s, T beta, Vec& c) const { parallel_for(3 * n, Xpby<T>{raw(s), beta, raw(c)}); }
   void start(Vec& dv) const {
-    parallel_for(S.num_constrained, AddPrescribed<T>{raw(S.constrained), raw(S.free), raw(S.proj), raw(z), raw(dv)});
+    parallel_for(S.num_constrained, AddPrescribed<T, M>{raw(S.constrained), raw(S.free), raw(S.proj), raw(z), raw(dv)});
   }
   void assign_prescribed(Vec& dv) const {
     fill(dv, T(0));
@@ -265,8 +315,8 @@ struct DevicePcgOps {
 
 }  // namespace
 
-template <class T>
-void DevicePcg<T>::analyze(Index n) {
+template <class T, class M>
+void DevicePcg<T, M>::analyze(Index n) {
   n_ = n;
   const std::size_t N = 3 * static_cast<std::size_t>(n);
   pinv_.assign(9 * static_cast<std::size_t>(n), T(0));
@@ -276,15 +326,15 @@ void DevicePcg<T>::analyze(Index n) {
   s_.assign(N, T(0));
 }
 
-template <class T>
-bool DevicePcg<T>::factorize(const DeviceBsr<T>& A, const DeviceFilter<T>& S, SolveReport& report) {
+template <class T, class M>
+bool DevicePcg<T, M>::factorize(const DeviceBsr<M>& A, const DeviceFilter<M>& S, SolveReport& report) {
   const auto t0 = Clock::now();
   if (A.n != n_) analyze(A.n);
   const int kind = opt_.preconditioner == PcgOptions::Preconditioner::None     ? 0
                    : opt_.preconditioner == PcgOptions::Preconditioner::Jacobi ? 1
                                                                                : 2;
   const int bad = reduce_sum<int>(
-      n_, Preconditioner<T>{raw(A.diag), raw(A.values), raw(S.free), raw(S.proj), kind, raw(pinv_)});
+      n_, Preconditioner<T, M>{raw(A.diag), raw(A.values), raw(S.free), raw(S.proj), kind, raw(pinv_)});
   report.factorize_seconds = seconds_since(t0);
   if (bad > 0) {
     report.converged = false;
@@ -298,13 +348,13 @@ bool DevicePcg<T>::factorize(const DeviceBsr<T>& A, const DeviceFilter<T>& S, So
   return true;
 }
 
-template <class T>
-SolveReport DevicePcg<T>::solve(const DeviceBsr<T>& A, const DeviceFilter<T>& S, const DVec<T>& b, const DVec<T>& z,
-                                DVec<T>& dv) {
+template <class T, class M>
+SolveReport DevicePcg<T, M>::solve(const DeviceBsr<M>& A, const DeviceFilter<M>& S, const DVec<T>& b,
+                                   const DVec<T>& z, DVec<T>& dv) {
   const auto t0 = Clock::now();
   if (A.n != n_) analyze(A.n);
-  DevicePcgOps<T> ops{A, S, b, z, pinv_, n_};
-  static_assert(pcg::FilteredPcgOps<DevicePcgOps<T>>);
+  DevicePcgOps<T, M> ops{A, S, b, z, pinv_, n_};
+  static_assert(pcg::FilteredPcgOps<DevicePcgOps<T, M>>);
   pcg::Settings set;
   set.tolerance = std::min(0.5, opt_.tolerance * tolerance_scale_);  // as the CPU filtered_pcg
   set.max_iterations = opt_.max_iterations;
@@ -316,6 +366,7 @@ SolveReport DevicePcg<T>::solve(const DeviceBsr<T>& A, const DeviceFilter<T>& S,
 
 template class DevicePcg<double>;
 template class DevicePcg<float>;
+template class DevicePcg<double, float>;
 template struct DeviceFilter<double>;
 template struct DeviceFilter<float>;
 

@@ -5,6 +5,11 @@
 // P_i = S_i M_i^-1 S_i with M_i the (projected) block diagonal (block_jacobi, default), the
 // diagonal (jacobi) or I (none), as on the CPU. Stopping rule: the true relative residual
 // |S(b - A dv)| <= tolerance |S(b - A z)| (loom/filtered_pcg.hpp).
+//
+// Mixed precision: DevicePcg<T, M> keeps the matrix and the filter in M and the vectors, the
+// preconditioner and every reduction in T. The device baraff_witkin with `precision: float`
+// solves with DevicePcg<double, float>: CG in double on the float system, so it reaches the
+// tolerance that float vectors cannot (their rounding floor; docs/plugins/cuda.md).
 #pragma once
 
 #include <string>
@@ -45,7 +50,9 @@ struct DeviceFilter {
   void rebuild_constrained();
 };
 
-template <class T>
+/// T: vectors, preconditioner, reductions; M: the matrix A and the filter S (M = T, or T =
+/// double with M = float: the SpMV then reads float blocks into double sums, one thread per row).
+template <class T, class M = T>
 class DevicePcg {
  public:
   explicit DevicePcg(PcgOptions o = {}) : opt_(o) {}
@@ -54,9 +61,9 @@ class DevicePcg {
   void analyze(Index n);
   /// Build the filtered preconditioner S_i M_i^-1 S_i from A's diagonal blocks; false (with a
   /// message) when a diagonal (block) is not positive definite.
-  bool factorize(const DeviceBsr<T>& A, const DeviceFilter<T>& S, SolveReport& report);
+  bool factorize(const DeviceBsr<M>& A, const DeviceFilter<M>& S, SolveReport& report);
   /// Solve on range(S) with (I - S) dv = z; dv holds the warm start on entry.
-  SolveReport solve(const DeviceBsr<T>& A, const DeviceFilter<T>& S, const DVec<T>& b, const DVec<T>& z,
+  SolveReport solve(const DeviceBsr<M>& A, const DeviceFilter<M>& S, const DVec<T>& b, const DVec<T>& z,
                     DVec<T>& dv);
   /// Prefix of the messages (the plugin's name).
   void set_name(std::string name) { name_ = std::move(name); }
