@@ -434,16 +434,20 @@ static void self_friction_correction_settles_on_coupled_pairs(bool h_pinned = fa
   impulse(S, pS);
   impulse(H, pH);
   EXPECT_NEAR(pS[1], m * g * h, 1e-6 * J) << "S's weight: the spring and stop_approach";
-  if (!h_pinned) EXPECT_NEAR(pH[1], m * g * h, 1e-6 * J) << "H's weight: the spring and stop_approach";
+  if (!h_pinned) {
+    EXPECT_NEAR(pH[1], m * g * h, 1e-6 * J) << "H's weight: the spring and stop_approach";
+  }
   const double vS = (m * v0 - mu * J) / (m + 2 * h * h * k);
   ASSERT_LE(h * h * k * vS / std::sqrt(2.0), mu * J) << "H is held (the analysis above)";
   // Lone S: its first damper exact (the bound to rounding and the solve's tolerance).
   const double tolS = (h_pinned ? 1e-6 : loom::kernels::kCoulombTolerance) * mu * J;
-  if (h_pinned)  // S's slip without friction: m v0 / (m + 2 h^2 k); the mass alone would hold it
+  if (h_pinned) {  // S's slip without friction: m v0 / (m + 2 h^2 k); the mass alone would hold it
     ASSERT_LE(m * m * v0 / (m + 2 * h * h * k), mu * J) << "the analysis above";
+  }
   EXPECT_NEAR(std::hypot(pS[0], pS[2]), mu * J, tolS) << "S slides with the kinetic bound";
-  if (!h_pinned)
+  if (!h_pinned) {
     EXPECT_LE(std::hypot(pH[0], pH[2]), mu * J * (1 + loom::kernels::kCoulombTolerance)) << "H within the bound";
+  }
   for (int c : {0, 2}) EXPECT_NEAR(s.v[3 * S + c], vS * d[c], tolS / m) << c;
   EXPECT_NEAR(std::hypot(s.v[3 * H], s.v[3 * H + 2]), 0.0, 1e-6 * vS) << "H held";
   if (verbose())

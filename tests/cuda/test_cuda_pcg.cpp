@@ -43,6 +43,14 @@ ts::System system_with_contacts() {
   return s;
 }
 
+/// The matrix and the filter of s on the device, rounded to T.
+template <class T>
+void upload_system(const ts::System& s, lc::DeviceBsr<T>& A, lc::DeviceFilter<T>& S) {
+  A.set_pattern(s.A.pattern());
+  lc::upload(s.A.values(), A.values);
+  S.upload(s.S);
+}
+
 struct PcgRun {
   SolveReport rep;
   std::vector<double> dv;
@@ -176,10 +184,8 @@ TEST(DeviceFilteredPcg, SameDefaultsAndStoppingRuleAsTheCpu) {
 TEST(DeviceFilteredPcg, MixedPrecisionIsDoubleCgOnTheRoundedSystem) {
   const ts::System s = system_with_contacts();
   lc::DeviceBsr<float> A32;
-  A32.set_pattern(s.A.pattern());
-  lc::upload(s.A.values(), A32.values);
   lc::DeviceFilter<float> S32;
-  S32.upload(s.S);
+  upload_system(s, A32, S32);
   // The reference: the rounded values in double.
   std::vector<double> rounded(s.A.values().begin(), s.A.values().end());
   for (double& v : rounded) v = static_cast<double>(static_cast<float>(v));
@@ -260,10 +266,8 @@ TEST(DeviceFilteredPcg, DeprecatedNamesStillWork) {
 TEST(DeviceFilteredPcg, FloatRoundingFloorIsReportedWithTheFix) {
   const ts::System s = system_with_contacts();
   lc::DeviceBsr<float> A;
-  A.set_pattern(s.A.pattern());
-  lc::upload(s.A.values(), A.values);
   lc::DeviceFilter<float> S;
-  S.upload(s.S);
+  upload_system(s, A, S);
   lc::DVec<float> b, z, dv;
   lc::upload(s.b, b);
   lc::upload(s.z, z);

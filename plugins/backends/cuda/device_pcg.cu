@@ -236,8 +236,8 @@ struct FilteredDot {  // q_i <- S_i q_i; returns c_i . q_i
   }
 };
 
-// y_i = sum_k B_k x_col(k) for block row i, with the blocks in M and x, y and the sums in T: the
-// SpMV of the mixed-precision PCG (kernels::bsr_row_multiply's order of operations).
+// Block row i of y = A x with the blocks in M and x, y and the sums in T (the SpMV of the
+// mixed-precision PCG).
 template <class T, class M>
 struct MixedSpmvRow {
   const Index* row_ptr;
@@ -245,20 +245,7 @@ struct MixedSpmvRow {
   const M* values;
   const T* x;
   T* y;
-  LOOM_HD void operator()(Index i) const {
-    T y0 = T(0), y1 = T(0), y2 = T(0);
-    for (Index k = row_ptr[i]; k < row_ptr[i + 1]; ++k) {
-      const M* B = values + 9LL * k;
-      const T* xj = x + 3LL * col[k];
-      const T x0 = xj[0], x1 = xj[1], x2 = xj[2];
-      y0 += T(B[0]) * x0 + T(B[1]) * x1 + T(B[2]) * x2;
-      y1 += T(B[3]) * x0 + T(B[4]) * x1 + T(B[5]) * x2;
-      y2 += T(B[6]) * x0 + T(B[7]) * x1 + T(B[8]) * x2;
-    }
-    y[3LL * i] = y0;
-    y[3LL * i + 1] = y1;
-    y[3LL * i + 2] = y2;
-  }
+  LOOM_HD void operator()(Index i) const { kernels::bsr_row_multiply(row_ptr, col, values, x, i, y + 3LL * i); }
 };
 
 // out = A x: cuSPARSE (through the seam) when the matrix and the vectors share a type, else the

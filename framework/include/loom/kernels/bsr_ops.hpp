@@ -106,12 +106,14 @@ LOOM_HD inline T dot3(const T* a, const T* b) {
 }
 
 /// y_i = sum_k A_ik x_col(k) over block row i of a BSR matrix (row_ptr, col, 9-value blocks).
-template <class T, class I>
-LOOM_HD inline void bsr_row_multiply(const I* row_ptr, const I* col, const T* values, const T* x,
+/// The blocks may be stored in another type V than the vectors and the sums (T): the CUDA
+/// backend's mixed-precision PCG reads float blocks into double sums.
+template <class T, class I, class V = T>
+LOOM_HD inline void bsr_row_multiply(const I* row_ptr, const I* col, const V* values, const T* x,
                                      I i, T* yi) {
   T y0 = T(0), y1 = T(0), y2 = T(0);
   for (I k = row_ptr[i]; k < row_ptr[i + 1]; ++k) {
-    const T* B = values + 9 * static_cast<long long>(k);
+    const V* B = values + 9 * static_cast<long long>(k);
     const T* xj = x + 3 * static_cast<long long>(col[k]);
     const T x0 = xj[0], x1 = xj[1], x2 = xj[2];
     y0 += B[0] * x0 + B[1] * x1 + B[2] * x2;
