@@ -10,6 +10,8 @@
 #include <system_error>
 #include <fstream>
 #include <map>
+#include <utility>
+#include <vector>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -21,7 +23,22 @@ struct Doc {
   YAML::Node root;
   std::string source;
   std::map<std::string, std::set<std::string>> asked;  // path -> keys asked for
+  /// Values set by set_path (`--set`), in order: the dotted path and "key=value" as given. A
+  /// node at or below such a path came from the command line, not from a line of the file.
+  std::vector<std::pair<std::string, std::string>> overrides;
 };
+
+/// The `--set key=value` that put the node at `path` there (the latest one that covers it), or
+/// nullptr when the node comes from the file.
+const std::string* override_for(const Doc& doc, const std::string& path) {
+  for (auto it = doc.overrides.rbegin(); it != doc.overrides.rend(); ++it) {
+    const std::string& k = it->first;
+    if (path.size() >= k.size() && path.compare(0, k.size(), k) == 0 &&
+        (path.size() == k.size() || path[k.size()] == '.' || path[k.size()] == '['))
+      return &it->second;
+  }
+  return nullptr;
+}
 }  // namespace
 
 struct Params::Impl {
@@ -217,6 +234,7 @@ std::vector<std::string> Params::keys() const {
 std::size_t Params::size() const { return is_sequence() ? impl_->node.size() : 0; }
 
 std::string Params::where() const {
+  if (const std::string* o = override_for(*impl_->doc, impl_->path)) return "--set " + *o;
   const std::string& src = impl_->doc->source.empty() ? std::string("<params>") : impl_->doc->source;
   if (impl_->line > 0) return src + ":" + std::to_string(impl_->line);
   return src;
@@ -398,10 +416,13 @@ void Params::check_unused(const std::vector<std::string>& also_known) const {
     if (it->second.IsNull()) continue;  // `key: null` (or --set key=null) removes a key
     const int key_line = line_of(it->first, impl_->line);
     const std::string& key_src = impl_->doc->source.empty() ? std::string("<params>") : impl_->doc->source;
+    // Where the key was written: the file's line, or the --set that added it.
+    const std::string* set_by = override_for(*impl_->doc, join_path(impl_->path, k));
+    const std::string key_where = set_by ? "--set " + *set_by : key_src + ":" + std::to_string(key_line);
     if (const ParamDecl* d = impl_->spec ? impl_->spec->find(k) : nullptr; d && !d->backends.empty()) {
       std::string list;
       for (const auto& b : d->backends) list += (list.empty() ? "" : ", ") + b;
-      throw InputError(key_src + ":" + std::to_string(key_line) + ": key '" + k + "'" +
+      throw InputError(key_where + ": key '" + k + "'" +
                        (impl_->path.empty() ? "" : " in '" + impl_->path + "'") + " is honoured only by the " + list +
                        " backend of '" + impl_->spec->name() + "'. Fix: remove it, or set backend: " +
                        d->backends.front() + ".");
@@ -417,9 +438,7 @@ void Params::check_unused(const std::vector<std::string>& also_known) const {
       for (std::size_t i = 0; i < known.size(); ++i) msg += (i ? ", " : "") + known[i];
     }
     msg += ".";
-    const int line = line_of(it->first, impl_->line);
-    const std::string& src = impl_->doc->source.empty() ? std::string("<params>") : impl_->doc->source;
-    throw InputError(src + ":" + std::to_string(line) + ": " + msg);
+    throw InputError(key_where + ": " + msg);
   }
 }
 
@@ -470,6 +489,7 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
   }
   YAML::Node last = chain.back();
   last[parts.back()] = value;
+  impl_->doc->overrides.emplace_back(join_path(impl_->path, dotted_key), dotted_key + "=" + value_yaml);
 }
 
 std::string Params::dump(bool flow) const {

@@ -90,6 +90,38 @@ TEST(Params, SetPathOverridesAndCreates) {
   EXPECT_NE(error_of([&] { p.set_path("a..b", "1"); }).find("empty component"), std::string::npos);
 }
 
+// A bad value or key given with --set is named by the --set that gave it, not by a line of the
+// file (the node has no line there; it used to read "scene.yaml:1"). Keys of the file keep
+// their file:line, also next to an override.
+TEST(Params, ErrorsFromSetNameTheSetNotALineOfTheFile) {
+  Params p = Params::from_string("# a comment\nintegrator:\n  dt: 0.001\n  substeps: x\n", "scene.yaml");
+  p.set_path("integrator.dt", "abc");
+  p.set_path("material", "{type: mass_spring, densty: 2}");
+  const std::string e = error_of([&] { p.child("integrator").get("dt", 0.1); });
+  EXPECT_EQ(e.rfind("--set integrator.dt=abc: ", 0), 0u) << e;
+  EXPECT_NE(e.find("expected a number"), std::string::npos) << e;
+  EXPECT_EQ(e.find("scene.yaml"), std::string::npos) << e;
+  // A key of the file beside the override keeps its line.
+  const std::string e2 = error_of([&] { p.child("integrator").get("substeps", 1); });
+  EXPECT_EQ(e2.rfind("scene.yaml:4: ", 0), 0u) << e2;
+  // A key inside a section that --set gave: that --set, for its values and its unknown keys.
+  Params mat = p.child("material");
+  mat.get("type", std::string());
+  const std::string e3 = error_of([&] { mat.check_unused(); });
+  EXPECT_EQ(e3.rfind("--set material={type: mass_spring, densty: 2}: unknown key 'densty'", 0), 0u) << e3;
+  // A later --set of the same key is the one named.
+  p.set_path("integrator.dt", "[1]");
+  const std::string e4 = error_of([&] { p.child("integrator").get("dt", 0.1); });
+  EXPECT_EQ(e4.rfind("--set integrator.dt=[1]: ", 0), 0u) << e4;
+  // An unknown key added by --set next to the file's keys.
+  p.set_path("integrator.dtt", "0.1");
+  Params integ = p.child("integrator");
+  integ.child("dt");
+  integ.child("substeps");
+  const std::string e5 = error_of([&] { integ.check_unused(); });
+  EXPECT_EQ(e5.rfind("--set integrator.dtt=0.1: unknown key 'dtt'", 0), 0u) << e5;
+}
+
 TEST(Params, ClosestMatch) {
   EXPECT_EQ(loom::closest_match("mas_spring", {"mass_spring", "gnatv"}), "mass_spring");
   EXPECT_EQ(loom::closest_match("zzzzzz", {"mass_spring", "gnatv"}), "");
