@@ -471,25 +471,70 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
     parts.push_back(part);
   }
   // Navigate with non-const access, creating maps on the way. yaml-cpp nodes are handles,
-  // so we keep a chain of handles and assign into the last one.
+  // so we keep a chain of handles and assign into the last one. A component that meets a list
+  // is an entry's index, from 0 (colliders.0.radius). ppath: the reached node's path as Params
+  // names it (colliders[0].radius), for the errors that name this --set later.
+  const std::string set_text = "--set " + dotted_key + "=" + value_yaml;
+  std::string ppath = impl_->path;
+  const auto prefix = [&](std::size_t n) {  // the first n components, dotted
+    std::string t;
+    for (std::size_t k = 0; k < n; ++k) t += (k ? "." : "") + parts[k];
+    return t;
+  };
+  const auto entry = [&](const YAML::Node& list, std::size_t i) -> std::size_t {
+    const std::string& c = parts[i];
+    const std::string where = i == 0 ? std::string("the scene") : "'" + prefix(i) + "'";
+    if (c.empty() || c.size() > 9 || c.find_first_not_of("0123456789") != std::string::npos)
+    {
+      std::string rest;  // the components after this one
+      for (std::size_t k = i + 1; k < parts.size(); ++k) rest += "." + parts[k];
+      throw InputError(set_text + ": " + where + " is a list, so '" + c + "' must be the index of one of its " +
+                       std::to_string(list.size()) + " entries, from 0. Fix: e.g. --set " + prefix(i) + ".0" + rest +
+                       "=" + value_yaml + ", or set the whole list.");
+    }
+    const std::size_t k = static_cast<std::size_t>(std::stoul(c));
+    if (k >= list.size())
+      throw InputError(set_text + ": " + where + " has " + std::to_string(list.size()) + " entr" +
+                       (list.size() == 1 ? "y" : "ies") + " (indices from 0), so there is no entry " + c +
+                       ". Fix: use an index below " + std::to_string(list.size()) + ", or set the whole list.");
+    return k;
+  };
   std::vector<YAML::Node> chain{impl_->node};
   for (std::size_t i = 0; i + 1 < parts.size(); ++i) {
     YAML::Node cur = chain.back();
-    if (!cur.IsMap() && !cur.IsNull() && cur.IsDefined())
-      throw InputError("--set " + dotted_key + ": '" + parts[i] + "' is inside a value that is not a mapping.");
-    YAML::Node next = cur[parts[i]];
-    if (!next.IsDefined() || next.IsNull()) {
-      cur[parts[i]] = YAML::Node(YAML::NodeType::Map);
+    YAML::Node next;
+    if (cur.IsSequence()) {
+      const std::size_t k = entry(cur, i);
+      next = cur[k];
+      ppath += "[" + std::to_string(k) + "]";
+    } else {
+      if (!cur.IsMap() && !cur.IsNull() && cur.IsDefined())
+        throw InputError("--set " + dotted_key + ": '" + parts[i] + "' is inside a value that is not a mapping.");
       next = cur[parts[i]];
-    } else if (!next.IsMap()) {
-      throw InputError("--set " + dotted_key + ": '" + parts[i] + "' is a " +
-                       (next.IsSequence() ? "list" : "value") + ", not a section; cannot set a key inside it.");
+      if (!next.IsDefined() || next.IsNull()) {
+        cur[parts[i]] = YAML::Node(YAML::NodeType::Map);
+        next = cur[parts[i]];
+      }
+      ppath = join_path(ppath, parts[i]);
     }
+    if (!next.IsMap() && !next.IsSequence())
+      throw InputError("--set " + dotted_key + ": '" + prefix(i + 1) +
+                       "' is a value, not a section or a list; cannot set a key inside it.");
     chain.push_back(next);
   }
   YAML::Node last = chain.back();
-  last[parts.back()] = value;
-  impl_->doc->overrides.emplace_back(join_path(impl_->path, dotted_key), dotted_key + "=" + value_yaml);
+  if (last.IsSequence()) {
+    const std::size_t k = entry(last, parts.size() - 1);
+    if (value.IsNull())
+      throw InputError(set_text + ": an entry of a list cannot be removed by --set. Fix: set the whole list, e.g. --set " +
+                       prefix(parts.size() - 1) + "=[...].");
+    last[k] = value;
+    ppath += "[" + std::to_string(k) + "]";
+  } else {
+    last[parts.back()] = value;
+    ppath = join_path(ppath, parts.back());
+  }
+  impl_->doc->overrides.emplace_back(ppath, dotted_key + "=" + value_yaml);
 }
 
 std::string Params::dump(bool flow) const {

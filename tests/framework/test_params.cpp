@@ -122,6 +122,37 @@ TEST(Params, ErrorsFromSetNameTheSetNotALineOfTheFile) {
   EXPECT_EQ(e5.rfind("--set integrator.dtt=0.1: unknown key 'dtt'", 0), 0u) << e5;
 }
 
+// --set reaches into lists by index (colliders.0.radius): the entry of a list, a scalar of a
+// list, with errors naming that --set and the entry's path; an index out of range, a component
+// that is not an index, and removing an entry are refused with the fix.
+TEST(Params, SetPathIndexesLists) {
+  Params p = Params::from_string(
+      "gravity: [0, -9.81, 0]\ncolliders:\n  - {type: sphere, radius: 0.3, motion: {type: rotate, angular_velocity: 2}}\n",
+      "scene.yaml");
+  p.set_path("colliders.0.motion.angular_velocity", "8");
+  p.set_path("colliders.0.friction", "{static: 0.5}");
+  p.set_path("gravity.1", "-3");
+  const Params c0 = p.child("colliders").at(0);
+  EXPECT_DOUBLE_EQ(c0.child("motion").get("angular_velocity", 0.0), 8.0);
+  EXPECT_DOUBLE_EQ(c0.child("friction").get("static", 0.0), 0.5);
+  EXPECT_DOUBLE_EQ(c0.get("radius", 0.0), 0.3);   // the rest of the entry is kept
+  EXPECT_EQ(p.child("gravity").as_doubles(), (std::vector<double>{0, -3, 0}));
+  p.set_path("colliders.0.radius", "abc");
+  const std::string e = error_of([&] { p.child("colliders").at(0).get("radius", 1.0); });
+  EXPECT_EQ(e.rfind("--set colliders.0.radius=abc: colliders[0].radius: expected a number", 0), 0u) << e;
+  const std::string e2 = error_of([&] { p.set_path("colliders.1.radius", "1"); });
+  EXPECT_NE(e2.find("'colliders' has 1 entry (indices from 0), so there is no entry 1"), std::string::npos) << e2;
+  const std::string e3 = error_of([&] { p.set_path("colliders.ball.radius", "1"); });
+  EXPECT_NE(e3.find("must be the index of one of its 1 entries"), std::string::npos) << e3;
+  EXPECT_NE(e3.find("--set colliders.0.radius=1"), std::string::npos) << e3;
+  const std::string e4 = error_of([&] { p.set_path("colliders.0", "null"); });
+  EXPECT_NE(e4.find("cannot be removed"), std::string::npos) << e4;
+  const std::string e5 = error_of([&] { p.set_path("colliders.0.radius.x", "1"); });
+  EXPECT_NE(e5.find("'colliders.0.radius' is a value"), std::string::npos) << e5;
+  const std::string e6 = error_of([&] { p.set_path("gravity.3", "1"); });
+  EXPECT_NE(e6.find("'gravity' has 3 entries"), std::string::npos) << e6;
+}
+
 TEST(Params, ClosestMatch) {
   EXPECT_EQ(loom::closest_match("mas_spring", {"mass_spring", "gnatv"}), "mass_spring");
   EXPECT_EQ(loom::closest_match("zzzzzz", {"mass_spring", "gnatv"}), "");
