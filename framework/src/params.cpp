@@ -500,6 +500,7 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
     return k;
   };
   std::vector<YAML::Node> chain{impl_->node};
+  std::string created;  // the path of the first section this --set had to create, if any
   for (std::size_t i = 0; i + 1 < parts.size(); ++i) {
     YAML::Node cur = chain.back();
     YAML::Node next;
@@ -511,11 +512,12 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
       if (!cur.IsMap() && !cur.IsNull() && cur.IsDefined())
         throw InputError("--set " + dotted_key + ": '" + parts[i] + "' is inside a value that is not a mapping.");
       next = cur[parts[i]];
+      ppath = join_path(ppath, parts[i]);
       if (!next.IsDefined() || next.IsNull()) {
         cur[parts[i]] = YAML::Node(YAML::NodeType::Map);
         next = cur[parts[i]];
+        if (created.empty()) created = ppath;   // this --set made the section: errors in it name the --set
       }
-      ppath = join_path(ppath, parts[i]);
     }
     if (!next.IsMap() && !next.IsSequence())
       throw InputError("--set " + dotted_key + ": '" + prefix(i + 1) +
@@ -534,7 +536,7 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
     last[parts.back()] = value;
     ppath = join_path(ppath, parts.back());
   }
-  impl_->doc->overrides.emplace_back(ppath, dotted_key + "=" + value_yaml);
+  impl_->doc->overrides.emplace_back(created.empty() ? ppath : created, dotted_key + "=" + value_yaml);
 }
 
 std::string Params::dump(bool flow) const {

@@ -151,6 +151,10 @@ TEST(Params, SetPathIndexesLists) {
   EXPECT_NE(e5.find("'colliders.0.radius' is a value"), std::string::npos) << e5;
   const std::string e6 = error_of([&] { p.set_path("gravity.3", "1"); });
   EXPECT_NE(e6.find("'gravity' has 3 entries"), std::string::npos) << e6;
+  // A section that --set had to create is that --set's, also where it is read as a whole.
+  p.set_path("pins.0.motion", "{type: translate}");
+  const std::string e7 = error_of([&] { p.child("pins").fail("must be a list"); });
+  EXPECT_EQ(e7.rfind("--set pins.0.motion={type: translate}: pins: must be a list", 0), 0u) << e7;
 }
 
 TEST(Params, ClosestMatch) {
