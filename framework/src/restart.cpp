@@ -69,7 +69,7 @@ RestartData read_restart(const std::string& dir) {
   std::ifstream in(path, std::ios::binary);
   if (!in)
     throw InputError(path + ": no restart point. Fix: --resume needs the folder of a run made by this Loom version "
-                     "(it writes restart.bin after every frame); start the run again without --resume.");
+                     "with output.restart on (it writes restart.bin from frame 0 on); start the run again without --resume.");
   const std::string s((std::istreambuf_iterator<char>(in)), {});
   std::size_t pos = 0;
   auto damaged = [&](const std::string& why) {

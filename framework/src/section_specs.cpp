@@ -73,7 +73,9 @@ const ParamFields<OutputOptions>& output_section_fields() {
     f.flag("lossless", &O::lossless).framework().help("OBJ coordinates in full double precision");
     f.flag("vtk", &O::vtk).framework().help("ParaView frames (frame_NNNNN.vtu) and run.pvd");
     f.flag("velocities", &O::velocities).framework().help("per-vertex velocities in the .vtu frames / velocity.pc2");
-    f.flag("restart", &O::restart).framework().help("restart.bin after every frame (loom run --resume)");
+    f.flag("restart", &O::restart).framework().help("restart.bin, the last complete frame's state (loom run --resume)");
+    f.number("restart_interval", &O::restart_interval).range(ParamRange::closed(0, 1e9)).units("s").framework().help(
+        "wall time between restart.bin writes (always after frame 0, the last frame and an early stop); 0: every frame");
     return f;
   }();
   return fields;

@@ -400,6 +400,14 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     vtk.emplace(output_.dir, scene_->mesh, output_.uvs);
     if (resuming) vtk->adopt_existing(first_frame);
   }
+  RestartData pending;                 // the last complete frame's restart point
+  bool pending_unwritten = false;      // ... not yet in restart.bin
+  auto last_restart_write = Clock::now();
+  auto write_pending = [&] {
+    write_restart(output_.dir, pending);
+    pending_unwritten = false;
+    last_restart_write = Clock::now();
+  };
   auto emit = [&](int frame) {
     if (!write) return;
     integrator_->sync_to_host(*scene_);  // (check_state(true) has done it after a frame; a no-op then)
@@ -463,31 +471,51 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       }
       stats_complete = stats.tellp();
     }
-    // Last: the restart point of this frame, once everything before it is on disk.
+    // Last: the restart point of this frame, once everything before it is on disk. It is kept
+    // in memory and written when restart_interval has passed since the last write (creating and
+    // renaming a file per frame cost a short run up to half its time), after frame 0 and the
+    // last frame, and when the run stops early (below).
     if (output_.restart) {
-      RestartData r;
-      r.frame = frame;
-      r.frames = frames_;
-      r.step = scene_->state.step;
-      r.time = scene_->state.time;
-      r.force_evaluations = force_evals_;
-      r.linear_iterations = linear_iters_;
-      r.x = scene_->state.x;
-      r.v = scene_->state.v;
-      r.integrator_state = integrator_->restart_state();
-      write_restart(output_.dir, r);
+      pending.frame = frame;
+      pending.frames = frames_;
+      pending.step = scene_->state.step;
+      pending.time = scene_->state.time;
+      pending.force_evaluations = force_evals_;
+      pending.linear_iterations = linear_iters_;
+      pending.x = scene_->state.x;
+      pending.v = scene_->state.v;
+      pending.integrator_state = integrator_->restart_state();
+      pending_unwritten = true;
+      if (frame == first_frame || frame == frames_ || seconds_since(last_restart_write) >= output_.restart_interval)
+        write_pending();
     }
   };
   if (write && !resuming) write_file_atomic((fs::path(output_.dir) / "scene.yaml").string(), scene_text);
   if (!resuming) emit(0);
   // `threads: auto` probes only while the steps left can repay a probe (loom/thread_controller.hpp)
   if (thread_ctl_) thread_ctl_->set_run_steps(thread_ctl_->steps() + static_cast<long>(frames_ - first_frame) * substeps_);
-  for (int f = first_frame + 1; f <= frames_; ++f) {
-    step_seconds_ = 0;
-    steps_in_frame_ = 0;
-    advance_frame();
-    emit(f);
-    if (progress) progress(f, frames_);
+  try {
+    for (int f = first_frame + 1; f <= frames_; ++f) {
+      step_seconds_ = 0;
+      steps_in_frame_ = 0;
+      advance_frame();
+      emit(f);
+      if (progress) progress(f, frames_);
+    }
+  } catch (const OutputError&) {
+    throw;  // the disk refused a write: do not try another
+  } catch (...) {
+    // Stopped early (Ctrl-C, divergence, a failed solve, ...): the last complete frame's
+    // restart point goes to disk, so that --resume continues from it.
+    if (pending_unwritten) {
+      try {
+        write_pending();
+      } catch (const std::exception&) {
+        // The disk refused it: the older restart point stays, and the run's own error is the
+        // one to report.
+      }
+    }
+    throw;
   }
 }
 

@@ -208,7 +208,9 @@ TEST(ParaView, SeriesReadsBackWithAnIndependentParser) {
     const auto& sv = v.arrays.at("strain");
     ASSERT_EQ(sv.size(), 30u);
     for (int i = 0; i < 30; ++i) EXPECT_NEAR(sv[i], strain[i], 1e-12);
-    if (k > 0) EXPECT_GT(*std::max_element(sv.begin(), sv.end()), 0.0);  // pinned row vs falling rows
+    if (k > 0) {
+      EXPECT_GT(*std::max_element(sv.begin(), sv.end()), 0.0);  // pinned row vs falling rows
+    }
   }
 }
 
@@ -240,7 +242,9 @@ TEST(ParaView, ContactFieldIsTheGapToTheColliders) {
     for (int i = 0; i < 30; ++i) {
       EXPECT_NEAR(gap[i], x[3 * i + 1] - surface, 1e-12) << "frame " << k << " vertex " << i;
       EXPECT_EQ(contact[i], gap[i] <= 1e-6 ? 1.0 : 0.0) << "frame " << k << " vertex " << i;
-      if (k == 0) EXPECT_EQ(contact[i], 0.0) << i;
+      if (k == 0) {
+        EXPECT_EQ(contact[i], 0.0) << i;
+      }
       if (k == 4 && contact[i] == 1.0) ++touching_last;
     }
   }
@@ -430,6 +434,55 @@ TEST(Resume, AfterCtrlCOrKillNineMatchesAnUninterruptedRun) {
     expect_same_run(whole, stopped);
     for (const auto& e : fs::directory_iterator(stopped))
       EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos) << e.path();
+  }
+}
+
+// The frame of a run folder's restart.bin (int32 after the 8-byte tag, docs/OUTPUT.md).
+int restart_frame(const fs::path& dir) {
+  const std::string b = slurp(dir / "restart.bin");
+  if (b.size() < 12 || b.compare(0, 8, "LOOMRST1") != 0) return -1;
+  std::int32_t f;
+  std::memcpy(&f, b.data() + 8, 4);
+  return f;
+}
+
+// The rows of a run folder's stats.csv, frame 0 included (the last complete frame is rows - 1).
+int stats_rows(const fs::path& dir) {
+  std::ifstream st(dir / "stats.csv");
+  int rows = -1;  // the header
+  for (std::string line; std::getline(st, line);) rows += !line.empty();
+  return rows;
+}
+
+// restart.bin is written after frame 0, then at most once per restart_interval of wall time,
+// after the last frame and when a run stops early. With an interval no run here reaches: a
+// finished run's restart point is its last frame; Ctrl-C writes the last complete frame's
+// (kept in memory); kill -9 leaves frame 0's, and --resume from it still matches an
+// uninterrupted run (the frames and rows after it are cut and redone).
+TEST(Resume, RestartPointsAreThrottledAndWrittenAtAnEarlyStop) {
+  const auto dir = scratch("restart_interval");
+  const std::string sc = scene(dir, 12, "output: {restart_interval: 1000, lossless: true}\n");
+  ASSERT_EQ(run("run " + sc + " --quiet --out " + (dir / "done").string()).code, 0);
+  EXPECT_EQ(restart_frame(dir / "done"), 12);
+  const std::string sc_long = scene(dir, 1000000, "output: {restart_interval: 1000, lossless: true}\n");
+  for (int sig : {SIGINT, SIGKILL}) {
+    const fs::path stopped = dir / (sig == SIGINT ? "sigint" : "sigkill"), whole = dir / "whole";
+    run_and_stop({"run", sc_long, "--quiet", "--out", stopped.string()}, stopped, 30, sig, true);
+    const int rows = stats_rows(stopped);
+    ASSERT_GE(rows, 30);
+    if (sig == SIGINT) {
+      EXPECT_EQ(restart_frame(stopped), rows - 1) << "Ctrl-C keeps the last complete frame";
+    } else {
+      EXPECT_EQ(restart_frame(stopped), 0) << "nothing after frame 0 within the interval";
+    }
+    const int target = rows + 5;
+    Result r = run("run --resume " + stopped.string() + " --quiet --frames " + std::to_string(target));
+    ASSERT_EQ(r.code, 0) << r.out;
+    fs::remove_all(whole);
+    r = run("run " + sc_long + " --quiet --frames " + std::to_string(target) + " --out " + whole.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    expect_same_run(whole, stopped);
+    EXPECT_EQ(restart_frame(stopped), target);
   }
 }
 

@@ -1,5 +1,7 @@
-// Restart points for `loom run --resume`: after every frame a run writes DIR/restart.bin
-// (atomically), the exact state a continuation needs.
+// Restart points for `loom run --resume`: a run writes DIR/restart.bin (atomically), the exact
+// state after a complete frame that a continuation needs: after frame 0, about once per
+// output.restart_interval of wall time, after the last frame and at an early stop
+// (Simulation::run; docs/OUTPUT.md).
 #pragma once
 
 #include <cstdint>

@@ -35,7 +35,13 @@ struct OutputOptions {
   bool lossless = false;       ///< OBJ coordinates in full double precision
   bool vtk = false;            ///< ParaView: frame_NNNNN.vtu per written frame and run.pvd (loom/vtk_output.hpp)
   bool velocities = false;     ///< per-vertex velocities: a "velocity" array in the .vtu frames, velocity.pc2
-  bool restart = true;         ///< restart.bin after every frame, for loom run --resume (loom/restart.hpp)
+  bool restart = true;         ///< restart.bin, for loom run --resume (loom/restart.hpp)
+  /// Seconds of wall time between restart.bin writes: after a frame, it is written when this much
+  /// has passed since the last write, and always after frame 0 and the run's last frame, and
+  /// when a run stops early (Ctrl-C, divergence, a failed solve; the last complete frame is kept
+  /// in memory). 0: after every frame. A killed run (kill -9, power loss) resumes from up to
+  /// this much wall time back.
+  double restart_interval = 1.0;
 };
 
 /// Thrown by Simulation::step when request_stop() was called (Ctrl-C): the frames written so
