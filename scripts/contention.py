@@ -18,7 +18,8 @@ would take hours, so the cap and --minutes keep the whole table under 8 minutes.
 
 The step cost is calibrated first with a short one-thread run (the integrator's own time per
 step from `loom run`'s summary line; the rest of the run's wall time is its start-up). Times are
-the wall-clock seconds of the whole `loom run` (start-up, steps, output).
+the wall-clock seconds of the whole `loom run` (start-up, steps, output); every setting of a
+scene writes into the same output folder (out_dir: the file system's cost depends on the folder).
 
 Method (the statistics are in scripts/contention_stats.py, tested by
 tests/scripts/test_contention_stats.py):
@@ -106,6 +107,16 @@ def run_once(loom, scene, out, frames, substeps, threads, env):
             (line.group(1) if line else None), cpu)
 
 
+def out_dir(tmp, scene):
+    """The output folder of every run of a scene, whatever its thread setting. One folder per
+    setting made the settings differ by the file system, not by threads: on ext4, creating a
+    file costs a scan of the inodes recently deleted in the folder's block group, which the
+    --overwrite runs before had left in different numbers in each folder (hanging_10x10_k2000,
+    2026-12-01: threads 1 took 62.8 ms a run in one folder and 40.8 ms in another, auto 40.1 and
+    64.7 ms in the same two folders, docs/BENCHMARKS.md)."""
+    return os.path.join(tmp, scene)
+
+
 def plan_scene(a, sc, tmp, env):
     name = os.path.splitext(os.path.basename(sc))[0]
     dt, substeps = scene_timing(sc)
@@ -161,7 +172,7 @@ class Cell:
         order = run_order(len(self.orders))
         t0 = time.perf_counter()
         for threads in order:
-            t, ms, end, line, c = run_once(a.loom, self.p["path"], os.path.join(tmp, f"{self.p['scene']}_{threads}"),
+            t, ms, end, line, c = run_once(a.loom, self.p["path"], out_dir(tmp, self.p["scene"]),
                                           self.p["frames"], self.p["substeps"], threads, env)
             self.runs[threads].append(t)
             self.cpu[threads].append(c)
@@ -218,7 +229,7 @@ def overhead(plans, a, tmp, env, cond):
     rows = []
     for p in plans:
         reps = a.repeat * (3 if p["est_one_thread"] < 0.5 else 1)
-        out = lambda th: os.path.join(tmp, f"{p['scene']}_{th}")  # noqa: E731
+        out = lambda th: out_dir(tmp, p["scene"])  # noqa: E731
         first = run_once(a.loom, p["path"], out("auto"), p["frames"], p["substeps"], "auto", env)
         fixed = str(first[2] or 1)
         pairs = {"auto": [], fixed: []}
