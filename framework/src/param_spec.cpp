@@ -411,17 +411,9 @@ void check_params(const Params& p, const ParamSpec& spec) {
   if (!p.is_map()) p.fail("expected a mapping of '" + spec.name() + "' keys, like {key: value}.");
   const ParamReader r(p, spec);
   for (const ParamDecl& d : spec.decls()) {
-    if (!r.has(d.name)) {
-      if (d.required && !d.framework) {  // a section's own required keys (type) are the framework's business
-        if (d.type == ParamType::Map || d.type == ParamType::List) r.node(d.name);
-        else if (d.type == ParamType::Number) r.number(d.name);
-        else if (d.type == ParamType::Int) r.integer(d.name);
-        else if (d.type == ParamType::Bool) r.flag(d.name);
-        else if (d.type == ParamType::Vec3) r.vec3(d.name);
-        else r.text(d.name);
-      }
-      continue;
-    }
+    // An absent key is read only when it is required (the read reports it); a section's own
+    // required keys (type) are the framework's business.
+    if (!r.has(d.name) && !(d.required && !d.framework)) continue;
     switch (d.type) {
       case ParamType::Number: r.number(d.name); break;
       case ParamType::Int: r.integer(d.name); break;

@@ -236,26 +236,14 @@ struct FilteredDot {  // q_i <- S_i q_i; returns c_i . q_i
   }
 };
 
-// Block row i of y = A x with the blocks in M and x, y and the sums in T (the SpMV of the
-// mixed-precision PCG).
-template <class T, class M>
-struct MixedSpmvRow {
-  const Index* row_ptr;
-  const Index* col;
-  const M* values;
-  const T* x;
-  T* y;
-  LOOM_HD void operator()(Index i) const { kernels::bsr_row_multiply(row_ptr, col, values, x, i, y + 3LL * i); }
-};
-
 // out = A x: cuSPARSE (through the seam) when the matrix and the vectors share a type, else the
-// mixed row product.
+// mixed row product (the SpMV of the mixed-precision PCG: float blocks, double sums).
 template <class T, class M>
 void multiply(const DeviceBsr<M>& A, const T* x, T* out) {
   if constexpr (std::is_same_v<T, M>)
     A.multiply(x, out);
   else
-    parallel_for(A.n, MixedSpmvRow<T, M>{raw(A.row_ptr), raw(A.col), raw(A.values), x, out});
+    parallel_for(A.n, kernels::BsrRowProduct<T, Index, M>{raw(A.row_ptr), raw(A.col), raw(A.values), x, out});
 }
 
 template <class T>

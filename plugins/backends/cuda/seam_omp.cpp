@@ -32,18 +32,9 @@ bool seam_device_memory(std::size_t& free_bytes, std::size_t& total_bytes, std::
 
 namespace {
 template <class T>
-struct SpmvRow {
-  const Index* rp;
-  const Index* col;
-  const T* val;
-  const T* x;
-  T* y;
-  void operator()(Index i) const { kernels::bsr_row_multiply(rp, col, val, x, i, y + 3 * static_cast<long long>(i)); }
-};
-template <class T>
 void spmv(Index nb, const Index* rp, const Index* col, const T* val, const T* x, T* y) {
   thrust::for_each(thrust::device, thrust::counting_iterator<Index>(0), thrust::counting_iterator<Index>(nb),
-                   SpmvRow<T>{rp, col, val, x, y});
+                   kernels::BsrRowProduct<T, Index>{rp, col, val, x, y});
 }
 }  // namespace
 

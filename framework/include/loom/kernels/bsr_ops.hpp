@@ -125,6 +125,18 @@ LOOM_HD inline void bsr_row_multiply(const I* row_ptr, const I* col, const V* va
   yi[2] = y2;
 }
 
+/// y = A x one block row at a time (bsr_row_multiply), as the functor of a parallel loop over the
+/// rows (Thrust's for_each, the CUDA backend's parallel_for): blocks in V, x, y and the sums in T.
+template <class T, class I, class V = T>
+struct BsrRowProduct {
+  const I* row_ptr;
+  const I* col;
+  const V* values;
+  const T* x;
+  T* y;
+  LOOM_HD void operator()(I i) const { bsr_row_multiply(row_ptr, col, values, x, i, y + 3 * static_cast<long long>(i)); }
+};
+
 /// y <- S_i y for one vertex, where free_dofs is the vertex's number of free DOF and P its
 /// projector (ignored when free_dofs is 3 or 0). Exactly zero for a fully constrained vertex.
 template <class T>
