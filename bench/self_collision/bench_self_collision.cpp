@@ -1,6 +1,7 @@
 // What self-collision costs: one step of the draped cloth (N x N mass-spring cloth, 1 m, on the
 // spinning ball of scenes/draped_ball_*.yaml) with and without self_collision, for
-// symplectic_euler and baraff_witkin at N = 64, 128, 256. The counters split the self-collision
+// symplectic_euler and baraff_witkin at N = 64, 128, 256 (baraff_witkin with filtered_pcg's
+// block Jacobi, the rows `baraff_witkin_*`, and with its sa_amg, the rows `baraff_witkin_sa_amg_*`). The counters split the self-collision
 // time per step into broad phase (the per-vertex reach check every step; refreshes of the pairs
 // of the few vertices that left their reach, or full rebuilds: refit + parallel traversal;
 // `rebuilds` is the fraction of steps whose lists changed either way, `full_rebuilds` per step,
@@ -67,12 +68,17 @@ namespace {
 constexpr double kDrapeTime = 0.35;  // s
 double se_dt(int n) { return 5.0e-5 * 127.0 / (n - 1); }
 
+// integrator "baraff_witkin_sa_amg": baraff_witkin with the multilevel preconditioner (the
+// solver a user picks for large cloth, docs/plugins/solvers.md) instead of block Jacobi.
 std::string scene(int n, const std::string& integrator, bool self) {
+  const bool sa_amg = integrator == "baraff_witkin_sa_amg";
   std::string s = "mesh: {grid: {nx: " + std::to_string(n) + ", ny: " + std::to_string(n) +
                   ", width: 1.0, height: 1.0, plane: xz}}\n" + R"(
 material: {type: mass_spring, stencil: structural_shear_bend, stiffness: {structural: 200, shear: 200, bend: 20}, density: 0.1, damping: 0.0005}
-solver: {type: eigen_pcg, eigen_pcg: {tolerance: 1.0e-5}}
-colliders: [{type: sphere, center: [0.5, -0.35, -0.5], radius: 0.3, thickness: 0.004, friction: 0.5,
+)";
+  s += sa_amg ? "solver: {type: filtered_pcg, filtered_pcg: {tolerance: 1.0e-5, preconditioner: sa_amg}}\n"
+              : "solver: {type: eigen_pcg, eigen_pcg: {tolerance: 1.0e-5}}\n";
+  s += R"(colliders: [{type: sphere, center: [0.5, -0.35, -0.5], radius: 0.3, thickness: 0.004, friction: 0.5,
              motion: {type: rotate, axis: [0, 1, 0], angular_velocity: 2.0}}]
 )";
   // symplectic_euler: dt = 5e-5 is stable at 128 (scenes/draped_ball_symplectic_euler.yaml); it scales with the edge.
@@ -870,6 +876,8 @@ BENCHMARK_CAPTURE(BM_Step, symplectic_euler_without, std::string("symplectic_eul
 BENCHMARK_CAPTURE(BM_Step, symplectic_euler_self_collision, std::string("symplectic_euler"), true)->Apply(args);
 BENCHMARK_CAPTURE(BM_Step, baraff_witkin_without, std::string("baraff_witkin"), false)->Apply(args);
 BENCHMARK_CAPTURE(BM_Step, baraff_witkin_self_collision, std::string("baraff_witkin"), true)->Apply(args);
+BENCHMARK_CAPTURE(BM_Step, baraff_witkin_sa_amg_without, std::string("baraff_witkin_sa_amg"), false)->Apply(args);
+BENCHMARK_CAPTURE(BM_Step, baraff_witkin_sa_amg_self_collision, std::string("baraff_witkin_sa_amg"), true)->Apply(args);
 
 }  // namespace
 
