@@ -1,7 +1,8 @@
 // What self-collision costs: one step of the draped cloth (N x N mass-spring cloth, 1 m, on the
 // spinning ball of scenes/draped_ball_*.yaml) with and without self_collision, for
 // symplectic_euler and baraff_witkin at N = 64, 128, 256 (baraff_witkin with filtered_pcg's
-// block Jacobi, the rows `baraff_witkin_*`, and with its sa_amg, the rows `baraff_witkin_sa_amg_*`). The counters split the self-collision
+// block Jacobi in the rows baraff_witkin_{without,self_collision}, and with its sa_amg in the
+// rows baraff_witkin_sa_amg_{without,self_collision}). The counters split the self-collision
 // time per step into broad phase (the per-vertex reach check every step; refreshes of the pairs
 // of the few vertices that left their reach, or full rebuilds: refit + parallel traversal;
 // `rebuilds` is the fraction of steps whose lists changed either way, `full_rebuilds` per step,
