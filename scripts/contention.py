@@ -229,15 +229,15 @@ def overhead(plans, a, tmp, env, cond):
     rows = []
     for p in plans:
         reps = a.repeat * (3 if p["est_one_thread"] < 0.5 else 1)
-        out = lambda th: out_dir(tmp, p["scene"])  # noqa: E731
-        first = run_once(a.loom, p["path"], out("auto"), p["frames"], p["substeps"], "auto", env)
+        out = out_dir(tmp, p["scene"])  # every setting writes into the scene's one folder
+        first = run_once(a.loom, p["path"], out, p["frames"], p["substeps"], "auto", env)
         fixed = str(first[2] or 1)
         pairs = {"auto": [], fixed: []}
         ends, lines = [], []
         for r in range(reps):
             res = {}
             for th in (("auto", fixed) if r % 2 == 0 else (fixed, "auto")):
-                res[th] = run_once(a.loom, p["path"], out(th), p["frames"], p["substeps"], th, env)
+                res[th] = run_once(a.loom, p["path"], out, p["frames"], p["substeps"], th, env)
             ends.append(res["auto"][2])
             lines.append(res["auto"][3])
             if str(res["auto"][2]) == fixed:

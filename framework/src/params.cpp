@@ -510,7 +510,7 @@ void Params::set_path(const std::string& dotted_key, const std::string& value_ya
       ppath += "[" + std::to_string(k) + "]";
     } else {
       if (!cur.IsMap() && !cur.IsNull() && cur.IsDefined())
-        throw InputError("--set " + dotted_key + ": '" + parts[i] + "' is inside a value that is not a mapping.");
+        throw InputError(set_text + ": '" + parts[i] + "' is inside a value that is not a mapping.");
       next = cur[parts[i]];
       ppath = join_path(ppath, parts[i]);
       if (!next.IsDefined() || next.IsNull()) {
