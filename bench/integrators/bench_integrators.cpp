@@ -90,6 +90,7 @@ struct Cloth {
   SpringSweep<double> sweep;          // grouped and windowed when it pays (the plugins' default)
   SpringSweep<float> fsweep;
   SpringSweep<double> sweep_plain;    // one spring at a time (build(..., false))
+  SpringSweep<double> sweep_nomerge;  // the default sweep without merging duplicate springs (twin segments)
   SpringSweep<float> fsweep_plain;
   // the grouped sweeps with blocks of 64 (the default), 128 and 256 vertices (kGroupBlocks), for
   // A/B runs of the block size
@@ -125,6 +126,8 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   c->sweep.build(sc.state.size(), *sc.material->springs());
   c->fsweep.convert_from(c->sweep);
   c->sweep_plain.build(sc.state.size(), *sc.material->springs(), false);
+  c->sweep_nomerge.merge_duplicates = false;
+  c->sweep_nomerge.build(sc.state.size(), *sc.material->springs());
   c->fsweep_plain.convert_from(c->sweep_plain);
   for (int b = 0; b < 3; ++b) {
     c->sweep_blk[b].build(sc.state.size(), *sc.material->springs(), true, kGroupBlocks[b]);
@@ -377,8 +380,10 @@ void BM_Rk4Step_float(benchmark::State& st) {
 // at a time, what the step ran before), 2: blocked (plain order, forces of 128 springs by one loop),
 // 3 + b: grouped and windowed with blocks of kGroupBlocks[b] vertices; 6: the default sweep with
 // two passes (forces, then scatter) for every segment (SpringSweep::fuse = false); 7: the default
-// sweep with each segment of a twin pair on its own (SpringSweep::twins = false); 8: the default
-// sweep with each vertex finalised on its own (SpringSweep::block_finalise = false).
+// sweep without merging duplicate springs and with each segment of a twin pair on its own
+// (SpringSweep::merge_duplicates = false, twins = false); 8: the default sweep with each vertex
+// finalised on its own (SpringSweep::block_finalise = false); 9: the sweep without merging
+// duplicate springs, their segments paired as twins (the default until 2026-12-01).
 template <class T>
 void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const Row& r = rows()[st.range(0)];
@@ -392,6 +397,7 @@ void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   const T g[3] = {T(0), T(-9.81), T(0)};
   SpringSweep<T>* sw = nullptr;
   if constexpr (std::is_same_v<T, float>) sw = kind == 0 ? &c.fsweep : &c.fsweep_plain;
+  else if (kind == 7 || kind == 9) sw = &c.sweep_nomerge;
   else sw = kind == 0 || kind >= 6 ? &c.sweep : (kind >= 3 ? &c.sweep_blk[kind - 3] : &c.sweep_plain);
   sw->blocked = kind == 2;
   sw->fuse = kind != 6;
@@ -399,6 +405,7 @@ void se_bench(benchmark::State& st, bool /*is_float*/, int kind = 0) {
   sw->block_finalise = kind != 8;
   st.counters["window"] = static_cast<double>(sw->win_cap);
   st.counters["segs"] = static_cast<double>(sw->segs.size());
+  st.counters["sweep_springs"] = static_cast<double>(sw->size());
   for (auto _ : st) se_step_springs<T>(*sw, x.data(), v.data(), w.data(), f.data(), static_cast<T>(c.h), g);
   sw->blocked = false;
   sw->fuse = true;
@@ -420,9 +427,10 @@ void BM_SeStep_double_block256(benchmark::State& st) { se_bench<double>(st, fals
 void BM_SeStep_double_unfused(benchmark::State& st) { se_bench<double>(st, false, 6); }
 void BM_SeStep_double_notwin(benchmark::State& st) { se_bench<double>(st, false, 7); }
 void BM_SeStep_double_scalarfin(benchmark::State& st) { se_bench<double>(st, false, 8); }
+void BM_SeStep_double_nomerge(benchmark::State& st) { se_bench<double>(st, false, 9); }
 
 template <class T>
-void rk4_fused_bench(benchmark::State& st, bool /*is_float*/, bool plain = false) {
+void rk4_fused_bench(benchmark::State& st, bool /*is_float*/, bool plain = false, bool nomerge = false) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -434,7 +442,7 @@ void rk4_fused_bench(benchmark::State& st, bool /*is_float*/, bool plain = false
   const std::array<T, 3> g{T(0), T(-9.81), T(0)};
   const SpringSweep<T>* sw = nullptr;
   if constexpr (std::is_same_v<T, float>) sw = plain ? &c.fsweep_plain : &c.fsweep;
-  else sw = plain ? &c.sweep_plain : &c.sweep;
+  else sw = plain ? &c.sweep_plain : (nomerge ? &c.sweep_nomerge : &c.sweep);
   for (auto _ : st)
     rk4_step_springs<T>(*sw, x.data(), v.data(), w.data(), g, static_cast<T>(c.h), xs.data(), vs.data(), f.data(),
                         ax.data(), av.data(), [](int) {});
@@ -445,6 +453,8 @@ void BM_Rk4Fused_double(benchmark::State& st) { rk4_fused_bench<double>(st, fals
 void BM_Rk4Fused_float(benchmark::State& st) { rk4_fused_bench<float>(st, true); }
 // RK4's fused stages on the plain sweep (what they ran before the grouped, windowed sweep)
 void BM_Rk4Fused_double_plain(benchmark::State& st) { rk4_fused_bench<double>(st, false, true); }
+// ... and on the default sweep without merging duplicate springs (twin segments instead)
+void BM_Rk4Fused_double_nomerge(benchmark::State& st) { rk4_fused_bench<double>(st, false, false, true); }
 
 // The Table 1 cloth with its vertices numbered in a random order (fixed seed): HO with the
 // mesh's order (reorder: none) and with the RCM order (reorder: rcm, which also copies x and v
@@ -617,9 +627,11 @@ BENCHMARK(BM_SeStep_double_block256)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_unfused)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_notwin)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_scalarfin)->Apply(rows_args);
+BENCHMARK(BM_SeStep_double_nomerge)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double_plain)->Apply(rows_args);
+BENCHMARK(BM_Rk4Fused_double_nomerge)->Apply(rows_args);
 BENCHMARK(BM_HoStep_shuffled_none)->Apply(rows_args);
 BENCHMARK(BM_HoStep_shuffled_rcm)->Apply(rows_args);
 

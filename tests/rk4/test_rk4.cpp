@@ -154,3 +154,36 @@ TEST(Rk4, FusedSpringPathMatchesGenericPath) {
     ASSERT_EQ(res[2][q], res[1][q]) << q;
   }
 }
+
+// The key merge_springs (default true): doubled springs (each duplicate with its own constants,
+// endpoints swapped) are merged for the fused path, and 40 steps equal merge_springs: false to
+// rounding.
+TEST(Rk4, MergeSpringsKeyAgreesWithEverySpring) {
+  const int nx = 52;
+  const loom::testing::TestCloth cloth = loom::testing::make_test_cloth(nx, true);
+  SpringSet s = cloth.springs;
+  const Index base = s.size();
+  Index dups = 0;
+  for (Index q = 0; q < base; q += 2) {
+    s.add(s.j[q], s.i[q], s.rest_length[q] * 0.99, 0.3 * s.stiffness[q], 0.01, s.kind[q]);
+    ++dups;
+  }
+  std::vector<double> res[2];
+  for (int merge : {0, 1}) {
+    auto scene = make_scene(cloth.x, cloth.v, cloth.m, {nx * (nx - 1), nx * nx - 1}, {0, -9.81, 0},
+                            std::make_unique<TestSpringMaterial>(s, cloth.m, true));
+    Rk4Integrator rk{merge ? Params() : Params::from_string("merge_springs: false\n")};
+    rk.prepare(*scene, 1e-4);
+    ASSERT_TRUE(rk.fused());
+    EXPECT_EQ(rk.merged_springs(), merge ? dups : 0);
+    for (int st = 0; st < 40; ++st) rk.step(*scene, 1e-4);
+    res[merge] = scene->state.x;
+    res[merge].insert(res[merge].end(), scene->state.v.begin(), scene->state.v.end());
+  }
+  double scale = 0, moved = 0;
+  for (std::size_t q = 0; q < res[0].size(); ++q) scale = std::max(scale, std::abs(res[0][q]));
+  for (std::size_t q = 0; q < cloth.x.size(); ++q) moved = std::max(moved, std::abs(res[0][q] - cloth.x[q]));
+  EXPECT_GT(moved, 1e-5);
+  for (std::size_t q = 0; q < res[0].size(); ++q) ASSERT_NEAR(res[1][q], res[0][q], 1e-12 * scale) << q;
+  EXPECT_THROW(Rk4Integrator(Params::from_string("merge_springs: 3\n")), InputError);
+}

@@ -7,9 +7,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <numeric>
 #include <random>
+#include <set>
+#include <utility>
 #include <vector>
 
 #include "loom/explicit_springs.hpp"
@@ -226,7 +230,8 @@ TEST(SymplecticEulerFused, FusedForceScatterIsBitIdentical) {
 // SpringSweep::twins on (the default) give the bits of twins off, damped and undamped, fused and
 // two-pass, on 1 and 2 threads; and the one-spring-at-a-time sweep's result to rounding. The
 // duplicates have their own constants, and there are twin pairs of every kind (unit stride with
-// disjoint and with overlapping ranges, stride 2).
+// disjoint and with overlapping ranges, stride 2). (With merge_duplicates off: by default the
+// sweep merges duplicates into one spring, next test.)
 TEST(SymplecticEulerFused, TwinSegmentsAreBitIdentical) {
   const int nx = 130;   // rows longer than a block: most blocks hold one row's segments
   for (bool damped : {false, true}) {
@@ -241,10 +246,12 @@ TEST(SymplecticEulerFused, TwinSegmentsAreBitIdentical) {
           for (int t = 0; t < 2; ++t) cl.s.add(a, a + 2, 0.04 + 0.001 * t, 60 + 20 * t, cd, SpringClass::Bend);
       }
     SpringSweep<double> sw, plain;
+    sw.merge_duplicates = plain.merge_duplicates = false;   // keep the duplicates: twin segments
     sw.build(cl.n, cl.s);
     plain.build(cl.n, cl.s, false);
     ASSERT_TRUE(sw.grouped);
     EXPECT_TRUE(sw.twins);
+    EXPECT_EQ(sw.size(), cl.s.size());
     int disjoint = 0, overlapping = 0, stride2 = 0;
     for (std::size_t sg = 0; sg < sw.segs.size(); ++sg) {
       const SpringSegment& G = sw.segs[sg];
@@ -488,4 +495,186 @@ TEST(SymplecticEulerReorder, AutoRuleAndParameter) {
   EXPECT_EQ(symplectic_euler::SymplecticEuler(Params::from_string("reorder: rcm\n")).reorder_mode(), ReorderMode::Rcm);
   EXPECT_EQ(symplectic_euler::SymplecticEuler(Params()).reorder_mode(), ReorderMode::Auto);
   EXPECT_THROW(symplectic_euler::SymplecticEuler(Params::from_string("reorder: metis\n")), InputError);
+}
+
+// The key merge_springs (default true): a grid whose shear springs are doubled (each duplicate with
+// its own stiffness, rest length and damper, given with its endpoints swapped) steps with half of
+// them merged away, and 60 steps equal the run with merge_springs: false to rounding, in the
+// mesh's order and in the RCM order.
+TEST(SymplecticEulerMerge, MergeSpringsKeyAgreesWithEverySpring) {
+  Shuffled g(40, false);
+  const Index base = g.s.size();
+  for (Index q = 0; q < base; ++q)
+    if (g.s.kind[q] == SpringClass::Shear)
+      g.s.add(g.s.j[q], g.s.i[q], g.s.rest_length[q] * 1.01, 300.0, 0.01, SpringClass::Shear);
+  std::set<std::pair<Index, Index>> pairs;
+  for (Index q = 0; q < g.s.size(); ++q) pairs.insert(std::minmax(g.s.i[q], g.s.j[q]));
+  const Index dups = g.s.size() - static_cast<Index>(pairs.size());
+  ASSERT_GT(dups, 1000);
+  for (const char* order : {"none", "rcm"}) {
+    std::vector<double> res[2];
+    for (int merge : {0, 1}) {
+      auto scene = make_scene(g.x, g.v, g.m, g.pins, {0, -9.81, 0}, std::make_unique<TestSpringMaterial>(g.s, g.m));
+      symplectic_euler::SymplecticEuler se{Params::from_string(std::string("reorder: ") + order +
+                                                               (merge ? "\n" : "\nmerge_springs: false\n"))};
+      se.prepare(*scene, 1e-4);
+      ASSERT_TRUE(se.fused());
+      EXPECT_EQ(se.merged_springs(), merge ? dups : 0);
+      EXPECT_EQ(se.swept_springs(), g.s.size() - (merge ? dups : 0));
+      for (int st = 0; st < 60; ++st) se.step(*scene, 1e-4);
+      res[merge] = scene->state.x;
+      res[merge].insert(res[merge].end(), scene->state.v.begin(), scene->state.v.end());
+    }
+    const std::size_t m3 = g.x.size();
+    double sx = 0, sv = 0, moved = 0;
+    for (std::size_t q = 0; q < m3; ++q) {
+      sx = std::max(sx, std::abs(res[0][q]));
+      sv = std::max(sv, std::abs(res[0][m3 + q]));
+      moved = std::max(moved, std::abs(res[0][q] - g.x[q]));
+    }
+    EXPECT_GT(moved, 1e-6);
+    for (std::size_t q = 0; q < m3; ++q) {
+      ASSERT_NEAR(res[1][q], res[0][q], 1e-13 * sx) << order << " x " << q;
+      ASSERT_NEAR(res[1][m3 + q], res[0][m3 + q], 1e-11 * sv) << order << " v " << q;
+    }
+  }
+  EXPECT_THROW(symplectic_euler::SymplecticEuler(Params::from_string("merge_springs: maybe\n")), InputError);
+}
+
+// Issue 16: merge_duplicate_springs folds springs on the same two endpoints into one whose force
+// is the group's sum at every length and velocity. Checked against the group's forces summed in
+// long double by this test's own formula, on groups of one to three springs given in either
+// endpoint order, with different stiffnesses, rest lengths and dampers, at lengths from 0.5 to 2
+// rest lengths and random relative velocities; a set without duplicates comes back unchanged,
+// and equal rest lengths are kept exactly.
+TEST(SymplecticEulerFused, MergedDuplicateSpringsGiveTheGroupsForce) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  const Index nv = 400;
+  SpringSet s;
+  std::vector<int> group_size;
+  for (Index a = 0; a + 1 < nv; a += 2) {
+    const int g = 1 + static_cast<int>(a / 2) % 3;
+    group_size.push_back(g);
+    const double l0 = 0.01 + 0.02 * U(rng);
+    for (int t = 0; t < g; ++t) {
+      const bool same_length = (a / 2) % 5 == 0;
+      const double l = same_length ? l0 : l0 * (1.0 + 0.2 * (U(rng) - 0.5));
+      const double k = 10.0 + 5000.0 * U(rng), c = (a / 2) % 4 == 0 ? 0.0 : 0.1 * U(rng);
+      if (t % 2 == 0) s.add(a, a + 1, l, k, c, SpringClass::Structural);
+      else s.add(a + 1, a, l, k, c, SpringClass::Shear);
+    }
+  }
+  Index merged = -1;
+  const SpringSet m = merge_duplicate_springs(s, &merged);
+  ASSERT_EQ(m.size(), static_cast<Index>(group_size.size()));
+  EXPECT_EQ(merged, s.size() - m.size());
+  Index first = 0;
+  for (std::size_t gi = 0; gi < group_size.size(); ++gi) {
+    const int g = group_size[gi];
+    const Index a = 2 * static_cast<Index>(gi);
+    ASSERT_EQ(std::min(m.i[gi], m.j[gi]), a);
+    ASSERT_EQ(std::max(m.i[gi], m.j[gi]), a + 1);
+    bool equal_lengths = true;
+    for (int t = 1; t < g; ++t) equal_lengths = equal_lengths && s.rest_length[first + t] == s.rest_length[first];
+    if (equal_lengths) {
+      EXPECT_EQ(m.rest_length[gi], s.rest_length[first]) << gi;
+    }
+    for (int trial = 0; trial < 20; ++trial) {
+      const double len = s.rest_length[first] * (0.5 + 1.5 * U(rng));
+      const double rate = U(rng) - 0.5;   // d(length)/dt
+      long double sum = 0;
+      for (int t = 0; t < g; ++t) {
+        const Index q = first + t;
+        sum += static_cast<long double>(s.stiffness[q]) * (static_cast<long double>(len) - s.rest_length[q]) +
+               static_cast<long double>(s.damping[q]) * rate;
+      }
+      const double got = m.stiffness[gi] * (len - m.rest_length[gi]) + m.damping[gi] * rate;
+      long double scale = 0;
+      for (int t = 0; t < g; ++t) scale += s.stiffness[first + t] * len;
+      EXPECT_NEAR(got, static_cast<double>(sum), 1e-14 * static_cast<double>(scale)) << "group " << gi;
+    }
+    first += g;
+  }
+  // no duplicates: the same set, bit for bit
+  SpringSet single;
+  for (Index a = 0; a + 1 < nv; ++a) single.add(a + 1, a, 0.01 + 1e-5 * a, 100.0 + a, 0.01 * (a % 3), SpringClass::Bend);
+  const SpringSet same = merge_duplicate_springs(single, &merged);
+  EXPECT_EQ(merged, 0);
+  EXPECT_EQ(same.i, single.i);
+  EXPECT_EQ(same.j, single.j);
+  EXPECT_EQ(same.rest_length, single.rest_length);
+  EXPECT_EQ(same.stiffness, single.stiffness);
+  EXPECT_EQ(same.damping, single.damping);
+}
+
+// The sweep merges duplicate springs by default (SpringSweep::merge_duplicates): on the cloth of
+// TwinSegmentsAreBitIdentical (duplicates of every kind, each with its own constants) 30 steps
+// of the merged sweep agree with the one-spring-at-a-time sweep over every spring to rounding,
+// damped and undamped, on 1 and 2 threads (the same bits on both), with half the duplicates'
+// springs gone.
+TEST(SymplecticEulerFused, MergedDuplicatesAgreeWithEverySpringToRounding) {
+  const int nx = 130;
+  for (bool damped : {false, true}) {
+    SweepCloth cl = sweep_cloth(nx, damped);
+    const double cd = damped ? 0.03 : 0.0;
+    Index dups = 0;
+    for (int r = 0; r < nx; ++r)
+      for (int col = 0; col < nx; ++col) {
+        const int a = r * nx + col;
+        if (col + 1 < nx) {
+          cl.s.add(a + 1, a, 0.0201, 1500, cd, SpringClass::Structural);
+          ++dups;
+        }
+        if (r + 1 < nx) {
+          cl.s.add(a, a + nx, 0.0199, 2500, 0.5 * cd, SpringClass::Structural);
+          ++dups;
+        }
+        if (col + 2 < nx && (r + col) % 2 == 0) {
+          cl.s.add(a, a + 2, 0.041, 80, cd, SpringClass::Bend);
+          ++dups;
+        }
+      }
+    std::set<std::pair<Index, Index>> pairs;   // the distinct endpoint pairs, counted here
+    for (Index q = 0; q < cl.s.size(); ++q) pairs.insert(std::minmax(cl.s.i[q], cl.s.j[q]));
+    ASSERT_GT(static_cast<Index>(cl.s.size() - pairs.size()), dups);   // sweep_cloth's own duplicates too
+    dups = cl.s.size() - static_cast<Index>(pairs.size());
+    SpringSweep<double> merged, every;
+    every.merge_duplicates = false;
+    merged.build(cl.n, cl.s);
+    every.build(cl.n, cl.s, false);
+    ASSERT_TRUE(merged.grouped);
+    EXPECT_EQ(merged.merged, dups);
+    EXPECT_EQ(merged.size(), cl.s.size() - dups);
+    EXPECT_EQ(every.size(), cl.s.size());
+    for (const SpringSegment& G : merged.segs) EXPECT_EQ(G.twin, 0);   // nothing left to pair
+    const double g[3] = {0.0, -9.81, 0.0};
+    auto run = [&](const SpringSweep<double>& s, int threads) {
+      omp_set_num_threads(threads);
+      std::vector<double> x = cl.x0, v = cl.v0, f(x.size(), 0.0);
+      for (int st = 0; st < 30; ++st) se_step_springs<double>(s, x.data(), v.data(), cl.w.data(), f.data(), 1e-4, g);
+      x.insert(x.end(), v.begin(), v.end());
+      return x;
+    };
+    const std::vector<double> ref = run(every, 1);
+    const std::vector<double> one = run(merged, 1), two = run(merged, 2);
+    const std::size_t m3 = cl.x0.size();
+    double sx = 0, sv = 0, change = 0, dx = 0, dv = 0;
+    for (std::size_t q = 0; q < m3; ++q) {
+      sx = std::max(sx, std::abs(ref[q]));
+      sv = std::max(sv, std::abs(ref[m3 + q]));
+    }
+    for (std::size_t q = 0; q < ref.size(); ++q) {
+      ASSERT_EQ(one[q], two[q]) << q;
+      (q < m3 ? dx : dv) = std::max(q < m3 ? dx : dv, std::abs(one[q] - ref[q]));
+      change = std::max(change, std::abs(ref[q] - (q < m3 ? cl.x0[q] : cl.v0[q - m3])));
+    }
+    EXPECT_LE(dx, 1e-12 * sx) << "damped " << damped;
+    EXPECT_LE(dv, 1e-9 * sv) << "damped " << damped;
+    EXPECT_GT(change, 1e-6);   // the springs did act
+    if (std::getenv("LOOM_TEST_VERBOSE"))
+      std::printf("damped %d: merged - every spring after 30 steps: |dx| %.3g (of %.3g), |dv| %.3g (of %.3g)\n",
+                  damped, dx, sx, dv, sv);
+  }
+  omp_set_num_threads(2);
 }

@@ -223,6 +223,13 @@ struct SpringSweep {
   /// block are handed to it four at a time from the window (vectorised, the same bits as fin);
   /// false: fin one vertex at a time (table1's SeStep_double_scalarfin row, the tests' reference).
   bool block_finalise = true;
+  /// build(): springs on the same two endpoints are merged into one first (merge_duplicate_springs,
+  /// loom/springs.hpp: exact in real arithmetic for forces, so the results change at rounding only);
+  /// false keeps every spring (the twin segments then pair them, with the unmerged bits; the twin
+  /// tests and table1's SeStep_double_nomerge row). Set before build().
+  bool merge_duplicates = true;
+  Index merged = 0;        ///< springs folded away by the last build()
+  Index source_size = 0;   ///< springs in the set given to the last build()
 
   Index size() const { return static_cast<Index>(i.size()); }
   bool damped() const { return !c.empty(); }
@@ -234,7 +241,9 @@ struct SpringSweep {
   /// group_block: vertices per block of the grouped sweep (group_springs).
   void build(Index nv, const SpringSet& set, bool allow_grouping = true, Index group_block = kSpringGroupBlock) {
     n = nv;
-    SpringSet s = set;
+    source_size = set.size();
+    merged = 0;
+    SpringSet s = merge_duplicates ? merge_duplicate_springs(set, &merged) : set;
     layout = SpringLayout(nv, s);
     layout.reorder(s);
     const Index S = s.size();
@@ -284,6 +293,9 @@ struct SpringSweep {
     fuse = o.fuse;
     twins = o.twins;
     block_finalise = o.block_finalise;
+    merge_duplicates = o.merge_duplicates;
+    merged = o.merged;
+    source_size = o.source_size;
   }
 
   /// Spring forces at (x, v) accumulated into f, with fin(q, f + 3q) per completed vertex

@@ -25,4 +25,14 @@ struct SpringSet {
   }
 };
 
+/// The springs of s with every group of springs on the same two endpoints (either order) merged
+/// into one: stiffnesses and dampers added, the rest length the stiffness-weighted mean (kept
+/// exactly when the group's rest lengths are equal), endpoints and kind those of the group's
+/// first spring, in the order of each group's first spring. For a force-only use (symplectic
+/// Euler, RK4) the merged spring's force equals the group's sum in exact arithmetic at every
+/// length and velocity: (k1 + k2)(l - l0) = k1 (l - l1) + k2 (l - l2) with l0 = (k1 l1 + k2 l2) /
+/// (k1 + k2), and the dampers act along the same axis. Not for harmonic_oscillation, whose
+/// per-spring oscillation is not additive. merged (optional): how many springs were folded away.
+SpringSet merge_duplicate_springs(const SpringSet& s, Index* merged = nullptr);
+
 }  // namespace loom

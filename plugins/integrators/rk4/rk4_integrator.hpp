@@ -85,7 +85,7 @@ void rk4_step_springs(const SpringSweep<T>& sw, T* x, T* v, const T* w, const st
   });
 }
 
-/// The keys of rk4 (cpu and cuda): none on the cpu; precision and host_sync_every on cuda.
+/// The keys of rk4 (cpu and cuda): merge_springs on the cpu; precision and host_sync_every on cuda.
 const ParamSpec& rk4_spec();
 
 class Rk4Integrator final : public Integrator {
@@ -97,6 +97,8 @@ class Rk4Integrator final : public Integrator {
   StepStats last_step() const override { return stats_; }
   /// Whether the step runs the fused spring path (a spring material).
   bool fused() const { return sweep_source_ != nullptr; }
+  /// Springs the fused path folded into others (key `merge_springs`; 0 before prepare()).
+  Index merged_springs() const { return fused() ? sweep_.merged : 0; }
 
  private:
   std::vector<double> xs_, vs_, f_, accx_, accv_;

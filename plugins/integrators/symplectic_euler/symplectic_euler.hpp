@@ -15,7 +15,7 @@
 
 namespace loom::symplectic_euler {
 
-/// The keys of symplectic_euler: reorder (dt, substeps: the framework's).
+/// The keys of symplectic_euler: reorder, merge_springs (dt, substeps: the framework's).
 const ParamSpec& spec();
 
 class SymplecticEuler final : public Integrator {
@@ -32,6 +32,10 @@ class SymplecticEuler final : public Integrator {
   /// Whether the fused path runs the grouped, windowed sweep (loom/spring_groups.hpp).
   bool windowed() const { return fused() && sweep_.grouped; }
   ReorderMode reorder_mode() const { return reorder_; }
+  /// Springs the fused path folded into others (key `merge_springs`; 0 before prepare()).
+  Index merged_springs() const { return fused() ? sweep_.merged : 0; }
+  /// Springs the fused path steps (after merging).
+  Index swept_springs() const { return fused() ? sweep_.size() : 0; }
 
  private:
   void generic_step(Scene& scene, double h);
