@@ -27,9 +27,13 @@ double ThreadController::seconds_on(int count) const {
 }
 
 double ThreadController::median(const double* v, int n) {
+  n = std::min(n, kMaxSamples);   // (records never exceed it)
   double a[kMaxSamples];
-  std::copy(v, v + n, a);
-  std::sort(a, a + n);
+  for (int q = 0; q < n; ++q) {   // insertion sort of at most kMaxSamples values
+    int r = q;
+    for (; r > 0 && a[r - 1] > v[q]; --r) a[r] = a[r - 1];
+    a[r] = v[q];
+  }
   return n % 2 ? a[n / 2] : 0.5 * (a[n / 2 - 1] + a[n / 2]);
 }
 
@@ -237,7 +241,7 @@ void ThreadController::next_candidate() {
 }
 
 void ThreadController::decide() {
-  double med[kMaxCandidates];
+  double med[kMaxCandidates] = {};
   for (int k = 0; k < ncand_; ++k) med[k] = nmeas_[k] > 0 ? median(meas_[k], nmeas_[k]) : 0;
   int w = baseline_idx_, a = baseline_idx_;
   for (int k = 0; k < ncand_; ++k)

@@ -122,7 +122,9 @@ std::vector<Example> examples(const fs::path& work) {
       ADD_FAILURE() << "README example runs something the test does not know: " << line;
       continue;
     }
-    if (prog == "./loom") EXPECT_EQ(::access((kRoot / "loom").c_str(), X_OK), 0) << "./loom is not executable";
+    if (prog == "./loom") {
+      EXPECT_EQ(::access((kRoot / "loom").c_str(), X_OK), 0) << "./loom is not executable";
+    }
     std::vector<std::string> args(w.begin() + static_cast<std::ptrdiff_t>(k) + 1, w.end());
     if (args.empty()) continue;
     const std::string cmd = args[0];

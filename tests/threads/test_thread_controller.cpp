@@ -468,7 +468,9 @@ TEST(ThreadController, ShortRunIsNotProbed) {
   e.set_run_steps(22);
   for (int s = 1; s <= 22; ++s) {
     e.record(world(e.threads()));
-    if (s == 7) EXPECT_EQ(e.chosen(), 1);
+    if (s == 7) {
+      EXPECT_EQ(e.chosen(), 1);
+    }
   }
   EXPECT_EQ(e.probes(), 1);
 }
@@ -483,7 +485,9 @@ TEST(ThreadController, RunLongEnoughToRepayIsProbedAsBefore) {
   for (int s = 0; s < 40; ++s) {
     c.record(world(c.threads()));
     d.record(world(d.threads()));
-    if (d.probes() < 2) EXPECT_EQ(c.threads(), d.threads()) << s;
+    if (d.probes() < 2) {
+      EXPECT_EQ(c.threads(), d.threads()) << s;
+    }
   }
   EXPECT_EQ(c.chosen(), 1);
   EXPECT_EQ(c.probes(), 1);
@@ -542,7 +546,9 @@ TEST(ThreadController, NoProbesNearTheEndOfARun) {
     extra_e += world(e.threads()) - 0.010;
     c.record(world(c.threads()));
     e.record(world(e.threads()));
-    if (s + 1 < p50) EXPECT_EQ(c.probes(), e.probes()) << s;
+    if (s + 1 < p50) {
+      EXPECT_EQ(c.probes(), e.probes()) << s;
+    }
   }
   EXPECT_EQ(c.probes(), 49);
   EXPECT_EQ(e.probes(), 50);
