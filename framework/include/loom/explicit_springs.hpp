@@ -185,6 +185,13 @@ inline void sweep_segment_forces_scatter_twin(Index len, Index a, Index off, con
   }
 }
 
+/// Help of the key `merge_springs` (SpringSweep::merge_duplicates), declared by symplectic_euler and rk4.
+inline constexpr const char* kMergeSpringsHelp =
+    "merge springs on the same two vertices into one before stepping (stiffnesses and dampers added, rest "
+    "length the stiffness-weighted mean): the same force in exact arithmetic, fewer springs per step (the "
+    "kang_cho_table1 stencil doubles almost every spring: about 1.4x faster). false: every spring on its own "
+    "(the results before 2026-12-01, bit for bit)";
+
 template <class T>
 struct SpringSweep {
   SpringLayout layout;
@@ -227,7 +234,8 @@ struct SpringSweep {
   /// loom/springs.hpp: exact in real arithmetic for forces, so the results change at rounding only);
   /// false keeps every spring (the twin segments then pair them, with the unmerged bits; the twin
   /// tests and table1's SeStep_double_nomerge row). Set before build().
-  bool merge_duplicates = true;
+  static constexpr bool kMergeDuplicatesDefault = true;
+  bool merge_duplicates = kMergeDuplicatesDefault;
   Index merged = 0;        ///< springs folded away by the last build()
   Index source_size = 0;   ///< springs in the set given to the last build()
 

@@ -8,11 +8,7 @@ namespace loom {
 const ParamSpec& rk4_spec() {
   static const ParamSpec spec = [] {
     ParamSpec s("rk4", "classical 4th-order Runge-Kutta");
-    s.flag("merge_springs", true).backends({"cpu"}).help(
-        "merge springs on the same two vertices into one before stepping (stiffnesses and dampers added, rest "
-        "length the stiffness-weighted mean): the same force in exact arithmetic, fewer springs per step (the "
-        "kang_cho_table1 stencil doubles almost every spring: about 1.4x faster). false: every spring on its own "
-        "(the results before 2026-12-01, bit for bit)");
+    s.flag("merge_springs", SpringSweep<double>::kMergeDuplicatesDefault).backends({"cpu"}).help(kMergeSpringsHelp);
     declare_device_keys(s);
     return s;
   }();

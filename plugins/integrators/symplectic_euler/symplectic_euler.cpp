@@ -14,11 +14,7 @@ const ParamSpec& spec() {
         "vertex order of the fused spring step: rcm renumbers the vertices internally (reverse Cuthill-McKee) so "
         "that springs join nearby vertices; results stay in the mesh's numbering. auto: rcm for meshes of at least "
         "16384 vertices whose spring span it shrinks 4x or more; none: the mesh's order");
-    s.flag("merge_springs", true).backends({"cpu"}).help(
-        "merge springs on the same two vertices into one before stepping (stiffnesses and dampers added, rest "
-        "length the stiffness-weighted mean): the same force in exact arithmetic, fewer springs per step (the "
-        "kang_cho_table1 stencil doubles almost every spring: about 1.4x faster). false: every spring on its own "
-        "(the results before 2026-12-01, bit for bit)");
+    s.flag("merge_springs", SpringSweep<double>::kMergeDuplicatesDefault).backends({"cpu"}).help(kMergeSpringsHelp);
     declare_device_keys(s);  // precision, host_sync_every: backend cuda (one spec for both backends)
     return s;
   }();
