@@ -82,6 +82,7 @@ struct Cloth {
   HoIntegrator ho{HoVariant::Velocity};
   HoIntegrator ho_direct{HoVariant::Velocity, false};   // per-spring constants (no tables)
   HoIntegrator ho_table{HoVariant::Velocity};           // parameter tables on the window (the old default)
+  HoIntegrator ho_nomerge{HoVariant::Velocity};         // every spring (merge_springs: false; twin segments)
   double h = 1e-6;
   // float copies
   HoSprings<float> fs;
@@ -115,6 +116,8 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   c->ho_direct.prepare(sc, c->h);
   c->ho_table.set_tables_on_window(true);
   c->ho_table.prepare(sc, c->h);
+  c->ho_nomerge.set_merge_springs(false);
+  c->ho_nomerge.prepare(sc, c->h);
   const HoSprings<double>& d = c->ho.springs();
   convert_ho_springs(d, c->fs);
   c->fx.assign(sc.state.x.begin(), sc.state.x.end());
@@ -132,7 +135,7 @@ Cloth& cloth(int n, const std::string& stencil = "kang_cho_table1") {
   for (int b = 0; b < 3; ++b) {
     c->sweep_blk[b].build(sc.state.size(), *sc.material->springs(), true, kGroupBlocks[b]);
     build_ho_springs(sc.state.size(), *sc.material->springs(), c->ho_blk_layout[b], c->ho_blk[b], true,
-                     kGroupBlocks[b]);
+                     kGroupBlocks[b], ho_merge_mode(HoVariant::Velocity, true));
     update_ho_coefficients(c->ho_blk[b], HoVariant::Velocity, sc.state.inv_mass.data(), c->h);
   }
   return *c;
@@ -229,6 +232,15 @@ void BM_HoStep_double_sqrt5(benchmark::State& st) {
   st.counters["springs"] = c.springs();
 }
 
+// Every spring stepped on its own (merge_springs: false): duplicates paired as twin segments,
+// the default until 2026-12-01.
+void BM_HoStep_double_nomerge(benchmark::State& st) {
+  auto [r, threads, c] = start_ho_run(st);
+  for (auto _ : st) c.ho_nomerge.step(c.scene, c.h);
+  set_counters(st, r, threads, ho_bytes(c.ho_nomerge.springs(), c.ho_nomerge.layout(), c.scene.state.size()));
+  st.counters["springs"] = static_cast<double>(c.ho_nomerge.springs().size());
+}
+
 void BM_HoStep_double_direct(benchmark::State& st) {
   auto [r, threads, c] = start_ho_run(st);
   for (auto _ : st) c.ho_direct.step(c.scene, c.h);
@@ -254,8 +266,10 @@ void ho_window_bench(benchmark::State& st, bool window, int blk = -1, bool fuse 
   triad_bandwidth(threads);
   Cloth& c = cloth(r.n);
   omp_set_num_threads(threads);
-  HoSprings<double> s = blk >= 0 ? c.ho_blk[blk] : c.ho.springs();
-  const SpringLayout& layout = blk >= 0 ? c.ho_blk_layout[blk] : c.ho.layout();
+  // the twin rows compare twin segments with their segments on their own: the unmerged springs
+  const HoIntegrator& ho = twins ? c.ho : c.ho_nomerge;
+  HoSprings<double> s = blk >= 0 ? c.ho_blk[blk] : ho.springs();
+  const SpringLayout& layout = blk >= 0 ? c.ho_blk_layout[blk] : ho.layout();
   if (!window) s.win_cap = 0;
   s.fuse = fuse;
   s.twins = twins;
@@ -603,6 +617,7 @@ BENCHMARK(BM_SqrtRecip_cr)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_Triad)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_HoStep_double)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_sqrt5)->Apply(rows_args);
+BENCHMARK(BM_HoStep_double_nomerge)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_direct)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_table)->Apply(rows_args);
 BENCHMARK(BM_HoStep_double_window)->Apply(rows_args);

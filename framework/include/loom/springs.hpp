@@ -32,7 +32,8 @@ struct SpringSet {
 /// Euler, RK4) the merged spring's force equals the group's sum in exact arithmetic at every
 /// length and velocity: (k1 + k2)(l - l0) = k1 (l - l1) + k2 (l - l2) with l0 = (k1 l1 + k2 l2) /
 /// (k1 + k2), and the dampers act along the same axis. Not for harmonic_oscillation, whose
-/// per-spring oscillation is not additive. merged (optional): how many springs were folded away.
+/// per-spring constants are not linear in k: it adds its members' constants instead
+/// (build_ho_springs, HoMerge). merged (optional): how many springs were folded away.
 SpringSet merge_duplicate_springs(const SpringSet& s, Index* merged = nullptr);
 
 }  // namespace loom

@@ -1,7 +1,9 @@
 #include "ho_integrator.hpp"
 
 #include <algorithm>
+#include <cstdint>
 #include <numeric>
+#include <unordered_map>
 #include <type_traits>
 #include <stdexcept>
 #include <utility>
@@ -38,6 +40,7 @@ const ParamSpec& harmonic_oscillation_spec() {
         "vertex order of the step: rcm renumbers the vertices internally (reverse Cuthill-McKee) so that "
         "springs join nearby vertices; results stay in the mesh's numbering. auto: rcm for meshes of at least "
         "16384 vertices whose spring span it shrinks 4x or more; none: the mesh's order");
+    s.flag("merge_springs", true).backends({"cpu"}).help(kHoMergeSpringsHelp);
     declare_device_keys(s);
     return s;
   }();
@@ -56,12 +59,84 @@ HoIntegrator::HoIntegrator(const Params& p) {
     allow_table_ = r.text("storage") == "auto";
     const std::string ro = r.text("reorder");
     reorder_ = parse_reorder_mode(ro);
+    merge_ = r.flag("merge_springs");
   }
 }
 
+namespace {
+
+std::uint64_t endpoint_key(Index a, Index b) {
+  const auto lo = static_cast<std::uint32_t>(std::min(a, b));
+  const auto hi = static_cast<std::uint32_t>(std::max(a, b));
+  return (std::uint64_t{lo} << 32) | hi;
+}
+
+/// The members of the merged groups of springs, by endpoint pair: where their rest lengths,
+/// stiffnesses and dampers start in l0, k, c (first[g] .. first[g + 1]).
+struct HoMergeGroups {
+  std::unordered_map<std::uint64_t, Index> group_of;   // endpoint pair -> merged group
+  std::vector<Index> first{0};
+  std::vector<double> l0, k, c;
+};
+
+/// set with its duplicate springs merged by mode (HoMerge); the members of every merged group in
+/// groups. A merged spring keeps its group's first spring's endpoints and kind, in that spring's
+/// place, with the stiffnesses and dampers added and the group's rest length (the first's when
+/// they agree, else the stiffness-weighted mean: update_ho_coefficients replaces it by the
+/// kx-weighted one).
+SpringSet merge_ho_springs(const SpringSet& set, HoMerge mode, HoMergeGroups& groups) {
+  const Index S = set.size();
+  std::unordered_map<std::uint64_t, Index> head;   // endpoint pair -> first spring of the pair
+  head.reserve(static_cast<std::size_t>(S));
+  std::vector<Index> next(static_cast<std::size_t>(S), -1), last(static_cast<std::size_t>(S), -1);
+  for (Index q = 0; q < S; ++q) {
+    const auto [it, first] = head.try_emplace(endpoint_key(set.i[q], set.j[q]), q);
+    if (first) {
+      last[q] = q;
+    } else {
+      next[last[it->second]] = q;
+      last[it->second] = q;
+    }
+  }
+  SpringSet out;
+  std::vector<std::uint8_t> taken(static_cast<std::size_t>(S), 0);
+  for (Index q = 0; q < S; ++q) {
+    if (taken[q]) continue;
+    const bool group = next[q] >= 0;
+    bool equal = true;
+    for (Index m = q; m >= 0; m = next[m]) equal = equal && set.rest_length[m] == set.rest_length[q];
+    if (!group || (mode == HoMerge::EqualRestLength && !equal)) {   // every member kept as it is
+      for (Index m = q; m >= 0; m = next[m]) {
+        taken[m] = 1;
+        out.add(set.i[m], set.j[m], set.rest_length[m], set.stiffness[m], set.damping[m], set.kind[m]);
+      }
+      continue;
+    }
+    double k = 0, c = 0, kl = 0;
+    for (Index m = q; m >= 0; m = next[m]) {
+      taken[m] = 1;
+      k += set.stiffness[m];
+      c += set.damping[m];
+      kl += set.stiffness[m] * set.rest_length[m];
+      groups.l0.push_back(set.rest_length[m]);
+      groups.k.push_back(set.stiffness[m]);
+      groups.c.push_back(set.damping[m]);
+    }
+    groups.group_of.emplace(endpoint_key(set.i[q], set.j[q]), static_cast<Index>(groups.first.size()) - 1);
+    groups.first.push_back(static_cast<Index>(groups.l0.size()));
+    out.add(set.i[q], set.j[q], equal || k == 0.0 ? set.rest_length[q] : kl / k, k, c, set.kind[q]);
+  }
+  return out;
+}
+
+}  // namespace
+
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out,
-                      bool allow_grouping, Index group_block) {
-  SpringSet sorted = set;            // copied once, so that the layout can store it in traversal order
+                      bool allow_grouping, Index group_block, HoMerge merge) {
+  HoMergeGroups groups;
+  // copied once, so that the layout can store it in traversal order
+  SpringSet sorted = merge == HoMerge::None ? set : merge_ho_springs(set, merge, groups);
+  out.merged = set.size() - sorted.size();
   layout = SpringLayout(n, sorted);
   layout.reorder(sorted);
   const Index S = sorted.size();
@@ -105,6 +180,24 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
       out.part_block.clear();
     }
   }
+  // The merged groups' members, in the final spring order.
+  out.merge_begin.clear();
+  out.merge_l0.clear();
+  out.merge_k.clear();
+  out.merge_c.clear();
+  if (!groups.group_of.empty()) {
+    out.merge_begin.assign(static_cast<std::size_t>(S) + 1, 0);
+    for (Index q = 0; q < S; ++q) {
+      const auto it = groups.group_of.find(endpoint_key(out.i[q], out.j[q]));
+      if (it != groups.group_of.end())
+        for (Index m = groups.first[it->second]; m < groups.first[it->second + 1]; ++m) {
+          out.merge_l0.push_back(groups.l0[m]);
+          out.merge_k.push_back(groups.k[m]);
+          out.merge_c.push_back(groups.c[m]);
+        }
+      out.merge_begin[q + 1] = static_cast<Index>(out.merge_l0.size());
+    }
+  }
   plan_ho_window(layout, out);
   allocate_ho_window(out, layout.parts());
   out.is_deferred.assign(static_cast<std::size_t>(n), 0);
@@ -132,18 +225,20 @@ void HoIntegrator::prepare(Scene& scene, double h) {
       throw InputError(scene.source + ": harmonic_oscillation needs springs with stiffness >= 0 and damping >= 0 "
                        "(spring " + std::to_string(q) + "). Fix: check the material's stiffness and damping.");
   const Index n = scene.state.size();
-  if (set != source_ || layout_.num_vertices() != n || layout_.num_springs() != set->size()) {
+  if (set != source_ || layout_.num_vertices() != n || source_size_ != set->size()) {
     // Vertex order: computed once per spring set (docs/plugins/integrators.md, `reorder`).
     order_ = choose_vertex_order(reorder_, n, set->i, set->j);
     if (order_.identity()) {
-      build_ho_springs(n, *set, layout_, springs_, allow_grouping_);
+      build_ho_springs(n, *set, layout_, springs_, allow_grouping_, kHoGroupBlock, ho_merge_mode(variant_, merge_));
     } else {
       SpringSet internal = *set;
       for (Index& a : internal.i) a = order_.inv[a];
       for (Index& b : internal.j) b = order_.inv[b];
-      build_ho_springs(n, internal, layout_, springs_, allow_grouping_);
+      build_ho_springs(n, internal, layout_, springs_, allow_grouping_, kHoGroupBlock,
+                       ho_merge_mode(variant_, merge_));
     }
     source_ = set;
+    source_size_ = set->size();
   }
   dv_.assign(3 * static_cast<std::size_t>(n), 0.0);
   dx_.assign(variant_ == HoVariant::AnalyticPosition ? 3 * static_cast<std::size_t>(n) : 0, 0.0);

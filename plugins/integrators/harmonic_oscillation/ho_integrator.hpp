@@ -43,6 +43,13 @@ const char* to_string(HoVariant v);
 const ParamSpec& harmonic_oscillation_spec();
 /// Reads `variant` through harmonic_oscillation_spec() (the cpu and cuda variants share it).
 HoVariant read_ho_variant(const Params& p);
+/// Help of harmonic_oscillation's key `merge_springs`.
+inline constexpr const char* kHoMergeSpringsHelp =
+    "merge springs on the same two vertices into one before stepping: the impulse is linear in the stretch and "
+    "the axial velocity, so the merged spring takes the sum of its members' HO constants (rest length their "
+    "kx-weighted mean; analytic_position merges only equal rest lengths): the same step in exact arithmetic, "
+    "fewer springs per step (the kang_cho_table1 stencil doubles almost every spring). false: every spring on "
+    "its own (the results before 2026-12-01, bit for bit)";
 
 /// A run of springs and a block of the grouped sweep (loom/spring_groups.hpp).
 using HoSegment = SpringSegment;
@@ -93,8 +100,22 @@ struct HoSprings {
   /// (ho_window_impulses_twin); the same bits. false: each segment on its own (table1's
   /// HoStep_double_notwin row).
   bool twins = true;
+  // Merged duplicates (build_ho_springs' HoMerge, key `merge_springs`): springs on the same two
+  // vertices folded into one. HO's impulse is linear in the stretch and the axial velocity with
+  // constants that depend only on k, c, W and h (loom/kernels/ho.hpp), so a group's impulse is one
+  // spring's with the members' constants added (and, for unequal rest lengths, l0 the kx-weighted
+  // mean); the constants are those sums, recomputed from the members at every prepare. Spring q
+  // is a merged group when merge_begin[q] < merge_begin[q + 1]: its members' rest lengths,
+  // stiffnesses and dampers are merge_l0/k/c[merge_begin[q] ..], and l0[q], k[q], c[q] hold the
+  // group's l0 (set by update_ho_coefficients), sum of k and sum of c. All empty when nothing
+  // was merged.
+  std::vector<Index> merge_begin;
+  std::vector<double> merge_l0, merge_k, merge_c;
+  Index merged = 0;   ///< springs folded away (the members beyond each group's first)
 
   Index size() const { return static_cast<Index>(i.size()); }
+  /// Whether spring q stands for a merged group.
+  bool is_merged(Index q) const { return !merge_begin.empty() && merge_begin[q] < merge_begin[q + 1]; }
 };
 
 /// The most vertices per block of the grouped traversal (the per-segment buffers' capacity).
@@ -103,13 +124,25 @@ constexpr Index kHoVertexBlock = kSpringGroupBlockMax;
 /// for what the size changes; table1's HoStep_double_block64/128/256 rows compare sizes).
 constexpr Index kHoGroupBlock = kSpringGroupBlock;
 
+/// Which springs on the same two vertices build_ho_springs merges into one (HoSprings::merge_begin):
+/// none; only groups whose rest lengths are equal (what analytic_position can merge: its
+/// displacement constants would need a second weighted rest length otherwise); every group.
+enum class HoMerge { None, EqualRestLength, All };
+
+/// The merge mode of a variant when merging is asked for (key `merge_springs`).
+inline HoMerge ho_merge_mode(HoVariant v, bool merge) {
+  if (!merge) return HoMerge::None;
+  return v == HoVariant::AnalyticPosition ? HoMerge::EqualRestLength : HoMerge::All;
+}
+
 /// Build the traversal layout and the spring arrays from a spring set over n vertices: springs
 /// in traversal order with i < j (HO is symmetric in its endpoints), sorted by i within each
 /// part, and the vertices that cross springs touch.
 /// allow_grouping = false keeps the plain blocked sweep (tests compare the two).
 /// group_block: vertices per block of the grouped sweep (group_springs; benchmarks compare sizes).
+/// merge: which duplicate springs become one (HoMerge; the plugin's default is ho_merge_mode(v, true)).
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out,
-                      bool allow_grouping = true, Index group_block = kHoGroupBlock);
+                      bool allow_grouping = true, Index group_block = kHoGroupBlock, HoMerge merge = HoMerge::None);
 
 /// Copy the structure (endpoints, traversal data) and the material constants to another scalar.
 template <class T, class U>
@@ -128,6 +161,11 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
   out.win.assign(in.win.size(), T(0));
   out.fuse = in.fuse;
   out.twins = in.twins;
+  out.merge_begin = in.merge_begin;
+  out.merge_l0 = in.merge_l0;
+  out.merge_k = in.merge_k;
+  out.merge_c = in.merge_c;
+  out.merged = in.merged;
   out.l0.assign(in.l0.begin(), in.l0.end());
   out.k.assign(in.k.begin(), in.k.end());
   out.c.assign(in.c.begin(), in.c.end());
@@ -166,6 +204,40 @@ bool ho_tables_wanted(const HoSprings<T>& s, bool allow_table, bool tables_on_wi
   return allow_table && (tables_on_window || !(s.grouped && s.win_cap > 0));
 }
 
+/// Hash of a parameter-table key (update_ho_coefficients).
+struct HoKeyHash {
+  template <std::size_t N>
+  std::size_t operator()(const std::array<double, N>& a) const {
+    std::size_t x = 0;
+    for (double d : a) x = x * 1000003u ^ std::hash<double>()(d);
+    return x;
+  }
+};
+
+/// Rest length and constants {l0, kx, kv, ex, ev} of merged spring q (HoSprings::is_merged) with
+/// W = w_i + w_j: each member's constants (ho_constants) added; l0 the members' when they agree,
+/// otherwise the kx-weighted mean, so that sum kx_m (l - l0_m) = kx (l - l0) at every length. The
+/// displacement constants of analytic_position cannot share that mean, so build_ho_springs
+/// merges only equal rest lengths for it (HoMerge::EqualRestLength); a group that breaks this is a
+/// logic error.
+template <class T>
+std::array<double, 5> ho_merged_constants(const HoSprings<T>& s, Index q, HoVariant variant, double W, double h) {
+  std::array<double, 5> r{0, 0, 0, 0, 0};
+  const Index b = s.merge_begin[q], e = s.merge_begin[q + 1];
+  double kxl = 0;
+  bool equal = true;
+  for (Index m = b; m < e; ++m) {
+    const auto c = ho_constants(variant, s.merge_k[m], s.merge_c[m], W, h);
+    for (int a = 0; a < 4; ++a) r[1 + a] += c[a];
+    kxl += c[0] * s.merge_l0[m];
+    equal = equal && s.merge_l0[m] == s.merge_l0[b];
+  }
+  if (!equal && variant == HoVariant::AnalyticPosition)
+    throw std::logic_error("harmonic_oscillation: analytic_position springs merged with unequal rest lengths");
+  r[0] = equal || r[1] == 0.0 ? s.merge_l0[b] : kxl / r[1];
+  return r;
+}
+
 /// (Re)compute the constants for step h and inverse masses w (called by prepare, so whenever h
 /// or a mass changes). Deduplicates (l0, k, c, W) into tables when ho_tables_wanted and there
 /// are at most kHoMaxTable distinct sets; otherwise stores the constants per spring.
@@ -177,21 +249,25 @@ void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h,
   const double hd = static_cast<double>(h);
   s.table = false;
   if (ho_tables_wanted(s, allow_table, tables_on_window)) {
-    struct KeyHash {
-      std::size_t operator()(const std::array<double, 4>& a) const {
-        std::size_t x = 0;
-        for (double d : a) x = x * 1000003u ^ std::hash<double>()(d);
-        return x;
-      }
-    };
-    std::unordered_map<std::array<double, 4>, std::uint32_t, KeyHash> map;
+    std::unordered_map<std::array<double, 4>, std::uint32_t, HoKeyHash> map;
     std::vector<std::array<double, 4>> keys;
     s.id.resize(S);
     bool ok = true;
+    // A merged spring's table entry is keyed by its own constants (its members' sums, below):
+    // (l0, kx, kv, -1 - index) never equals a plain spring's (l0, k, c, W >= 0) key, and merged
+    // springs share an entry only when their constants are equal.
+    std::vector<std::array<double, 5>> mc;   // constants of the merged entries, by -1 - key[3]
+    std::unordered_map<std::array<double, 5>, std::uint32_t, HoKeyHash> mmap;
     for (Index q = 0; q < S && ok; ++q) {
-      const std::array<double, 4> key{static_cast<double>(s.l0[q]), static_cast<double>(s.k[q]),
-                                      static_cast<double>(s.c[q]),
-                                      static_cast<double>(w[s.i[q]]) + static_cast<double>(w[s.j[q]])};
+      const double W = static_cast<double>(w[s.i[q]]) + static_cast<double>(w[s.j[q]]);
+      std::array<double, 4> key{static_cast<double>(s.l0[q]), static_cast<double>(s.k[q]),
+                                static_cast<double>(s.c[q]), W};
+      if (s.is_merged(q)) {
+        const auto c = ho_merged_constants(s, q, variant, W, hd);
+        const auto mi = mmap.try_emplace(c, static_cast<std::uint32_t>(mc.size())).first;
+        if (mi->second == mc.size()) mc.push_back(c);
+        key = {c[0], c[1], c[2], -1.0 - static_cast<double>(mi->second)};
+      }
       auto it = map.find(key);
       if (it == map.end()) {
         if (keys.size() >= kHoMaxTable) ok = false;
@@ -209,7 +285,13 @@ void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h,
       s.t_ex.assign(pos ? m : 0, T(0));
       s.t_ev.assign(pos ? m : 0, T(0));
       for (std::size_t t = 0; t < m; ++t) {
-        const auto c = ho_constants(variant, keys[t][1], keys[t][2], keys[t][3], hd);
+        std::array<double, 4> c{};
+        if (keys[t][3] < 0.0) {   // a merged entry: its constants computed above
+          const auto& e = mc[static_cast<std::size_t>(-1.0 - keys[t][3])];
+          c = {e[1], e[2], e[3], e[4]};
+        } else {
+          c = ho_constants(variant, keys[t][1], keys[t][2], keys[t][3], hd);
+        }
         s.t_l0[t] = static_cast<T>(keys[t][0]);
         s.t_kx[t] = static_cast<T>(c[0]);
         s.t_kv[t] = static_cast<T>(c[1]);
@@ -233,7 +315,14 @@ void update_ho_coefficients(HoSprings<T>& s, HoVariant variant, const T* w, T h,
 #pragma omp parallel for schedule(static) if (S >= kHoSerialSprings)
   for (Index q = 0; q < S; ++q) {
     const double W = static_cast<double>(w[s.i[q]]) + static_cast<double>(w[s.j[q]]);
-    const auto c = ho_constants(variant, static_cast<double>(s.k[q]), static_cast<double>(s.c[q]), W, hd);
+    std::array<double, 4> c{};
+    if (s.is_merged(q)) {
+      const auto e = ho_merged_constants(s, q, variant, W, hd);
+      s.l0[q] = static_cast<T>(e[0]);
+      c = {e[1], e[2], e[3], e[4]};
+    } else {
+      c = ho_constants(variant, static_cast<double>(s.k[q]), static_cast<double>(s.c[q]), W, hd);
+    }
     s.kx[q] = static_cast<T>(c[0]);
     s.kv[q] = static_cast<T>(c[1]);
     if (pos) {
@@ -682,12 +771,18 @@ class HoIntegrator final : public Integrator {
   /// Keep the parameter tables on the windowed grouped sweep too (the storage before per-spring
   /// streams became the default there; tests and benchmarks compare the two). Call before prepare.
   void set_tables_on_window(bool on) { tables_on_window_ = on; }
+  /// Key `merge_springs` (HoMerge): merge springs on the same two vertices (true, the default) or
+  /// keep every spring. Call before prepare.
+  void set_merge_springs(bool on) { merge_ = on; }
+  /// Springs folded into others by the merge (0 before prepare or with merge_springs false).
+  Index merged_springs() const { return springs_.merged; }
 
  private:
   HoVariant variant_ = HoVariant::Velocity;
   bool allow_table_ = true;
   bool allow_grouping_ = true;
   bool tables_on_window_ = false;
+  bool merge_ = true;
   SpringLayout layout_;
   HoSprings<double> springs_;
   HoReorder reorder_ = HoReorder::Auto;
@@ -696,6 +791,7 @@ class HoIntegrator final : public Integrator {
   std::vector<double> dv_, dx_;   ///< accumulators, zero between steps
   double h_ = -1;
   const SpringSet* source_ = nullptr;
+  Index source_size_ = -1;   ///< springs of the set the layout was built from (before merging)
 };
 
 }  // namespace loom
