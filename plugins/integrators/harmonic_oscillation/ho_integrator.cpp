@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cstdint>
 #include <numeric>
-#include <unordered_map>
 #include <type_traits>
 #include <stdexcept>
 #include <utility>
@@ -71,44 +70,35 @@ std::uint64_t endpoint_key(Index a, Index b) {
   return (std::uint64_t{lo} << 32) | hi;
 }
 
-/// The members of the merged groups of springs, by endpoint pair: where their rest lengths,
-/// stiffnesses and dampers start in l0, k, c (first[g] .. first[g + 1]).
-struct HoMergeGroups {
-  std::unordered_map<std::uint64_t, Index> group_of;   // endpoint pair -> merged group
-  std::vector<Index> first{0};
-  std::vector<double> l0, k, c;
-};
-
-/// set with its duplicate springs merged by mode (HoMerge); the members of every merged group in
-/// groups. A merged spring keeps its group's first spring's endpoints and kind, in that spring's
-/// place, with the stiffnesses and dampers added and the group's rest length (the first's when
-/// they agree, else the stiffness-weighted mean: update_ho_coefficients replaces it by the
-/// kx-weighted one).
-SpringSet merge_ho_springs(const SpringSet& set, HoMerge mode, HoMergeGroups& groups) {
+/// set with its duplicate springs merged by mode (HoMerge). A merged spring keeps its group's
+/// first spring's endpoints and kind, in that spring's place, with the stiffnesses and dampers
+/// added and the group's rest length (the first's when they agree, else the stiffness-weighted
+/// mean: update_ho_coefficients replaces it by the kx-weighted one). The members of merged group
+/// g (numbered in the order of their first springs) go to out's merge_first, merge_l0/k/c; keys
+/// gets (endpoint pair, g) for every merged group, sorted by pair. Memory beyond the output: 17
+/// bytes per spring while it runs (a sorted (pair, spring) array, then a successor per spring).
+SpringSet merge_ho_springs(const SpringSet& set, HoMerge mode, HoSprings<double>& out,
+                           std::vector<std::pair<std::uint64_t, Index>>& keys) {
   const Index S = set.size();
-  std::unordered_map<std::uint64_t, Index> head;   // endpoint pair -> first spring of the pair
-  head.reserve(static_cast<std::size_t>(S));
-  std::vector<Index> next(static_cast<std::size_t>(S), -1), last(static_cast<std::size_t>(S), -1);
-  for (Index q = 0; q < S; ++q) {
-    const auto [it, first] = head.try_emplace(endpoint_key(set.i[q], set.j[q]), q);
-    if (first) {
-      last[q] = q;
-    } else {
-      next[last[it->second]] = q;
-      last[it->second] = q;
-    }
+  std::vector<Index> next(static_cast<std::size_t>(S), -1);   // the next spring on the same pair
+  {
+    std::vector<std::pair<std::uint64_t, Index>> by_pair(static_cast<std::size_t>(S));
+    for (Index q = 0; q < S; ++q) by_pair[q] = {endpoint_key(set.i[q], set.j[q]), q};
+    std::sort(by_pair.begin(), by_pair.end());
+    for (Index t = 0; t + 1 < S; ++t)
+      if (by_pair[t].first == by_pair[t + 1].first) next[by_pair[t].second] = by_pair[t + 1].second;
   }
-  SpringSet out;
+  SpringSet out_set;
   std::vector<std::uint8_t> taken(static_cast<std::size_t>(S), 0);
+  out.merge_first.assign(1, 0);
   for (Index q = 0; q < S; ++q) {
     if (taken[q]) continue;
-    const bool group = next[q] >= 0;
     bool equal = true;
     for (Index m = q; m >= 0; m = next[m]) equal = equal && set.rest_length[m] == set.rest_length[q];
-    if (!group || (mode == HoMerge::EqualRestLength && !equal)) {   // every member kept as it is
+    if (next[q] < 0 || (mode == HoMerge::EqualRestLength && !equal)) {   // every member kept as it is
       for (Index m = q; m >= 0; m = next[m]) {
         taken[m] = 1;
-        out.add(set.i[m], set.j[m], set.rest_length[m], set.stiffness[m], set.damping[m], set.kind[m]);
+        out_set.add(set.i[m], set.j[m], set.rest_length[m], set.stiffness[m], set.damping[m], set.kind[m]);
       }
       continue;
     }
@@ -118,24 +108,30 @@ SpringSet merge_ho_springs(const SpringSet& set, HoMerge mode, HoMergeGroups& gr
       k += set.stiffness[m];
       c += set.damping[m];
       kl += set.stiffness[m] * set.rest_length[m];
-      groups.l0.push_back(set.rest_length[m]);
-      groups.k.push_back(set.stiffness[m]);
-      groups.c.push_back(set.damping[m]);
+      out.merge_l0.push_back(set.rest_length[m]);
+      out.merge_k.push_back(set.stiffness[m]);
+      out.merge_c.push_back(set.damping[m]);
     }
-    groups.group_of.emplace(endpoint_key(set.i[q], set.j[q]), static_cast<Index>(groups.first.size()) - 1);
-    groups.first.push_back(static_cast<Index>(groups.l0.size()));
-    out.add(set.i[q], set.j[q], equal || k == 0.0 ? set.rest_length[q] : kl / k, k, c, set.kind[q]);
+    keys.emplace_back(endpoint_key(set.i[q], set.j[q]), static_cast<Index>(out.merge_first.size()) - 1);
+    out.merge_first.push_back(static_cast<Index>(out.merge_l0.size()));
+    out_set.add(set.i[q], set.j[q], equal || k == 0.0 ? set.rest_length[q] : kl / k, k, c, set.kind[q]);
   }
-  return out;
+  std::sort(keys.begin(), keys.end());
+  return out_set;
 }
 
 }  // namespace
 
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out,
                       bool allow_grouping, Index group_block, HoMerge merge) {
-  HoMergeGroups groups;
+  out.merge_group.clear();
+  out.merge_first.clear();
+  out.merge_l0.clear();
+  out.merge_k.clear();
+  out.merge_c.clear();
+  std::vector<std::pair<std::uint64_t, Index>> keys;   // (endpoint pair, merged group), sorted
   // copied once, so that the layout can store it in traversal order
-  SpringSet sorted = merge == HoMerge::None ? set : merge_ho_springs(set, merge, groups);
+  SpringSet sorted = merge == HoMerge::None ? set : merge_ho_springs(set, merge, out, keys);
   out.merged = set.size() - sorted.size();
   layout = SpringLayout(n, sorted);
   layout.reorder(sorted);
@@ -180,23 +176,16 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
       out.part_block.clear();
     }
   }
-  // The merged groups' members, in the final spring order.
-  out.merge_begin.clear();
-  out.merge_l0.clear();
-  out.merge_k.clear();
-  out.merge_c.clear();
-  if (!groups.group_of.empty()) {
-    out.merge_begin.assign(static_cast<std::size_t>(S) + 1, 0);
+  // Each spring's merged group (-1: none), found by its endpoint pair.
+  if (!keys.empty()) {
+    out.merge_group.assign(static_cast<std::size_t>(S), -1);
     for (Index q = 0; q < S; ++q) {
-      const auto it = groups.group_of.find(endpoint_key(out.i[q], out.j[q]));
-      if (it != groups.group_of.end())
-        for (Index m = groups.first[it->second]; m < groups.first[it->second + 1]; ++m) {
-          out.merge_l0.push_back(groups.l0[m]);
-          out.merge_k.push_back(groups.k[m]);
-          out.merge_c.push_back(groups.c[m]);
-        }
-      out.merge_begin[q + 1] = static_cast<Index>(out.merge_l0.size());
+      const std::uint64_t key = endpoint_key(out.i[q], out.j[q]);
+      const auto it = std::lower_bound(keys.begin(), keys.end(), std::make_pair(key, Index{-1}));
+      if (it != keys.end() && it->first == key) out.merge_group[q] = it->second;
     }
+  } else {
+    out.merge_first.clear();
   }
   plan_ho_window(layout, out);
   allocate_ho_window(out, layout.parts());

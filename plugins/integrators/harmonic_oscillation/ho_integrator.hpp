@@ -105,17 +105,18 @@ struct HoSprings {
   // constants that depend only on k, c, W and h (loom/kernels/ho.hpp), so a group's impulse is one
   // spring's with the members' constants added (and, for unequal rest lengths, l0 the kx-weighted
   // mean); the constants are those sums, recomputed from the members at every prepare. Spring q
-  // is a merged group when merge_begin[q] < merge_begin[q + 1]: its members' rest lengths,
-  // stiffnesses and dampers are merge_l0/k/c[merge_begin[q] ..], and l0[q], k[q], c[q] hold the
-  // group's l0 (set by update_ho_coefficients), sum of k and sum of c. All empty when nothing
-  // was merged.
-  std::vector<Index> merge_begin;
+  // stands for merged group g = merge_group[q] when g >= 0: its members' rest lengths,
+  // stiffnesses and dampers are merge_l0/k/c[merge_first[g] .. merge_first[g + 1]), and l0[q],
+  // k[q], c[q] hold the group's l0 (set by update_ho_coefficients), sum of k and sum of c. All
+  // empty when nothing was merged.
+  std::vector<Index> merge_group;
+  std::vector<Index> merge_first;
   std::vector<double> merge_l0, merge_k, merge_c;
   Index merged = 0;   ///< springs folded away (the members beyond each group's first)
 
   Index size() const { return static_cast<Index>(i.size()); }
   /// Whether spring q stands for a merged group.
-  bool is_merged(Index q) const { return !merge_begin.empty() && merge_begin[q] < merge_begin[q + 1]; }
+  bool is_merged(Index q) const { return !merge_group.empty() && merge_group[q] >= 0; }
 };
 
 /// The most vertices per block of the grouped traversal (the per-segment buffers' capacity).
@@ -124,7 +125,7 @@ constexpr Index kHoVertexBlock = kSpringGroupBlockMax;
 /// for what the size changes; table1's HoStep_double_block64/128/256 rows compare sizes).
 constexpr Index kHoGroupBlock = kSpringGroupBlock;
 
-/// Which springs on the same two vertices build_ho_springs merges into one (HoSprings::merge_begin):
+/// Which springs on the same two vertices build_ho_springs merges into one (HoSprings::merge_group):
 /// none; only groups whose rest lengths are equal (what analytic_position can merge: its
 /// displacement constants would need a second weighted rest length otherwise); every group.
 enum class HoMerge { None, EqualRestLength, All };
@@ -161,7 +162,8 @@ void convert_ho_springs(const HoSprings<U>& in, HoSprings<T>& out) {
   out.win.assign(in.win.size(), T(0));
   out.fuse = in.fuse;
   out.twins = in.twins;
-  out.merge_begin = in.merge_begin;
+  out.merge_group = in.merge_group;
+  out.merge_first = in.merge_first;
   out.merge_l0 = in.merge_l0;
   out.merge_k = in.merge_k;
   out.merge_c = in.merge_c;
@@ -223,7 +225,8 @@ struct HoKeyHash {
 template <class T>
 std::array<double, 5> ho_merged_constants(const HoSprings<T>& s, Index q, HoVariant variant, double W, double h) {
   std::array<double, 5> r{0, 0, 0, 0, 0};
-  const Index b = s.merge_begin[q], e = s.merge_begin[q + 1];
+  const Index g = s.merge_group[q];
+  const Index b = s.merge_first[g], e = s.merge_first[g + 1];
   double kxl = 0;
   bool equal = true;
   for (Index m = b; m < e; ++m) {
