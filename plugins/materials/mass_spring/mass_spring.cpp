@@ -1,6 +1,7 @@
 #include "mass_spring.hpp"
 
 #include <algorithm>
+#include <cstdint>
 #include <cmath>
 #include <numeric>
 #include <sstream>
@@ -282,6 +283,16 @@ MassSpringMaterial::MassSpringMaterial(const Params& params, const Mesh& mesh) {
   if (springs_.size() == 0) p.fail("mesh '" + mesh.source + "' gives no springs for stencil " + st);
   damped_ = std::any_of(springs_.damping.begin(), springs_.damping.end(), [](double x) { return x > 0; });
   for (SpringClass cl : springs_.kind) ++counts_[static_cast<int>(cl)];
+  {  // distinct vertex pairs (loom validate prints them when some pair has more than one spring)
+    std::vector<std::uint64_t> key(static_cast<std::size_t>(springs_.size()));
+    for (Index q = 0; q < springs_.size(); ++q) {
+      const auto lo = static_cast<std::uint32_t>(std::min(springs_.i[q], springs_.j[q]));
+      const auto hi = static_cast<std::uint32_t>(std::max(springs_.i[q], springs_.j[q]));
+      key[q] = (std::uint64_t{lo} << 32) | hi;
+    }
+    std::sort(key.begin(), key.end());
+    pairs_ = static_cast<Index>(std::unique(key.begin(), key.end()) - key.begin());
+  }
 
   layout_ = SpringLayout(n_, springs_);
   layout_.reorder(springs_);  // from here on, traversal position == spring index
@@ -365,6 +376,10 @@ std::vector<std::pair<std::string, std::string>> MassSpringMaterial::describe() 
   std::vector<std::pair<std::string, std::string>> d;
   d.emplace_back("stencil", to_string(stencil_));
   d.emplace_back("springs", std::to_string(springs_.size()));
+  if (pairs_ < springs_.size())
+    d.emplace_back("vertex pairs", std::to_string(pairs_) +
+                                       " (symplectic_euler, rk4 and harmonic_oscillation step one merged spring per "
+                                       "pair unless merge_springs: false)");
   const char* names[4] = {"structural", "shear", "bend", "edge"};
   for (int c = 0; c < 4; ++c)
     if (counts_[c] > 0) d.emplace_back(std::string(names[c]) + " springs", std::to_string(counts_[c]));

@@ -69,6 +69,8 @@ class MassSpringMaterial final : public Material {
   bool clamp_compressed() const { return clamp_; }
   Index num_vertices() const { return n_; }
   Index count(SpringClass c) const { return counts_[static_cast<int>(c)]; }
+  /// Distinct vertex pairs joined by springs (fewer than springs().size() when some pair has several).
+  Index vertex_pairs() const { return pairs_; }
 
  private:
   void check_sizes(std::size_t xs, const char* what) const;
@@ -80,6 +82,7 @@ class MassSpringMaterial final : public Material {
   std::vector<double> inv_rest_;  // 1 / l0
   std::vector<double> mass_;
   std::array<Index, 4> counts_{0, 0, 0, 0};
+  Index pairs_ = 0;   ///< distinct vertex pairs
   bool damped_ = false;
   bool clamp_ = true;
   // Jacobian scatter map: per spring, positions of blocks (i,i), (j,j), (i,j), (j,i).
