@@ -4,6 +4,7 @@
 // system, against the CPU backend: HO and RK4 runs, mass_spring and GNATV force/Jacobian
 // assembly, the modified PCG and a Baraff-Witkin step with pins (1e-12 relative in double).
 #include <gtest/gtest.h>
+#include <set>
 
 #include <algorithm>
 #include <cmath>
@@ -45,7 +46,7 @@ using loom_cuda_test::rel_diff;
 
 using loom_cuda_test::to_host;
 
-enum class Mat { Springs, DampedSprings, Gnatv };
+enum class Mat { Springs, DampedSprings, Gnatv, Table1Springs, Table1DampedSprings };
 
 /// A flat grid (xz plane, 1 m) with a material, two pinned corners, a perturbed start.
 std::unique_ptr<Scene> make_scene(Mat m, Index nx, Index ny, unsigned seed = 7, double vel = 0.2, double pert = 0.002) {
@@ -55,6 +56,10 @@ std::unique_ptr<Scene> make_scene(Mat m, Index nx, Index ny, unsigned seed = 7, 
   if (m == Mat::Gnatv) {
     auto p = Params::from_string("material_file: " + kWool + "\n", "<test>");
     sc->material = std::make_unique<gnatv::GnatvMaterial>(p, sc->mesh);
+  } else if (m == Mat::Table1Springs || m == Mat::Table1DampedSprings) {   // most vertex pairs hold two springs
+    const std::string y = std::string("stencil: kang_cho_table1\nstiffness: 2000\ndensity: 0.1\n") +
+                          (m == Mat::Table1DampedSprings ? "damping: 0.4\n" : "");
+    sc->material = std::make_unique<mass_spring::MassSpringMaterial>(Params::from_string(y, "<test>"), sc->mesh);
   } else {
     const std::string y = m == Mat::DampedSprings
                               ? "stiffness: {structural: 2000, shear: 1500, bend: 100}\ndamping: {structural: 0.5, "
@@ -158,6 +163,51 @@ TEST_P(CudaHoRun, MatchesTheCpuBackend) {
   for (Index i : dev->state.pin_list)
     for (int a = 0; a < 3; ++a) EXPECT_EQ(dev->state.x[3 * i + a], dev->mesh.positions[3 * i + a]);
 }
+// Key merge_springs on the device (the CPU plugin's rule, docs/plugins/integrators.md "Duplicate
+// springs merged"): on a kang_cho_table1 cloth, whose vertex pairs mostly hold two springs, the
+// device run with merged springs and the one with every spring both match the CPU plugin (merged)
+// to the rounding bound of MatchesTheCpuBackend, for every variant; the key is read from the scene.
+TEST_P(CudaHoRun, MergedSpringsMatchTheCpuBackend) {
+  const int variant = GetParam();
+  const Mat m = variant == 2 ? Mat::Table1Springs : Mat::Table1DampedSprings;  // kang_cho_2011 has no damping
+  auto cpu = make_scene(m, 12, 10, 7, 0.02, 2e-4);
+  const SpringSet& set = *cpu->material->springs();
+  std::set<std::pair<Index, Index>> pairs;
+  double kmax = 0, wmax = 0;
+  for (Index q = 0; q < set.size(); ++q) {
+    pairs.insert(std::minmax(set.i[q], set.j[q]));
+    kmax = std::max(kmax, set.stiffness[q]);
+  }
+  for (double w : cpu->state.inv_mass) wmax = std::max(wmax, w);
+  ASSERT_LT(pairs.size() * 10, static_cast<std::size_t>(set.size()) * 7);   // at least 30 % of the springs merge
+  HoIntegrator ci(static_cast<HoVariant>(variant));
+  const double h = 1e-4;
+  run(ci, *cpu, h, 50);
+  ASSERT_GT(ci.merged_springs(), 0);
+  const std::string v = to_string(static_cast<HoVariant>(variant));
+  // omega^2 h of the stiffest merged pair (two springs at most here), as in MatchesTheCpuBackend
+  const double om2h = 2 * kmax * 2 * wmax * h;
+  auto max_abs = [](const std::vector<double>& a) {
+    double r = 0;
+    for (double e : a) r = std::max(r, std::fabs(e));
+    return r;
+  };
+  const double vbound = 50 * om2h * 4 * std::numeric_limits<double>::epsilon() * max_abs(cpu->state.x) /
+                        max_abs(cpu->state.v);
+  EXPECT_GT(rel_diff(cpu->state.x, cpu->mesh.positions), 1e-5);
+  for (bool merge : {true, false}) {
+    auto dev = make_scene(m, 12, 10, 7, 0.02, 2e-4);
+    auto di = lc::make_cuda_ho(
+        Params::from_string("variant: " + v + "\nhost_sync_every: 1" + (merge ? std::string("\n") : std::string("\nmerge_springs: false\n"))));
+    run(*di, *dev, h, 50);
+    EXPECT_LE(rel_diff(dev->state.x, cpu->state.x), 1e-12) << v << " merge " << merge;
+    EXPECT_LE(rel_diff(dev->state.v, cpu->state.v), vbound) << v << " merge " << merge;
+    std::printf("[ measured ] HO %s on the device, merge_springs %d, 50 steps: x %.2e, v %.2e relative (bound %.2e)\n",
+                v.c_str(), merge ? 1 : 0, rel_diff(dev->state.x, cpu->state.x), rel_diff(dev->state.v, cpu->state.v),
+                vbound);
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Variants, CudaHoRun, ::testing::Values(0, 1, 2));
 
 #ifdef LOOM_CUDA_OMP_STANDIN

@@ -13,6 +13,7 @@
 #include "loom/kernels/friction.hpp"
 #include "loom/kernels/ho.hpp"
 #include "loom/kernels/rk4.hpp"
+#include "loom/springs.hpp"
 #include "bw_step.hpp"
 #include "device_colliders.hpp"
 #include "se_update.hpp"
@@ -236,7 +237,7 @@ struct HoVertexKernel {  // per vertex: gather the impulses, then update x and v
 template <class T>
 class CudaHo final : public Integrator {
  public:
-  CudaHo(HoVariantD v, int sync_every) : variant_(v), sync_every_(sync_every) {}
+  CudaHo(HoVariantD v, int sync_every, bool merge) : variant_(v), sync_every_(sync_every), merge_(merge) {}
   std::string name() const override { return "harmonic_oscillation"; }
   IntegratorNeeds needs() const override { return {true, false, false}; }
   bool handles_contacts() const override { return true; }  // on the device
@@ -263,18 +264,22 @@ class CudaHo final : public Integrator {
                          "no spring damping. Fix: set the material's spring damping to 0, or use variant velocity "
                          "or analytic_position.");
     }
-    const Index n = scene.state.size(), S = set->size();
+    // Springs on the same two vertices merged as the CPU plugin merges them (key merge_springs;
+    // docs/plugins/integrators.md, "Duplicate springs merged"): the members' constants added.
+    groups_ = merge_ ? group_springs_by_pair(*set, variant_ == HoVariantD::AnalyticPosition) : SpringPairGroups{};
+    const SpringSet& sp = merge_ ? groups_.springs : *set;
+    const Index n = scene.state.size(), S = sp.size();
     hi_.resize(S);
     hj_.resize(S);
     for (Index q = 0; q < S; ++q) {
-      hi_[q] = std::min(set->i[q], set->j[q]);  // HO is symmetric in (i, j)
-      hj_[q] = std::max(set->i[q], set->j[q]);
+      hi_[q] = std::min(sp.i[q], sp.j[q]);  // HO is symmetric in (i, j)
+      hj_[q] = std::max(sp.i[q], sp.j[q]);
     }
-    hk_ = set->stiffness;
-    hc_ = set->damping;
+    hk_ = sp.stiffness;
+    hc_ = sp.damping;
+    hl0_ = sp.rest_length;
     cuda::upload(hi_, si_);
     cuda::upload(hj_, sj_);
-    cuda::upload(set->rest_length, l0_);
     const VertexIncidence inc(n, hi_, hj_);  // the one incidence builder (loom/incidence.hpp)
     cuda::upload(inc.offsets, inc_ptr_);
     cuda::upload(inc.spring, inc_spring_);
@@ -308,22 +313,35 @@ class CudaHo final : public Integrator {
       ex.resize(S);
       ev.resize(S);
     }
+    std::vector<T> l0(S);
     for (Index q = 0; q < S; ++q) {  // in double, like the CPU plugin
       const double wi = s.inv_mass[hi_[q]], wj = s.inv_mass[hj_[q]];
-      if (variant_ == HoVariantD::KangCho2011) {
-        const auto c = kernels::kang_cho_coefficients<double>(hk_[q], wi, wj, h);
-        kx[q] = static_cast<T>(c.kx);
-        kv[q] = static_cast<T>(c.ka);
-      } else {
-        const auto c = kernels::ho_coefficients<double>(hk_[q], hc_[q], wi, wj, h);
-        kx[q] = static_cast<T>(c.kx);
-        kv[q] = static_cast<T>(c.kv);
-        if (pos) {
-          ex[q] = static_cast<T>(c.ex);
-          ev[q] = static_cast<T>(c.ev);
+      auto constants = [&](double k, double c) -> std::array<double, 4> {
+        if (variant_ == HoVariantD::KangCho2011) {
+          const auto r = kernels::kang_cho_coefficients<double>(k, wi, wj, h);
+          return {r.kx, r.ka, 0.0, 0.0};
         }
+        const auto r = kernels::ho_coefficients<double>(k, c, wi, wj, h);
+        return {r.kx, r.kv, r.ex, r.ev};
+      };
+      std::array<double, 5> e{hl0_[q], 0, 0, 0, 0};
+      if (merge_ && groups_.group[q] >= 0) {   // a merged group: its members' constants added
+        bool equal = true;
+        e = pair_group_constants(groups_.first, groups_.l0, groups_.group[q],
+                                 [&](Index m) { return constants(groups_.k[m], groups_.c[m]); }, equal);
+      } else {
+        const auto c = constants(hk_[q], hc_[q]);
+        for (int a = 0; a < 4; ++a) e[1 + a] = c[a];
+      }
+      l0[q] = static_cast<T>(e[0]);
+      kx[q] = static_cast<T>(e[1]);
+      kv[q] = static_cast<T>(e[2]);
+      if (pos) {
+        ex[q] = static_cast<T>(e[3]);
+        ev[q] = static_cast<T>(e[4]);
       }
     }
+    cuda::upload(l0, l0_);
     cuda::upload(kx, kx_);
     cuda::upload(kv, kv_);
     cuda::upload(ex, ex_);
@@ -345,11 +363,13 @@ class CudaHo final : public Integrator {
 
   HoVariantD variant_;
   int sync_every_ = 1;
+  bool merge_ = true;
+  SpringPairGroups groups_;   // merge_springs: the merged groups' members (host)
   DeviceState<T> ds_;
   HostMirror<T> mirror_;  // the host copy of x and v against ds_ (lazy copy, device guard)
   DeviceColliders<T> colliders_;
   std::vector<Index> hi_, hj_;
-  std::vector<double> hk_, hc_;
+  std::vector<double> hk_, hc_, hl0_;
   DVec<Index> si_, sj_, inc_ptr_, inc_spring_;
   DVec<signed char> inc_sign_;
   DVec<T> l0_, kx_, kv_, ex_, ev_, G_, P_;
@@ -1067,12 +1087,13 @@ HoVariantD parse_variant(const Params& p) {
 
 }  // namespace
 
-std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision, int host_sync_every) {
-  if (precision == Precision::Float) return std::make_unique<CudaHo<float>>(variant, host_sync_every);
-  return std::make_unique<CudaHo<double>>(variant, host_sync_every);
+std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision, int host_sync_every, bool merge) {
+  if (precision == Precision::Float) return std::make_unique<CudaHo<float>>(variant, host_sync_every, merge);
+  return std::make_unique<CudaHo<double>>(variant, host_sync_every, merge);
 }
 std::unique_ptr<Integrator> make_cuda_ho(const Params& p) {
-  return make_cuda_ho(parse_variant(p), parse_precision(p), parse_sync_every(p));
+  const bool merge = !p.valid() || ParamReader(p, harmonic_oscillation_spec()).flag("merge_springs");
+  return make_cuda_ho(parse_variant(p), parse_precision(p), parse_sync_every(p), merge);
 }
 
 std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every) {

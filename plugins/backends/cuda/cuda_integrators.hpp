@@ -43,7 +43,9 @@ std::unique_ptr<Integrator> make_cuda_baraff_witkin(const Params& p);
 std::unique_ptr<Integrator> make_cuda_symplectic_euler(const Params& p);
 
 /// Direct construction (tests, benchmarks).
-std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision, int host_sync_every = 1);
+/// merge: key merge_springs (springs on the same two vertices stepped as one, the CPU plugin's rule).
+std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision, int host_sync_every = 1,
+                                         bool merge = true);
 std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every = 1);
 std::unique_ptr<Integrator> make_cuda_symplectic_euler(Precision precision, int host_sync_every = 1);
 struct BwOptionsD {

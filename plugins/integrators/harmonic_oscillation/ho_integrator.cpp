@@ -39,7 +39,7 @@ const ParamSpec& harmonic_oscillation_spec() {
         "vertex order of the step: rcm renumbers the vertices internally (reverse Cuthill-McKee) so that "
         "springs join nearby vertices; results stay in the mesh's numbering. auto: rcm for meshes of at least "
         "16384 vertices whose spring span it shrinks 4x or more; none: the mesh's order");
-    s.flag("merge_springs", true).backends({"cpu"}).help(kHoMergeSpringsHelp);
+    s.flag("merge_springs", true).backends({"cpu", "cuda"}).help(kHoMergeSpringsHelp);
     declare_device_keys(s);
     return s;
   }();
@@ -70,56 +70,6 @@ std::uint64_t endpoint_key(Index a, Index b) {
   return (std::uint64_t{lo} << 32) | hi;
 }
 
-/// set with its duplicate springs merged by mode (HoMerge). A merged spring keeps its group's
-/// first spring's endpoints and kind, in that spring's place, with the stiffnesses and dampers
-/// added and the group's rest length (the first's when they agree, else the stiffness-weighted
-/// mean: update_ho_coefficients replaces it by the kx-weighted one). The members of merged group
-/// g (numbered in the order of their first springs) go to out's merge_first, merge_l0/k/c; keys
-/// gets (endpoint pair, g) for every merged group, sorted by pair. Memory beyond the output: 17
-/// bytes per spring while it runs (a sorted (pair, spring) array, then a successor per spring).
-SpringSet merge_ho_springs(const SpringSet& set, HoMerge mode, HoSprings<double>& out,
-                           std::vector<std::pair<std::uint64_t, Index>>& keys) {
-  const Index S = set.size();
-  std::vector<Index> next(static_cast<std::size_t>(S), -1);   // the next spring on the same pair
-  {
-    std::vector<std::pair<std::uint64_t, Index>> by_pair(static_cast<std::size_t>(S));
-    for (Index q = 0; q < S; ++q) by_pair[q] = {endpoint_key(set.i[q], set.j[q]), q};
-    std::sort(by_pair.begin(), by_pair.end());
-    for (Index t = 0; t + 1 < S; ++t)
-      if (by_pair[t].first == by_pair[t + 1].first) next[by_pair[t].second] = by_pair[t + 1].second;
-  }
-  SpringSet out_set;
-  std::vector<std::uint8_t> taken(static_cast<std::size_t>(S), 0);
-  out.merge_first.assign(1, 0);
-  for (Index q = 0; q < S; ++q) {
-    if (taken[q]) continue;
-    bool equal = true;
-    for (Index m = q; m >= 0; m = next[m]) equal = equal && set.rest_length[m] == set.rest_length[q];
-    if (next[q] < 0 || (mode == HoMerge::EqualRestLength && !equal)) {   // every member kept as it is
-      for (Index m = q; m >= 0; m = next[m]) {
-        taken[m] = 1;
-        out_set.add(set.i[m], set.j[m], set.rest_length[m], set.stiffness[m], set.damping[m], set.kind[m]);
-      }
-      continue;
-    }
-    double k = 0, c = 0, kl = 0;
-    for (Index m = q; m >= 0; m = next[m]) {
-      taken[m] = 1;
-      k += set.stiffness[m];
-      c += set.damping[m];
-      kl += set.stiffness[m] * set.rest_length[m];
-      out.merge_l0.push_back(set.rest_length[m]);
-      out.merge_k.push_back(set.stiffness[m]);
-      out.merge_c.push_back(set.damping[m]);
-    }
-    keys.emplace_back(endpoint_key(set.i[q], set.j[q]), static_cast<Index>(out.merge_first.size()) - 1);
-    out.merge_first.push_back(static_cast<Index>(out.merge_l0.size()));
-    out_set.add(set.i[q], set.j[q], equal || k == 0.0 ? set.rest_length[q] : kl / k, k, c, set.kind[q]);
-  }
-  std::sort(keys.begin(), keys.end());
-  return out_set;
-}
-
 }  // namespace
 
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out,
@@ -130,8 +80,20 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
   out.merge_k.clear();
   out.merge_c.clear();
   std::vector<std::pair<std::uint64_t, Index>> keys;   // (endpoint pair, merged group), sorted
-  // copied once, so that the layout can store it in traversal order
-  SpringSet sorted = merge == HoMerge::None ? set : merge_ho_springs(set, merge, out, keys);
+  SpringSet sorted;   // copied once, so that the layout can store it in traversal order
+  if (merge == HoMerge::None) {
+    sorted = set;
+  } else {
+    SpringPairGroups g = group_springs_by_pair(set, merge == HoMerge::EqualRestLength);
+    for (Index q = 0; q < g.springs.size(); ++q)
+      if (g.group[q] >= 0) keys.emplace_back(endpoint_key(g.springs.i[q], g.springs.j[q]), g.group[q]);
+    std::sort(keys.begin(), keys.end());
+    sorted = std::move(g.springs);
+    out.merge_first = std::move(g.first);
+    out.merge_l0 = std::move(g.l0);
+    out.merge_k = std::move(g.k);
+    out.merge_c = std::move(g.c);
+  }
   out.merged = set.size() - sorted.size();
   layout = SpringLayout(n, sorted);
   layout.reorder(sorted);

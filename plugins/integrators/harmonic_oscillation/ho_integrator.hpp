@@ -23,6 +23,7 @@
 #include "loom/param_spec.hpp"
 #include "loom/params.hpp"
 #include "loom/spring_layout.hpp"
+#include "loom/springs.hpp"
 #include "loom/traversal.hpp"
 #include "loom/vertex_order.hpp"
 #include "ho_window.hpp"
@@ -224,20 +225,12 @@ struct HoKeyHash {
 /// logic error.
 template <class T>
 std::array<double, 5> ho_merged_constants(const HoSprings<T>& s, Index q, HoVariant variant, double W, double h) {
-  std::array<double, 5> r{0, 0, 0, 0, 0};
-  const Index g = s.merge_group[q];
-  const Index b = s.merge_first[g], e = s.merge_first[g + 1];
-  double kxl = 0;
   bool equal = true;
-  for (Index m = b; m < e; ++m) {
-    const auto c = ho_constants(variant, s.merge_k[m], s.merge_c[m], W, h);
-    for (int a = 0; a < 4; ++a) r[1 + a] += c[a];
-    kxl += c[0] * s.merge_l0[m];
-    equal = equal && s.merge_l0[m] == s.merge_l0[b];
-  }
+  const auto r = pair_group_constants(
+      s.merge_first, s.merge_l0, s.merge_group[q],
+      [&](Index m) { return ho_constants(variant, s.merge_k[m], s.merge_c[m], W, h); }, equal);
   if (!equal && variant == HoVariant::AnalyticPosition)
     throw std::logic_error("harmonic_oscillation: analytic_position springs merged with unequal rest lengths");
-  r[0] = equal || r[1] == 0.0 ? s.merge_l0[b] : kxl / r[1];
   return r;
 }
 
