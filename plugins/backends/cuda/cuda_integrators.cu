@@ -402,7 +402,7 @@ struct Rk4Stage {  // stage 1 (kind 0), 2-3 (kind 1, next = h/2 or h), 4 (kind 2
 template <class T>
 class CudaRk4 final : public Integrator {
  public:
-  explicit CudaRk4(int sync_every) : sync_every_(sync_every) {}
+  CudaRk4(int sync_every, bool merge) : sync_every_(sync_every), merge_(merge) {}
   std::string name() const override { return "rk4"; }
   bool handles_contacts() const override { return true; }  // on the device
   void sync_to_host(Scene& scene) override { mirror_.sync(ds_, scene.state); }
@@ -413,7 +413,7 @@ class CudaRk4 final : public Integrator {
     require_device_memory(explicit_bytes<T>(scene, 9), scene.source, "rk4");
     colliders_.prepare(scene);
     if (!scene.material) throw InputError(scene.source + ": rk4 needs a material; add a 'material:' section");
-    model_.build(scene, nullptr);
+    model_.build(scene, nullptr, merge_);   // key merge_springs
     ds_.upload(scene.state);
     mirror_.stale = false;
     const std::size_t m = 3 * static_cast<std::size_t>(ds_.n);
@@ -450,6 +450,7 @@ class CudaRk4 final : public Integrator {
 
  private:
   int sync_every_ = 1;
+  bool merge_ = true;
   DeviceState<T> ds_;
   HostMirror<T> mirror_;  // the host copy of x and v against ds_ (lazy copy, device guard)
   DeviceColliders<T> colliders_;
@@ -478,7 +479,7 @@ struct SeVertexKernel {  // per vertex: the CPU plugin's update, one source (sym
 template <class T>
 class CudaSe final : public Integrator {
  public:
-  explicit CudaSe(int sync_every) : sync_every_(sync_every) {}
+  CudaSe(int sync_every, bool merge) : sync_every_(sync_every), merge_(merge) {}
   std::string name() const override { return "symplectic_euler"; }
   bool handles_contacts() const override { return true; }  // on the device
   void sync_to_host(Scene& scene) override { mirror_.sync(ds_, scene.state); }
@@ -491,7 +492,7 @@ class CudaSe final : public Integrator {
     if (!(h > 0)) throw InputError(scene.source + ": symplectic_euler needs dt > 0");
     require_device_memory(explicit_bytes<T>(scene, 1), scene.source, "symplectic_euler");
     colliders_.prepare(scene);
-    model_.build(scene, nullptr);
+    model_.build(scene, nullptr, merge_);   // key merge_springs
     ds_.upload(scene.state);
     mirror_.stale = false;
     f_.assign(3 * static_cast<std::size_t>(ds_.n), T(0));
@@ -514,6 +515,7 @@ class CudaSe final : public Integrator {
 
  private:
   int sync_every_ = 1;
+  bool merge_ = true;
   DeviceState<T> ds_;
   HostMirror<T> mirror_;  // the host copy of x and v against ds_ (lazy copy, device guard)
   DeviceColliders<T> colliders_;
@@ -1096,23 +1098,25 @@ std::unique_ptr<Integrator> make_cuda_ho(const Params& p) {
   return make_cuda_ho(parse_variant(p), parse_precision(p), parse_sync_every(p), merge);
 }
 
-std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every) {
-  if (precision == Precision::Float) return std::make_unique<CudaRk4<float>>(host_sync_every);
-  return std::make_unique<CudaRk4<double>>(host_sync_every);
+std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every, bool merge) {
+  if (precision == Precision::Float) return std::make_unique<CudaRk4<float>>(host_sync_every, merge);
+  return std::make_unique<CudaRk4<double>>(host_sync_every, merge);
 }
 std::unique_ptr<Integrator> make_cuda_rk4(const Params& p) {
-  return make_cuda_rk4(parse_precision(p), parse_sync_every(p));
+  const bool merge = !p.valid() || ParamReader(p, rk4_spec()).flag("merge_springs");
+  return make_cuda_rk4(parse_precision(p), parse_sync_every(p), merge);
 }
 
-std::unique_ptr<Integrator> make_cuda_symplectic_euler(Precision precision, int host_sync_every) {
-  if (precision == Precision::Float) return std::make_unique<CudaSe<float>>(host_sync_every);
-  return std::make_unique<CudaSe<double>>(host_sync_every);
+std::unique_ptr<Integrator> make_cuda_symplectic_euler(Precision precision, int host_sync_every, bool merge) {
+  if (precision == Precision::Float) return std::make_unique<CudaSe<float>>(host_sync_every, merge);
+  return std::make_unique<CudaSe<double>>(host_sync_every, merge);
 }
 std::unique_ptr<Integrator> make_cuda_symplectic_euler(const Params& p) {
   // One spec (symplectic_euler::spec(), which appends the device keys); `reorder` is cpu only
   // and refused here by the spec's backends column.
   if (p.valid() && p.has("type")) p.mark_used("type");
-  return make_cuda_symplectic_euler(parse_precision(p), parse_sync_every(p));
+  const bool merge = !p.valid() || ParamReader(p, symplectic_euler::spec()).flag("merge_springs");
+  return make_cuda_symplectic_euler(parse_precision(p), parse_sync_every(p), merge);
 }
 
 std::unique_ptr<Integrator> make_cuda_baraff_witkin(const BwOptionsD& o, Precision precision) {

@@ -46,8 +46,10 @@ std::unique_ptr<Integrator> make_cuda_symplectic_euler(const Params& p);
 /// merge: key merge_springs (springs on the same two vertices stepped as one, the CPU plugin's rule).
 std::unique_ptr<Integrator> make_cuda_ho(HoVariantD variant, Precision precision, int host_sync_every = 1,
                                          bool merge = true);
-std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every = 1);
-std::unique_ptr<Integrator> make_cuda_symplectic_euler(Precision precision, int host_sync_every = 1);
+/// merge: key merge_springs (springs on the same two vertices stepped as one; forces only).
+std::unique_ptr<Integrator> make_cuda_rk4(Precision precision, int host_sync_every = 1, bool merge = true);
+/// merge: key merge_springs (springs on the same two vertices stepped as one; forces only).
+std::unique_ptr<Integrator> make_cuda_symplectic_euler(Precision precision, int host_sync_every = 1, bool merge = true);
 struct BwOptionsD {
   double kang_cho_damping = 0, rayleigh_alpha = 0, rayleigh_beta = 0;
   bool halve_on_failure = false;

@@ -7,6 +7,7 @@
 #include "loom/incidence.hpp"
 #include "loom/kernels/bending.hpp"
 #include "loom/kernels/spring.hpp"
+#include "loom/springs.hpp"
 
 namespace loom::cuda {
 
@@ -208,7 +209,8 @@ void warn_host_fallback(const std::string& name) {
 }  // namespace
 
 template <class T>
-void DeviceForceModel<T>::build(const Scene& scene, const BsrPattern* pattern) {
+void DeviceForceModel<T>::build(const Scene& scene, const BsrPattern* pattern, bool merge_springs) {
+  merged_ = 0;
   material_ = scene.material.get();
   if (!material_) throw InputError(scene.source + ": backend cuda: the scene has no material");
   n_ = scene.state.size();
@@ -227,7 +229,7 @@ void DeviceForceModel<T>::build(const Scene& scene, const BsrPattern* pattern) {
     }
     // Spring blocks first: the first one overwrites f and the Jacobian rows, the rest add.
     for (const ElementBlock& b : desc.blocks)
-      if (b.kernel == ElementKernel::Spring) add_springs(b, pattern);
+      if (b.kernel == ElementKernel::Spring) add_springs(b, pattern, merge_springs && !pattern);
     for (const ElementBlock& b : desc.blocks)
       if (b.kernel != ElementKernel::Spring) add_coloured(b, pattern);
     return;
@@ -243,21 +245,26 @@ void DeviceForceModel<T>::build(const Scene& scene, const BsrPattern* pattern) {
 }
 
 template <class T>
-void DeviceForceModel<T>::add_springs(const ElementBlock& b, const BsrPattern* pattern) {
+void DeviceForceModel<T>::add_springs(const ElementBlock& b, const BsrPattern* pattern, bool merge) {
   auto d = std::make_unique<DeviceSprings<T>>();
-  const Index S = b.size();
-  d->count = S;
   d->clamp = (b.flags & ElementBlock::kClampCompressed) != 0;
-  std::vector<Index> I(S), J(S);
-  std::vector<double> l0(S), k(S), c(S);
-  for (Index q = 0; q < S; ++q) {
-    I[q] = b.vertices[2 * q];
-    J[q] = b.vertices[2 * q + 1];
-    l0[q] = b.data[3 * q];
-    k[q] = b.data[3 * q + 1];
-    c[q] = b.data[3 * q + 2];
-    d->damped = d->damped || c[q] != 0.0;
+  SpringSet set;
+  for (Index q = 0; q < b.size(); ++q)
+    set.add(b.vertices[2 * q], b.vertices[2 * q + 1], b.data[3 * q], b.data[3 * q + 1], b.data[3 * q + 2],
+            SpringClass::Structural);
+  if (merge) {   // forces only: the merged spring's force is its group's (loom/springs.hpp)
+    Index m = 0;
+    set = merge_duplicate_springs(set, &m);
+    merged_ += m;
   }
+  const Index S = set.size();
+  d->count = S;
+  const std::vector<Index>& I = set.i;
+  const std::vector<Index>& J = set.j;
+  const std::vector<double>& l0 = set.rest_length;
+  const std::vector<double>& k = set.stiffness;
+  const std::vector<double>& c = set.damping;
+  for (Index q = 0; q < S; ++q) d->damped = d->damped || c[q] != 0.0;
   cuda::upload(I, d->si);
   cuda::upload(J, d->sj);
   cuda::upload(l0, d->l0);

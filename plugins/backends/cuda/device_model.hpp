@@ -102,8 +102,13 @@ class DeviceForceModel {
   /// Read the material's device description. With `pattern` (implicit integrators) also build
   /// the Jacobian scatter maps over it (the material's bind_pattern must already have been
   /// called with the same pattern, for the host fallback).
-  void build(const Scene& scene, const BsrPattern* pattern);
+  /// merge_springs (forces only, pattern null): the springs of a block on the same two vertices
+  /// become one (merge_duplicate_springs, loom/springs.hpp: the same force in exact arithmetic),
+  /// as the CPU's symplectic_euler and rk4 do (key merge_springs).
+  void build(const Scene& scene, const BsrPattern* pattern, bool merge_springs = false);
   ForceModelKind kind() const { return kind_; }
+  /// Springs the last build() folded into others (merge_springs).
+  Index merged_springs() const { return merged_; }
   /// Kernel ids of the blocks on the device, in evaluation order (tests, messages).
   const std::vector<ElementKernel>& kernels() const { return kernels_; }
 
@@ -114,11 +119,12 @@ class DeviceForceModel {
   int force_calls() const { return force_calls_; }
 
  private:
-  void add_springs(const ElementBlock& b, const BsrPattern* pattern);
+  void add_springs(const ElementBlock& b, const BsrPattern* pattern, bool merge);
   void add_coloured(const ElementBlock& b, const BsrPattern* pattern);
 
   ForceModelKind kind_ = ForceModelKind::Host;
   Index n_ = 0;
+  Index merged_ = 0;
   int force_calls_ = 0;
   const Material* material_ = nullptr;
   std::vector<ElementKernel> kernels_;

@@ -8,7 +8,7 @@ namespace loom {
 const ParamSpec& rk4_spec() {
   static const ParamSpec spec = [] {
     ParamSpec s("rk4", "classical 4th-order Runge-Kutta");
-    s.flag("merge_springs", SpringSweep<double>::kMergeDuplicatesDefault).backends({"cpu"}).help(kMergeSpringsHelp);
+    s.flag("merge_springs", SpringSweep<double>::kMergeDuplicatesDefault).backends({"cpu", "cuda"}).help(kMergeSpringsHelp);
     declare_device_keys(s);
     return s;
   }();

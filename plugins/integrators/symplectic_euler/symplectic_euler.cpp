@@ -14,7 +14,7 @@ const ParamSpec& spec() {
         "vertex order of the fused spring step: rcm renumbers the vertices internally (reverse Cuthill-McKee) so "
         "that springs join nearby vertices; results stay in the mesh's numbering. auto: rcm for meshes of at least "
         "16384 vertices whose spring span it shrinks 4x or more; none: the mesh's order");
-    s.flag("merge_springs", SpringSweep<double>::kMergeDuplicatesDefault).backends({"cpu"}).help(kMergeSpringsHelp);
+    s.flag("merge_springs", SpringSweep<double>::kMergeDuplicatesDefault).backends({"cpu", "cuda"}).help(kMergeSpringsHelp);
     declare_device_keys(s);  // precision, host_sync_every: backend cuda (one spec for both backends)
     return s;
   }();

@@ -378,8 +378,8 @@ std::vector<std::pair<std::string, std::string>> MassSpringMaterial::describe() 
   d.emplace_back("springs", std::to_string(springs_.size()));
   if (pairs_ < springs_.size())
     d.emplace_back("vertex pairs", std::to_string(pairs_) +
-                                       " (harmonic_oscillation, and symplectic_euler and rk4 on the cpu backend, "
-                                       "step one merged spring per pair unless merge_springs: false)");
+                                       " (symplectic_euler, rk4 and harmonic_oscillation step one merged spring per "
+                                       "pair unless merge_springs: false)");
   const char* names[4] = {"structural", "shear", "bend", "edge"};
   for (int c = 0; c < 4; ++c)
     if (counts_[c] > 0) d.emplace_back(std::string(names[c]) + " springs", std::to_string(counts_[c]));
