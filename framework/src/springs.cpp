@@ -15,9 +15,7 @@ SpringSet merge_duplicate_springs(const SpringSet& s, Index* merged) {
   std::vector<double> kl;            // sum of k * l0 per merged spring
   std::vector<std::uint8_t> same;    // every spring merged into it has its first spring's rest length
   for (Index q = 0; q < S; ++q) {
-    const auto lo = static_cast<std::uint32_t>(std::min(s.i[q], s.j[q]));
-    const auto hi = static_cast<std::uint32_t>(std::max(s.i[q], s.j[q]));
-    const auto [it, first] = slot_of.try_emplace((std::uint64_t{lo} << 32) | hi, out.size());
+    const auto [it, first] = slot_of.try_emplace(spring_pair_key(s.i[q], s.j[q]), out.size());
     if (first) {   // the group's first spring, in the input order
       out.add(s.i[q], s.j[q], s.rest_length[q], s.stiffness[q], s.damping[q], s.kind[q]);
       kl.push_back(s.stiffness[q] * s.rest_length[q]);
@@ -40,15 +38,10 @@ SpringSet merge_duplicate_springs(const SpringSet& s, Index* merged) {
 
 SpringPairGroups group_springs_by_pair(const SpringSet& set, bool equal_rest_length_only) {
   const Index S = set.size();
-  auto key_of = [&](Index q) {
-    const auto lo = static_cast<std::uint32_t>(std::min(set.i[q], set.j[q]));
-    const auto hi = static_cast<std::uint32_t>(std::max(set.i[q], set.j[q]));
-    return (std::uint64_t{lo} << 32) | hi;
-  };
   std::vector<Index> next(static_cast<std::size_t>(S), -1);   // the next spring on the same pair
   {
     std::vector<std::pair<std::uint64_t, Index>> by_pair(static_cast<std::size_t>(S));
-    for (Index q = 0; q < S; ++q) by_pair[q] = {key_of(q), q};
+    for (Index q = 0; q < S; ++q) by_pair[q] = {spring_pair_key(set.i[q], set.j[q]), q};
     std::sort(by_pair.begin(), by_pair.end());
     for (Index t = 0; t + 1 < S; ++t)
       if (by_pair[t].first == by_pair[t + 1].first) next[by_pair[t].second] = by_pair[t + 1].second;

@@ -27,6 +27,27 @@ using namespace loom;
 using loom::testing::make_scene;
 using loom::testing::TestSpringMaterial;
 
+namespace {
+// Two runs' results (x then v, in the user's numbering) equal to rounding: positions to xtol and
+// velocities to vtol of their scale (by default 1e-13 and 1e-11); and the springs did move the
+// cloth by more than min_moved.
+void expect_runs_agree(const std::vector<double> res[2], const std::vector<double>& x0, const std::string& what,
+                       double xtol = 1e-13, double vtol = 1e-11, double min_moved = 1e-6) {
+  const std::size_t m3 = x0.size();
+  double sx = 0, sv = 0, moved = 0;
+  for (std::size_t q = 0; q < m3; ++q) {
+    sx = std::max(sx, std::abs(res[0][q]));
+    sv = std::max(sv, std::abs(res[0][m3 + q]));
+    moved = std::max(moved, std::abs(res[0][q] - x0[q]));
+  }
+  EXPECT_GT(moved, min_moved) << what;
+  for (std::size_t q = 0; q < m3; ++q) {
+    ASSERT_NEAR(res[1][q], res[0][q], xtol * sx) << what << " x " << q;
+    ASSERT_NEAR(res[1][m3 + q], res[0][m3 + q], vtol * sv) << what << " v " << q;
+  }
+}
+}  // namespace
+
 // Equal to rounding, with dampers, fixed and moving pins; the same bits on 1 and 2 threads.
 TEST(SymplecticEulerFused, MatchesGenericPathAndThreadCounts) {
   const int nx = 52;   // 52 x 52 vertices, ~10k springs: above kParallelMinSprings
@@ -55,18 +76,8 @@ TEST(SymplecticEulerFused, MatchesGenericPathAndThreadCounts) {
   // The test material's force k (l - l0) d / l and the kernel's k (1 - l0/l) d round differently
   // near the rest length (the cancellation in 1 - l0/l costs about 1/strain ulps, strain ~ 1e-4
   // here), so the velocities agree to 1e-9 of their scale, the positions to 1e-12 of theirs.
-  const std::size_t m3 = x.size();
-  double sx = 0, sv = 0, moved = 0;
-  for (std::size_t q = 0; q < m3; ++q) {
-    sx = std::max(sx, std::abs(res[0][q]));
-    sv = std::max(sv, std::abs(res[0][m3 + q]));
-    moved = std::max(moved, std::abs(res[0][q] - x[q]));
-  }
-  EXPECT_GT(moved, 1e-5);
-  for (std::size_t q = 0; q < res[0].size(); ++q) {
-    ASSERT_NEAR(res[1][q], res[0][q], q < m3 ? 1e-12 * sx : 1e-9 * sv) << q;
-    ASSERT_EQ(res[2][q], res[1][q]) << q;
-  }
+  expect_runs_agree(res, x, "fused against generic", 1e-12, 1e-9, 1e-5);
+  for (std::size_t q = 0; q < res[1].size(); ++q) ASSERT_EQ(res[2][q], res[1][q]) << q;
 }
 
 // The blocked sweep (forces of 128 springs by one vectorised loop, then scattered) and the
@@ -449,22 +460,6 @@ struct Shuffled {
   }
 };
 
-// Two runs' results (x then v, in the user's numbering) equal to rounding: positions to 1e-13
-// and velocities to 1e-11 of their scale; and the springs did move the cloth.
-void expect_runs_agree(const std::vector<double> res[2], const std::vector<double>& x0, const std::string& what) {
-  const std::size_t m3 = x0.size();
-  double sx = 0, sv = 0, moved = 0;
-  for (std::size_t q = 0; q < m3; ++q) {
-    sx = std::max(sx, std::abs(res[0][q]));
-    sv = std::max(sv, std::abs(res[0][m3 + q]));
-    moved = std::max(moved, std::abs(res[0][q] - x0[q]));
-  }
-  EXPECT_GT(moved, 1e-6) << what;
-  for (std::size_t q = 0; q < m3; ++q) {
-    ASSERT_NEAR(res[1][q], res[0][q], 1e-13 * sx) << what << " x " << q;
-    ASSERT_NEAR(res[1][m3 + q], res[0][m3 + q], 1e-11 * sv) << what << " v " << q;
-  }
-}
 }  // namespace
 
 // Numbered at random: both runs take the plain sweep (grouping does not pay in either order).

@@ -26,6 +26,13 @@ struct SpringSet {
   }
 };
 
+/// Key of the vertex pair (a, b), the same for (b, a): the lower index in the high 32 bits.
+inline std::uint64_t spring_pair_key(Index a, Index b) {
+  const auto lo = static_cast<std::uint32_t>(a < b ? a : b);
+  const auto hi = static_cast<std::uint32_t>(a < b ? b : a);
+  return (std::uint64_t{lo} << 32) | hi;
+}
+
 /// The springs of s with every group of springs on the same two endpoints (either order) merged
 /// into one: stiffnesses and dampers added, the rest length the stiffness-weighted mean (kept
 /// exactly when the group's rest lengths are equal), endpoints and kind those of the group's

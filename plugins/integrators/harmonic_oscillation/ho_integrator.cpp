@@ -62,16 +62,6 @@ HoIntegrator::HoIntegrator(const Params& p) {
   }
 }
 
-namespace {
-
-std::uint64_t endpoint_key(Index a, Index b) {
-  const auto lo = static_cast<std::uint32_t>(std::min(a, b));
-  const auto hi = static_cast<std::uint32_t>(std::max(a, b));
-  return (std::uint64_t{lo} << 32) | hi;
-}
-
-}  // namespace
-
 void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSprings<double>& out,
                       bool allow_grouping, Index group_block, HoMerge merge) {
   out.merge_group.clear();
@@ -86,7 +76,7 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
   } else {
     SpringPairGroups g = group_springs_by_pair(set, merge == HoMerge::EqualRestLength);
     for (Index q = 0; q < g.springs.size(); ++q)
-      if (g.group[q] >= 0) keys.emplace_back(endpoint_key(g.springs.i[q], g.springs.j[q]), g.group[q]);
+      if (g.group[q] >= 0) keys.emplace_back(spring_pair_key(g.springs.i[q], g.springs.j[q]), g.group[q]);
     std::sort(keys.begin(), keys.end());
     sorted = std::move(g.springs);
     out.merge_first = std::move(g.first);
@@ -142,7 +132,7 @@ void build_ho_springs(Index n, const SpringSet& set, SpringLayout& layout, HoSpr
   if (!keys.empty()) {
     out.merge_group.assign(static_cast<std::size_t>(S), -1);
     for (Index q = 0; q < S; ++q) {
-      const std::uint64_t key = endpoint_key(out.i[q], out.j[q]);
+      const std::uint64_t key = spring_pair_key(out.i[q], out.j[q]);
       const auto it = std::lower_bound(keys.begin(), keys.end(), std::make_pair(key, Index{-1}));
       if (it != keys.end() && it->first == key) out.merge_group[q] = it->second;
     }

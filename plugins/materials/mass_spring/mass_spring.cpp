@@ -285,11 +285,7 @@ MassSpringMaterial::MassSpringMaterial(const Params& params, const Mesh& mesh) {
   for (SpringClass cl : springs_.kind) ++counts_[static_cast<int>(cl)];
   {  // distinct vertex pairs (loom validate prints them when some pair has more than one spring)
     std::vector<std::uint64_t> key(static_cast<std::size_t>(springs_.size()));
-    for (Index q = 0; q < springs_.size(); ++q) {
-      const auto lo = static_cast<std::uint32_t>(std::min(springs_.i[q], springs_.j[q]));
-      const auto hi = static_cast<std::uint32_t>(std::max(springs_.i[q], springs_.j[q]));
-      key[q] = (std::uint64_t{lo} << 32) | hi;
-    }
+    for (Index q = 0; q < springs_.size(); ++q) key[q] = spring_pair_key(springs_.i[q], springs_.j[q]);
     std::sort(key.begin(), key.end());
     pairs_ = static_cast<Index>(std::unique(key.begin(), key.end()) - key.begin());
   }
