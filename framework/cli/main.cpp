@@ -389,6 +389,10 @@ int main(int argc, char** argv) {
                   static_cast<long long>(st.scene().state.step - first_step), el,
                   st.scene().state.step > first_step ? 1e3 * st.step_seconds_total() / (st.scene().state.step - first_step) : 0.0, f.max_strain,
                   f.kinetic + f.gravitational + f.elastic, f.kinetic, f.elastic, st.force_evaluations(), st.linear_iterations());
+      if (st.step_retries() > 0)
+        std::printf("loom: %lld step halving%s after failed linear solves (integrator.on_solver_failure: halve_step): "
+                    "those steps were solved again as two halves\n",
+                    st.step_retries(), st.step_retries() == 1 ? "" : "s");
       if (const auto* tc = st.thread_controller()) {
         char load[128] = "not measured (short set-up)";
         if (tc->start_load() >= 0) std::snprintf(load, sizeof load, "%.2f cores", tc->start_load());

@@ -276,6 +276,7 @@ void Simulation::step() {
   const StepStats s = integrator_->last_step();
   force_evals_ += s.force_evaluations;
   linear_iters_ += s.linear_iterations;
+  retries_ += s.retries;
   if (scene_->state.step % guard_.check_every == 0) check_state(false);
   if (on_step_) on_step_();
 }

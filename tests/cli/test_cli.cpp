@@ -125,6 +125,20 @@ TEST(Cli, DivergenceExitsWith3AndKeepsEarlierFrames) {
   EXPECT_FALSE(fs::exists(dir / "out" / "frame_00002.obj"));
 }
 
+TEST(Cli, SummaryCountsStepHalvings) {
+  // A step the integrator solved again as two halves (StepStats::retries) is counted in the
+  // summary; a run without one prints no such line.
+  const auto dir = scratch("halvings");
+  std::string s = kScene;
+  s.replace(s.find("type: test_explicit_euler"), 25, "type: test_explicit_euler\n  retry_at: 5");
+  Result r = run("run " + write_scene(dir, s) + " --out " + (dir / "out").string());
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("loom: 1 step halving after failed linear solves"), std::string::npos) << r.out;
+  r = run("run " + write_scene(dir, kScene, "plain.yaml") + " --out " + (dir / "plain").string());
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.out.find("step halving"), std::string::npos) << r.out;
+}
+
 TEST(Cli, RunWithRenderDrawsTheFrames) {
   const auto dir = scratch("render");
   const Result r = run("run " + write_scene(dir, kScene) + " --frames 2 --quiet --render --out " + (dir / "out").string());

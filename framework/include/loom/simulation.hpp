@@ -91,6 +91,9 @@ class Simulation {
   /// Totals since construction (for studies).
   long long force_evaluations() const { return force_evals_; }
   long long linear_iterations() const { return linear_iters_; }
+  /// Step halvings after failed solves (StepStats::retries; baraff_witkin's on_solver_failure:
+  /// halve_step) since construction or resume: not kept in the restart file.
+  long long step_retries() const { return retries_; }
   /// Seconds spent inside Integrator::step since construction.
   double step_seconds_total() const { return step_seconds_total_; }
 
@@ -165,7 +168,7 @@ class Simulation {
   void check_program_state();
   OutputOptions output_;
   GuardOptions guard_;
-  long long force_evals_ = 0, linear_iters_ = 0;
+  long long force_evals_ = 0, linear_iters_ = 0, retries_ = 0;
   double step_seconds_ = 0;
   double step_seconds_total_ = 0;
   long long steps_in_frame_ = 0;
