@@ -14,11 +14,13 @@ echo "$out" | grep -q "backend: cuda needs a usable NVIDIA GPU" || { echo "unexp
 echo "$out" | grep -q "set backend: cpu" || { echo "the message does not name the fix: $out"; exit 1; }
 [ "$(echo "$out" | grep -c 'error')" -eq 1 ] || { echo "expected one error line: $out"; exit 1; }
 echo "no GPU: clear error, as expected"
-# The shipped Baraff-Witkin draped ball on cuda: its solver list [cholmod, filtered_pcg] picks the
-# first solver the cuda backend has (filtered_pcg), and the scene (sphere collider, self-collision
-# removed) reaches the device check instead of being refused.
+# The shipped Baraff-Witkin draped ball on cuda with the solver list [cholmod, filtered_pcg] (the
+# scene's own list until it chose filtered_pcg alone): the list picks the first solver the cuda
+# backend has (filtered_pcg), and the scene (sphere collider, self-collision removed) reaches the
+# device check instead of being refused.
 root=$(dirname "$0")/../..
-out=$("$loom" validate "$root/scenes/draped_ball_gnatv_bw.yaml" --set backend=cuda --set self_collision=null 2>&1); rc=$?
+out=$("$loom" validate "$root/scenes/draped_ball_gnatv_bw.yaml" --set backend=cuda --set self_collision=null \
+  --set 'solver.type=[cholmod, filtered_pcg]' 2>&1); rc=$?
 echo "$out" | grep -q "using filtered_pcg" || { echo "draped_ball_gnatv_bw on cuda did not choose filtered_pcg: $out"; exit 1; }
 if [ "$rc" -ne 0 ]; then
   echo "$out" | grep -q "backend: cuda needs a usable NVIDIA GPU" || { echo "draped_ball_gnatv_bw on cuda refused: $out"; exit 1; }
