@@ -139,7 +139,12 @@ void Simulation::build(const Params& scene, const std::string& base_dir, PluginL
     state_check_pending_ = true;
   }
   if (auto_threads) {  // the count the steps start on (loom/thread_start.hpp)
-    thread_ctl_ = auto_threads->finish(usable_cores(), static_cast<long long>(sc.state.x.size() / 3));
+    // A mesh below kParallelMinVertices starts on 1 thread, unless an iterative solver's row
+    // loops (most of an implicit step) run in parallel at its size (loom/threads.hpp).
+    long long serial_below = kParallelMinVertices;
+    if (sc.solver && sc.solver->parallel_min_rows() > 0)
+      serial_below = std::min<long long>(serial_below, sc.solver->parallel_min_rows());
+    thread_ctl_ = auto_threads->finish(usable_cores(), static_cast<long long>(sc.state.x.size() / 3), serial_below);
     sc.threads = auto_threads->start().threads;
     omp_set_num_threads(sc.threads);
   }

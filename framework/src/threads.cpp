@@ -94,7 +94,7 @@ int free_cores(int cores, int mask_cpus, double others_busy) {
 }
 
 ThreadStart choose_start_threads(int cores, int mask_cpus, double others_busy, int others_runnable,
-                                 long long vertices) {
+                                 long long vertices, long long serial_below) {
   ThreadStart s;
   cores = std::max(1, cores);
   const int by_runnable = others_runnable >= 0 ? std::max(1, cores - others_runnable) : -1;
@@ -103,7 +103,7 @@ ThreadStart choose_start_threads(int cores, int mask_cpus, double others_busy, i
     s.free = by_runnable;
     s.unconfirmed = true;
   }
-  s.small_mesh = vertices >= 0 && vertices < kParallelMinVertices;
+  s.small_mesh = vertices >= 0 && vertices < serial_below;
   s.threads = s.small_mesh ? 1 : (s.free > 0 ? s.free : cores);
   return s;
 }

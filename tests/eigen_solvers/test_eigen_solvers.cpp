@@ -256,6 +256,18 @@ TEST(EigenSolvers, SameAnswerOnOneAndTwoThreads) {
   EXPECT_LT(rel_diff(a.dv, bv), 1e-8);
 }
 
+// threads: auto's start-up rule reads it (Simulation::build): the PCG's loops run in parallel from
+// its parallel_min_rows (kParallelMinRows unless the scene sets it); the direct solve never.
+TEST(EigenSolvers, ParallelMinRowsIsThePcgsSettingAndNoneForTheDirectSolver) {
+  loom::EigenLdlt direct;
+  EXPECT_EQ(direct.parallel_min_rows(), -1);
+  loom::EigenPcg p(pcg(loom::PcgPreconditioner::BlockJacobi));
+  EXPECT_EQ(p.parallel_min_rows(), loom::kParallelMinRows);
+  auto o = pcg(loom::PcgPreconditioner::Jacobi);
+  o.parallel_min_rows = 100;
+  EXPECT_EQ(loom::EigenPcg(o).parallel_min_rows(), 100);
+}
+
 TEST(EigenSolvers, PcgToleranceIsRelativeResidual) {
   System sys;
   SystemSpec sp;

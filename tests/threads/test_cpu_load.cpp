@@ -218,6 +218,12 @@ TEST(StartRule, BusyIdleSmallAndUnknown) {
   EXPECT_TRUE(s.small_mesh);
   EXPECT_EQ(s.free, 2);
   EXPECT_EQ(choose_start_threads(2, 2, 0.0, -1, kParallelMinVertices).threads, 2);
+  // Under an iterative solver whose row loops run in parallel from kParallelMinRows
+  // (LinearSolver::parallel_min_rows): ground_plane's 2304 vertices start on the free cores.
+  EXPECT_EQ(choose_start_threads(2, 2, 0.0, -1, 2304).threads, 1);
+  EXPECT_EQ(choose_start_threads(2, 2, 0.0, -1, 2304, kParallelMinRows).threads, 2);
+  EXPECT_EQ(choose_start_threads(2, 2, 1.0, -1, 2304, kParallelMinRows).threads, 1);  // busy: still 1
+  EXPECT_TRUE(choose_start_threads(2, 2, 0.0, -1, kParallelMinRows - 1, kParallelMinRows).small_mesh);
   // Window unknown: the runnable count decides; both unknown: all cores.
   EXPECT_EQ(choose_start_threads(2, 2, -1, 1, big).threads, 1);
   EXPECT_EQ(choose_start_threads(2, 2, -1, 0, big).threads, 2);

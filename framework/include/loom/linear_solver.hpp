@@ -64,6 +64,13 @@ class LinearSolver {
     (void)s;
     return false;
   }
+  /// The smallest system, in block rows, whose solve runs its loops on the OpenMP threads (the
+  /// rule of common.hpp in rows, kParallelMinRows, or the solver's own setting); -1 when its
+  /// solve never does (direct solvers, whose factorisation uses its own BLAS threads). The
+  /// start-up rule of `threads: auto` reads it (Simulation::build, loom/threads.hpp): an
+  /// iterative solve is most of an implicit step, so a mesh of at least this many vertices
+  /// starts on the free cores although it is below kParallelMinVertices.
+  virtual Index parallel_min_rows() const { return -1; }
 };
 
 }  // namespace loom

@@ -21,8 +21,9 @@ class AutoThreadStart {
   /// too short to measure and the mesh is not small, the runnable count decides
   /// (others_runnable_sampled: up to 8 ms of sleep while others are runnable); when the reading
   /// takes cores from the run, the runnable count must confirm it (others_runnable_confirm: up
-  /// to 2 ms of sleep while nothing else is runnable). Call once.
-  std::unique_ptr<ThreadController> finish(int cores, long long vertices);
+  /// to 2 ms of sleep while nothing else is runnable). serial_below: choose_start_threads'. Call once.
+  std::unique_ptr<ThreadController> finish(int cores, long long vertices,
+                                           long long serial_below = kParallelMinVertices);
   const ThreadStart& start() const { return start_; }
   double others_busy() const { return others_busy_; }  ///< during the set-up; -1 unknown
   int others_runnable() const { return runnable_; }     ///< the runnable count read at the start; -1 not read

@@ -6,13 +6,16 @@
 //   The scene is set up on those cores less the other runnable processes (/proc/loadavg); the
 //   steps then start on choose_start_threads(): 1 thread when the mesh is below
 //   kParallelMinVertices (most loops run serially there and a second thread only adds
-//   barriers) or when other processes kept the cores busy during the set-up (/proc/stat,
+//   barriers; under an iterative linear solver, whose row loops are most of the step, below its
+//   LinearSolver::parallel_min_rows(), kParallelMinRows by default) or when other processes kept the cores busy during the set-up (/proc/stat,
 //   loom/cpu_load.hpp; the runnable count when the set-up was too short to measure), else the
 //   free cores. loom/thread_controller.hpp then adapts the count to the step times.
 // - An explicit count is capped at those cores (more threads than cores only adds waiting at
 //   every barrier) with a note; a count above kMaxThreads is refused.
 // - Small loops run serially: kParallelMinVertices (common.hpp) is the threshold.
 #pragma once
+
+#include "loom/common.hpp"
 
 namespace loom {
 
@@ -49,7 +52,7 @@ int free_cores(int cores, int mask_cpus, double others_busy);
 struct ThreadStart {
   int threads = 1;
   int free = -1;            ///< free cores (free_cores(), or from the runnable count; -1 unknown)
-  bool small_mesh = false;  ///< below kParallelMinVertices: starts on 1 whatever the load
+  bool small_mesh = false;  ///< below serial_below (kParallelMinVertices by default): starts on 1 whatever the load
   bool unconfirmed = false; ///< others_busy took cores that the runnable count did not: not trusted
 };
 /// The start-up rule. cores: usable_cores(); mask_cpus: CPUs in the affinity mask;
@@ -59,9 +62,11 @@ struct ThreadStart {
 /// an others_busy that takes cores (others_runnable_confirm()): others take a core only when
 /// both say so, so one window's reading (a short set-up is a few ticks per CPU, and a burst
 /// that ended counts in it) cannot hold the run on fewer cores by itself;
-/// vertices: the mesh's vertex count.
+/// vertices: the mesh's vertex count; serial_below: a mesh with fewer vertices starts on 1
+/// (kParallelMinVertices, or an iterative solver's parallel_min_rows() when smaller: see the top
+/// of this file).
 ThreadStart choose_start_threads(int cores, int mask_cpus, double others_busy, int others_runnable,
-                                 long long vertices);
+                                 long long vertices, long long serial_below = kParallelMinVertices);
 
 
 }  // namespace loom

@@ -70,6 +70,7 @@ class EigenPcg final : public LinearSolver {
     tolerance_scale_ = s;
     return true;
   }
+  Index parallel_min_rows() const override { return options_.parallel_min_rows; }
   const PcgOptions& options() const { return options_; }
   /// The multigrid hierarchy (preconditioner: sa_amg), null before the first factorize().
   amg::SaAmg* amg() { return amg_.get(); }
