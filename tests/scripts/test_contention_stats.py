@@ -9,6 +9,7 @@ import unittest
 sys.path.insert(0, sys.argv.pop(1) if len(sys.argv) > 1 else
                 os.path.join(os.path.dirname(__file__), "..", "..", "scripts"))
 import contention_stats as cs  # noqa: E402
+import contention  # noqa: E402
 
 
 def exact_ratios(t1, t2, ta):
@@ -142,6 +143,21 @@ class Order(unittest.TestCase):
         self.assertEqual(len(pairs), 6)
         self.assertTrue(all(c == 2 for c in pairs.values()))
         self.assertEqual(cs.run_order(6), cs.run_order(0))
+
+
+class Plan(unittest.TestCase):
+    """contention.frames_for: the frames of a planned run (the rest of plan_scene runs loom)."""
+    def test_uncapped_runs_whole_frames_covering_the_simulated_time(self):
+        self.assertEqual(contention.frames_for(500, 500, 8), (63, 8))     # 504 steps >= 500
+        self.assertEqual(contention.frames_for(900, 500, 8), (63, 8))
+
+    def test_capped_runs_whole_frames_within_the_steps(self):
+        self.assertEqual(contention.frames_for(375, 500, 8), (46, 8))     # 368 steps
+        self.assertEqual(contention.frames_for(8, 500, 8), (1, 8))
+
+    def test_fewer_steps_than_a_frame_make_one_short_frame(self):
+        self.assertEqual(contention.frames_for(5, 500, 8), (1, 5))
+        self.assertEqual(contention.frames_for(0, 500, 8), (1, 1))
 
 
 if __name__ == "__main__":
