@@ -424,6 +424,43 @@ TEST(BaraffWitkin, SolverFailurePolicy) {
   }
 }
 
+// A solve that fails without a hint of halve_step (PCG out of iterations: its own message names
+// max_iterations, dt and the direct solvers) gets it from the integrator under `stop`; under
+// halve_step the message says how many halvings it gave up after instead.
+TEST(BaraffWitkin, StopNamesHalveStepForEveryFailure) {
+  const Index nx = 8, ny = 8;
+  const double dx = 0.05;
+  auto fail = [&](BaraffWitkinOptions::OnFailure mode) {
+    Scene sc;
+    loom::testing::init_scene(sc, grid_xz(nx, ny, dx),
+                              std::make_unique<SpringMaterial>(std::vector<double>(nx * ny, 0.002),
+                                                               loom::testing::grid_springs(nx, ny, dx, 2000), true));
+    sc.state.pin((ny - 1) * nx);
+    sc.state.update_inverse_masses();
+    loom::PcgOptions po;
+    po.tolerance = 1e-14;
+    po.max_iterations = 1;  // never enough
+    sc.solver = std::make_unique<loom::EigenPcg>(po);
+    BaraffWitkinOptions o;
+    o.on_failure = mode;
+    o.max_halvings = 1;
+    BaraffWitkin bw(o);
+    bw.prepare(sc, 0.01);
+    try {
+      bw.step(sc, 0.01);
+    } catch (const loom::SolverError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no failure");
+  };
+  const std::string stop = fail(BaraffWitkinOptions::OnFailure::Stop);
+  EXPECT_NE(stop.find("not converged in 1 iterations"), std::string::npos) << stop;
+  EXPECT_NE(stop.find("set integrator.on_solver_failure: halve_step"), std::string::npos) << stop;
+  const std::string halve = fail(BaraffWitkinOptions::OnFailure::HalveStep);
+  EXPECT_NE(halve.find("gave up after 1 halvings"), std::string::npos) << halve;
+  EXPECT_EQ(halve.find("set integrator.on_solver_failure"), std::string::npos) << halve;
+}
+
 TEST(BaraffWitkin, StepStatsAndWarmStart) {
   auto run = [](bool warm, loom::StepStats& last) {
     Scene sc;

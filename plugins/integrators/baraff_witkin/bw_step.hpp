@@ -137,6 +137,8 @@ void advance(Ops& ops, const State& state, double h, int depth, StepStats& st, c
   std::string msg = buf + (rep.message.empty() ? std::string("the solver reported no reason") : rep.message);
   if (ops.halve_on_failure())
     msg += " (gave up after " + std::to_string(ops.max_halvings()) + " halvings; raise max_halvings or reduce dt)";
+  else if (msg.find("halve_step") == std::string::npos)
+    msg += "; or set integrator.on_solver_failure: halve_step, which solves a failed step again as two halves";
   throw SolverError(msg);
 }
 
