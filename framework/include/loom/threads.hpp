@@ -7,8 +7,9 @@
 //   steps then start on choose_start_threads(): 1 thread when the mesh is below
 //   kParallelMinVertices (most loops run serially there and a second thread only adds
 //   barriers; under an iterative linear solver, whose row loops are most of the step, below its
-//   LinearSolver::parallel_min_rows(), kParallelMinRows by default) or when other processes kept the cores busy during the set-up (/proc/stat,
-//   loom/cpu_load.hpp; the runnable count when the set-up was too short to measure), else the
+//   LinearSolver::parallel_min_rows(), kParallelMinRows by default) or when other processes
+//   kept the cores busy during the set-up (/proc/stat, loom/cpu_load.hpp; the runnable count
+//   when the set-up was too short to measure), else the
 //   free cores. loom/thread_controller.hpp then adapts the count to the step times.
 // - An explicit count is capped at those cores (more threads than cores only adds waiting at
 //   every barrier) with a note; a count above kMaxThreads is refused.
