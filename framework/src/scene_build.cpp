@@ -37,6 +37,42 @@ Params optional_section(const Params& root, const std::string& name, const std::
   return p;
 }
 
+// `make` builds a plugin of `kind` named `name` from `section`; when it refuses a key that other
+// plugins of the kind declare (a scene whose type was switched, e.g. by --set
+// integrator.type=rk4, keeps the keys of the plugin before), the error names those plugins and
+// how to drop the key. Their modules are loaded only then.
+template <class Make>
+auto naming_key_owners(PluginKind kind, const std::string& name, const Params& section, PluginLoader& loader,
+                       Make&& make) {
+  try {
+    return make();
+  } catch (const InputError& e) {
+    const std::string msg = e.what();
+    for (const auto& k : section.keys()) {
+      if (msg.find("unknown key '" + k + "'") == std::string::npos) continue;
+      std::string owners;
+      for (const auto& other : loader.names(kind)) {
+        if (other == name) continue;
+        try {
+          loader.ensure(kind, other);
+        } catch (const InputError&) {
+          continue;  // a module that does not load names nothing
+        }
+        const ParamSpec* spec = loader.registry().params(kind, other);
+        if (spec && spec->find(k)) owners += (owners.empty() ? "'" : "', '") + other;
+      }
+      if (owners.empty()) break;
+      const std::string dotted = section.path().empty() ? k : section.path() + "." + k;
+      const std::string whose = " '" + k + "' is a key of " + to_string(kind) + " " + owners + "', not of '" + name + "'";
+      if (msg.rfind("--set ", 0) == 0) throw InputError(msg + whose + ". Fix: drop that --set.");
+      throw InputError(msg + whose + ": a scene switched to another " + to_string(kind) +
+                       " keeps the keys of the one before. Fix: remove it from the scene, or run with --set " + dotted +
+                       "=null.");
+    }
+    throw;
+  }
+}
+
 }  // namespace
 
 void apply_overrides(Params& root, const std::vector<std::string>& overrides) {
@@ -129,7 +165,9 @@ std::string material(const Params& root, Scene& sc, PluginLoader& loader) {
   const bool material_on_backend = loader.registry().has(PluginKind::Material, material_name, sc.backend);
   const Params fabric_bending = apply_fabric(mat, material_name);  // measured-fabric library (loom/fabric_library.hpp)
   const Params bending = mat.has("bending") ? mat.child("bending") : fabric_bending;  // hinge bending (loom/bending.hpp)
-  sc.material = loader.registry().make_material(material_name, material_on_backend ? sc.backend : "cpu", mat, sc.mesh);
+  sc.material = naming_key_owners(PluginKind::Material, material_name, mat, loader, [&] {
+    return loader.registry().make_material(material_name, material_on_backend ? sc.backend : "cpu", mat, sc.mesh);
+  });
   sc.material = add_bending(std::move(sc.material), with_section_spec(bending, "bending"), sc.mesh, sc.backend);
   return material_name;
 }
@@ -256,7 +294,8 @@ IntegratorChoice integrator(const Params& root, Scene& sc, PluginLoader& loader,
   } catch (const InputError& e) {
     integ.child("type").fail(e.what());
   }
-  c.integrator = loader.registry().make_integrator(c.name, sc.backend, integ);
+  c.integrator = naming_key_owners(PluginKind::Integrator, c.name, integ, loader,
+                                   [&] { return loader.registry().make_integrator(c.name, sc.backend, integ); });
   const IntegratorNeeds needs = c.integrator->needs();
   if (needs.springs && !sc.material->springs())
     integ.fail("integrator '" + c.name + "' works per spring, but material '" + material_name +

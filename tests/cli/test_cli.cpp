@@ -113,6 +113,37 @@ TEST(Cli, BadInputExitsWith2AndNamesFileAndLine) {
   EXPECT_NE(r.out.find("unknown material 'test_gravity_only'"), std::string::npos) << r.out;
 }
 
+// A scene whose integrator or material type is switched keeps the keys of the plugin before:
+// the error names the plugin that declares the key and how to drop it (from the file: a
+// --set KEY=null; from a --set: drop it). A key no plugin declares gets no such sentence.
+TEST(Cli, KeyOfAnotherPluginNamesItsOwnerAndTheFix) {
+  const std::string ball = std::string(LOOM_SOURCE_DIR) + "/scenes/draped_mesh_sphere_gnatv_bw.yaml";
+  Result r = run("validate " + ball + " --set integrator.type=rk4", false);
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("draped_mesh_sphere_gnatv_bw.yaml:21: unknown key 'kang_cho_damping'"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("is a key of integrator 'baraff_witkin', not of 'rk4'"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("--set integrator.kang_cho_damping=null"), std::string::npos) << r.out;
+  // with that key dropped, the next one of baraff_witkin is named in turn
+  r = run("validate " + ball + " --set integrator.type=rk4 --set integrator.kang_cho_damping=null", false);
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("unknown key 'on_solver_failure'"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("--set integrator.on_solver_failure=null"), std::string::npos) << r.out;
+  const std::string se = std::string(LOOM_SOURCE_DIR) + "/scenes/draped_ball_symplectic_euler.yaml";
+  r = run("validate " + se + " --set material.type=gnatv --set material.material_file=../materials/wool.yaml", false);
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("unknown key 'stencil'"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("is a key of material 'mass_spring', not of 'gnatv'"), std::string::npos) << r.out;
+  r = run("validate " + se + " --set integrator.kang_cho_damping=0.1", false);
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("is a key of integrator 'baraff_witkin', not of 'symplectic_euler'. Fix: drop that --set."),
+            std::string::npos)
+      << r.out;
+  r = run("validate " + se + " --set integrator.dampin=0.1", false);
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("unknown key 'dampin'"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("is a key of"), std::string::npos) << r.out;
+}
+
 TEST(Cli, DivergenceExitsWith3AndKeepsEarlierFrames) {
   const auto dir = scratch("diverge");
   std::string s = kScene;
