@@ -241,6 +241,37 @@ int finish(int code) {
   return code;
 }
 
+// After `loom run SCENE` diverged: the stable-step estimate of the scene's initial state (what
+// `loom validate` prints), so that the message says whether dt was above it. Explicit
+// integrators only (the estimate has no meaning for the others); built from a fresh copy of the
+// scene, since the run's state is the diverged one. Nothing is printed when that fails.
+void print_step_estimate(const Args& args) {
+  if (args.command != "run" || !args.resume.empty() || !loom::is_output_rank()) return;
+  try {
+    loom::Registry registry;
+    loom::PluginLoader loader(registry);
+    loom::Simulation fresh(args.scene, args.sets, loader);
+    const auto lim = loom::estimate_step_limit(fresh.scene(), fresh.integrator_name());
+    if (!lim) return;
+    const double dt = fresh.dt();
+    char buf[640];
+    if (dt > lim->h_max)
+      std::snprintf(buf, sizeof buf,
+                    "loom: dt = %.3g s exceeds the largest stable step of %s estimated at the initial state, %.3g s "
+                    "(loom validate prints it before a run). Fix: set integrator.dt <= %.3g (with "
+                    "integrator.frame_time the frames keep their spacing), lower the stiffness, or use baraff_witkin.",
+                    dt, fresh.integrator_name().c_str(), lim->h_max, 0.9 * lim->h_max);
+    else
+      std::snprintf(buf, sizeof buf,
+                    "loom: dt = %.3g s is within the largest stable step of %s estimated at the initial state, %.3g s: "
+                    "a later state went unstable (a stiffer stretch, contact, fast motion: a smaller step or more "
+                    "damping), or the guard's bound is below motion that is real.",
+                    dt, fresh.integrator_name().c_str(), lim->h_max);
+    std::cerr << buf << "\n";
+  } catch (const std::exception&) {
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -434,6 +465,7 @@ int main(int argc, char** argv) {
     return finish(loom::kExitBadInput);
   } catch (const loom::DivergenceError& e) {
     std::cerr << "loom: " << e.what() << "\n(frames written before the divergence are kept)\n";
+    print_step_estimate(args);
     return finish(loom::kExitDiverged);
   } catch (const loom::SolverError& e) {
     std::cerr << "loom: linear solver failed: " << e.what() << "\n";

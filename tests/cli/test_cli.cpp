@@ -156,6 +156,38 @@ TEST(Cli, DivergenceExitsWith3AndKeepsEarlierFrames) {
   EXPECT_FALSE(fs::exists(dir / "out" / "frame_00002.obj"));
 }
 
+// After a divergence of an explicit run, the stable-step estimate of the initial state (the one
+// `loom validate` prints) says whether dt was above it, and the fix gives 0.9 of it.
+TEST(Cli, DivergenceOfAnExplicitRunComparesDtWithTheStableStep) {
+  const auto dir = scratch("diverge_dt");
+  const std::string scene = std::string(LOOM_SOURCE_DIR) + "/scenes/hanging_cloth.yaml";
+  const Result v = run("validate " + scene, false);
+  const auto at = v.out.find("largest stable step about ");
+  ASSERT_NE(at, std::string::npos) << v.out;
+  const double h_max = std::stod(v.out.substr(at + 26));
+  ASSERT_GT(h_max, 0);
+  char dt[32], fix[32], est[32];
+  std::snprintf(dt, sizeof dt, "%.3g", 2.5 * h_max);
+  std::snprintf(est, sizeof est, "%.3g", h_max);
+  std::snprintf(fix, sizeof fix, "%.3g", 0.9 * h_max);
+  Result r = run("run " + scene + " --frames 3 --quiet --set integrator.dt=" + dt + " --out " + (dir / "a").string(), false);
+  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_NE(r.out.find("exceeds the largest stable step of symplectic_euler estimated at the initial state, " +
+                       std::string(est) + " s"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("set integrator.dt <= " + std::string(fix)), std::string::npos) << r.out;
+  // a stable dt that a tight guard stops: the message says dt was within the estimate
+  r = run("run " + scene + " --frames 3 --quiet --set guard.max_velocity=0.05 --out " + (dir / "b").string(), false);
+  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_NE(r.out.find("is within the largest stable step of symplectic_euler"), std::string::npos) << r.out;
+  // an implicit run has no such estimate: nothing is added
+  r = run("run " + std::string(LOOM_SOURCE_DIR) + "/scenes/drape_denim.yaml --frames 2 --quiet --set "
+          "guard.max_velocity=0.01 --out " + (dir / "c").string(), false);
+  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_EQ(r.out.find("largest stable step"), std::string::npos) << r.out;
+}
+
 TEST(Cli, SummaryCountsStepHalvings) {
   // A step the integrator solved again as two halves (StepStats::retries) is counted in the
   // summary; a run without one prints no such line.
