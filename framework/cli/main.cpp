@@ -244,13 +244,17 @@ int finish(int code) {
 // After `loom run SCENE` diverged: the stable-step estimate of the scene's initial state (what
 // `loom validate` prints), so that the message says whether dt was above it. Explicit
 // integrators only (the estimate has no meaning for the others); built from a fresh copy of the
-// scene, since the run's state is the diverged one. Nothing is printed when that fails.
+// scene (for --resume, the scene.yaml of the run), since the run's state is the diverged one.
+// Nothing is printed when that fails.
 void print_step_estimate(const Args& args) {
-  if (args.command != "run" || !args.resume.empty() || !loom::is_output_rank()) return;
+  if (args.command != "run" || !loom::is_output_rank()) return;
   try {
     loom::Registry registry;
     loom::PluginLoader loader(registry);
-    loom::Simulation fresh(args.scene, args.sets, loader);
+    const std::unique_ptr<loom::Simulation> owned =
+        args.resume.empty() ? std::make_unique<loom::Simulation>(args.scene, args.sets, loader)
+                            : loom::cli::load_run_scene(args.resume, loader);
+    loom::Simulation& fresh = *owned;
     const auto lim = loom::estimate_step_limit(fresh.scene(), fresh.integrator_name());
     if (!lim) return;
     const double dt = fresh.dt();

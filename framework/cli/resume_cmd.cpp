@@ -12,7 +12,7 @@ namespace fs = std::filesystem;
 
 namespace loom::cli {
 
-std::unique_ptr<Simulation> load_for_resume(const std::string& run_dir, int frames, PluginLoader& loader) {
+std::unique_ptr<Simulation> load_run_scene(const std::string& run_dir, PluginLoader& loader) {
   if (!fs::is_directory(run_dir))
     throw InputError(run_dir + ": not a folder. Fix: --resume takes the output folder of a stopped 'loom run'.");
   const fs::path scene = fs::path(run_dir) / "scene.yaml";
@@ -40,6 +40,11 @@ std::unique_ptr<Simulation> load_for_resume(const std::string& run_dir, int fram
     throw InputError(std::string(e.what()) + " (line numbers refer to " + scene.string() +
                      ", the copy of the scene the run left)");
   }
+  return sim;
+}
+
+std::unique_ptr<Simulation> load_for_resume(const std::string& run_dir, int frames, PluginLoader& loader) {
+  std::unique_ptr<Simulation> sim = load_run_scene(run_dir, loader);
   sim->output().dir = run_dir;
   sim->resume(frames);
   // What continues from the exact state but not bit for bit (docs/OUTPUT.md).

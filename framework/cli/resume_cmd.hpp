@@ -13,4 +13,7 @@ namespace loom::cli {
 /// to its last complete frame (Simulation::resume). frames >= 0 replaces the run's frame count.
 std::unique_ptr<Simulation> load_for_resume(const std::string& run_dir, int frames, PluginLoader& loader);
 
+/// The same simulation at its initial state (not restored): the scene the run in run_dir ran.
+std::unique_ptr<Simulation> load_run_scene(const std::string& run_dir, PluginLoader& loader);
+
 }  // namespace loom::cli

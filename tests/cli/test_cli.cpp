@@ -181,6 +181,15 @@ TEST(Cli, DivergenceOfAnExplicitRunComparesDtWithTheStableStep) {
   r = run("run " + scene + " --frames 3 --quiet --set guard.max_velocity=0.05 --out " + (dir / "b").string(), false);
   EXPECT_EQ(r.code, 3) << r.out;
   EXPECT_NE(r.out.find("is within the largest stable step of symplectic_euler"), std::string::npos) << r.out;
+  // a resumed run that diverges: the estimate of the scene the run ran (its scene.yaml)
+  r = run("run " + scene + " --frames 2 --quiet --set guard.max_velocity=0.5 --out " + (dir / "d").string(), false);
+  EXPECT_EQ(r.code, 0) << r.out;
+  r = run("run --resume " + (dir / "d").string() + " --frames 10 --quiet", false);
+  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_NE(r.out.find("is within the largest stable step of symplectic_euler estimated at the initial state, " +
+                       std::string(est) + " s"),
+            std::string::npos)
+      << r.out;
   // an implicit run has no such estimate: nothing is added
   r = run("run " + std::string(LOOM_SOURCE_DIR) + "/scenes/drape_denim.yaml --frames 2 --quiet --set "
           "guard.max_velocity=0.01 --out " + (dir / "c").string(), false);
