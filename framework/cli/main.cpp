@@ -243,11 +243,13 @@ int finish(int code) {
 
 // After `loom run SCENE` diverged: the stable-step estimate of the scene's initial state (what
 // `loom validate` prints), so that the message says whether dt was above it. Explicit
-// integrators only (the estimate has no meaning for the others); built from a fresh copy of the
+// integrators only (the estimate has no meaning for the others, and their scenes, e.g. with a
+// PETSc solver under mpirun, are not built a second time); built from a fresh copy of the
 // scene (for --resume, the scene.yaml of the run), since the run's state is the diverged one.
 // Nothing is printed when that fails.
-void print_step_estimate(const Args& args) {
+void print_step_estimate(const Args& args, const std::string& integrator) {
   if (args.command != "run" || !loom::is_output_rank()) return;
+  if (integrator != "symplectic_euler" && integrator != "rk4" && integrator != "harmonic_oscillation") return;
   try {
     loom::Registry registry;
     loom::PluginLoader loader(registry);
@@ -280,6 +282,7 @@ void print_step_estimate(const Args& args) {
 
 int main(int argc, char** argv) {
   const Args args = parse_args(argc, argv);
+  std::string integrator_name;  // of the run, for the message after a divergence
   try {
     if (args.command == "plugins") return cmd_plugins(args);
     if (args.command == "render") {
@@ -345,6 +348,7 @@ int main(int argc, char** argv) {
         args.resume.empty() ? std::make_unique<loom::Simulation>(args.scene, args.sets, loader)
                             : loom::cli::load_for_resume(args.resume, args.frames, loader);
     loom::Simulation& sim = *owned;
+    integrator_name = sim.integrator_name();
     if (args.frames >= 0 && args.resume.empty()) sim.set_frames(args.frames);
     if (args.command == "validate") {
       for (const auto& line : sim.describe()) std::cout << line << "\n";
@@ -469,7 +473,7 @@ int main(int argc, char** argv) {
     return finish(loom::kExitBadInput);
   } catch (const loom::DivergenceError& e) {
     std::cerr << "loom: " << e.what() << "\n(frames written before the divergence are kept)\n";
-    print_step_estimate(args);
+    print_step_estimate(args, integrator_name);
     return finish(loom::kExitDiverged);
   } catch (const loom::SolverError& e) {
     std::cerr << "loom: linear solver failed: " << e.what() << "\n";
