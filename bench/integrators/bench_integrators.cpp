@@ -545,6 +545,216 @@ void ho_shuffled(benchmark::State& st, HoReorder mode) {
 void BM_HoStep_shuffled_none(benchmark::State& st) { ho_shuffled(st, HoReorder::None); }
 void BM_HoStep_shuffled_rcm(benchmark::State& st) { ho_shuffled(st, HoReorder::Rcm); }
 
+// Issue 16: a floor for the symplectic Euler step on this machine. The Table 1 cloth's merged
+// springs are exactly five grid offsets, (1,0), (0,1), (1,1), (-1,1) and (2,0) (561,794 springs
+// at 336^2, the rows' `sweep_springs`); here their undamped step runs with the state kept in
+// structure-of-arrays form for good (no window, no interleaved copies in or out) on the grid's
+// own row-major numbering, every spring run a whole grid row with unit stride, the horizontal
+// springs summed into their vertices in one pass, each row finalised as soon as it is complete,
+// threads on contiguous bands of rows (the band's first row after the others, with the springs
+// that reach it from the band before). Not a Loom code path: what the step could reach with a
+// layout built for this one grid and no user-facing interleaved state. Its bytes are what it
+// reads and writes: k and l0 per spring (16 B); x, v read and written, the inverse mass and a
+// pin flag per vertex (the SE rows' per-vertex model, without their segment tables).
+// BM_SeFloor_double_aos: the same with the user's interleaved x and v (x0 y0 z0 x1 ...) read
+// into the structure of arrays before the step and written back after it, each a pass over all
+// vertices (no window): an upper bound on what converting the layout costs a step.
+void se_floor(benchmark::State& st, bool aos) {
+  const Row& r = rows()[st.range(0)];
+  const int threads = static_cast<int>(st.range(1));
+  triad_bandwidth(threads);
+  omp_set_num_threads(threads);
+  const Index n = r.n, N = n * n;
+  const double dx = 1.0 / static_cast<double>(n - 1), h = 1e-6, g = -9.81, k = 2000.0;  // h as the SE rows
+  std::vector<double> X(N), Y(N), Z(N, 0.0), VX(N, 0.0), VY(N, 0.0), VZ(N, 0.0), FX(N), FY(N), FZ(N), W(N);
+  std::vector<std::uint8_t> pin(N, 0);
+  for (Index i = 0; i < N; ++i) {
+    X[i] = dx * static_cast<double>(i % n);
+    Y[i] = -dx * static_cast<double>(i / n);
+    W[i] = 1.0 / (0.1 / static_cast<double>(N));
+  }
+  pin[0] = pin[n - 1] = 1;
+  W[0] = W[n - 1] = 0;
+  // Offsets and column ranges [c0, c1) of the lower endpoint (rows 0..n-2 for the vertical ones).
+  struct Off {
+    Index off, c0, c1;
+    bool vertical;
+  };
+  const Off offs[5] = {{1, 0, n - 1, false}, {2, 0, n - 2, false}, {n, 0, n, true}, {n + 1, 0, n - 1, true},
+                       {n - 1, 1, n, true}};
+  std::vector<double> K[5], L[5];
+  double springs = 0;
+  for (int o = 0; o < 5; ++o) {
+    K[o].assign(N, k);
+    L[o].assign(N, 0.0);
+    for (Index i = 0; i < N; ++i) {
+      const Index c = i % n, row = i / n, j = i + offs[o].off;
+      if (c < offs[o].c0 || c >= offs[o].c1 || (offs[o].vertical && row >= n - 1)) continue;
+      L[o][i] = std::sqrt((X[j] - X[i]) * (X[j] - X[i]) + (Y[j] - Y[i]) * (Y[j] - Y[i]));
+      springs += 1;
+    }
+  }
+  const int nt = threads;
+  std::vector<double> border(static_cast<std::size_t>(nt) * 3 * static_cast<std::size_t>(n), 0.0);
+  const auto spring_row = [&](Index row, double* __restrict bx, double* __restrict by, double* __restrict bz) {
+    double* __restrict fx = FX.data();
+    double* __restrict fy = FY.data();
+    double* __restrict fz = FZ.data();
+    const double* __restrict x = X.data();
+    const double* __restrict y = Y.data();
+    const double* __restrict z = Z.data();
+    const Index a = row * n;
+    // horizontal springs (offsets 1 and 2): forces into a row buffer, then one pass per vertex
+    alignas(64) double g1[3][400], g2[3][400];
+    for (int o = 0; o < 2; ++o) {
+      double(*G)[400] = o == 0 ? g1 : g2;
+      const Index off = offs[o].off, len = offs[o].c1;
+      const double* __restrict kk = K[o].data() + a;
+      const double* __restrict ll = L[o].data() + a;
+#pragma omp simd
+      for (Index c = 0; c < len; ++c) {
+        const Index p = a + c, q = p + off;
+        const double d0 = x[q] - x[p], d1 = y[q] - y[p], d2 = z[q] - z[p];
+        const double il = 1.0 / std::sqrt(d0 * d0 + d1 * d1 + d2 * d2 + std::numeric_limits<double>::min());
+        const double sc = kk[c] * (1.0 - ll[c] * il);
+        G[0][c] = sc * d0;
+        G[1][c] = sc * d1;
+        G[2][c] = sc * d2;
+      }
+    }
+    for (int e = 0; e < 3; ++e) {
+      double* __restrict f = e == 0 ? fx : (e == 1 ? fy : fz);
+      f[a] += g1[e][0] + g2[e][0];
+      f[a + 1] += g1[e][1] - g1[e][0] + g2[e][1];
+#pragma omp simd
+      for (Index c = 2; c < n - 2; ++c) f[a + c] += g1[e][c] - g1[e][c - 1] + g2[e][c] - g2[e][c - 2];
+      f[a + n - 2] += g1[e][n - 2] - g1[e][n - 3] - g2[e][n - 4];
+      f[a + n - 1] += -g1[e][n - 2] - g2[e][n - 3];
+    }
+    if (row == n - 1) return;
+    // vertical and diagonal springs: disjoint ranges (rows row and row + 1), fused force and scatter;
+    // bx, by, bz: where row + 1's share goes (the band's last row: the next band's buffer)
+    for (int o = 2; o < 5; ++o) {
+      const Index off = offs[o].off, c0 = offs[o].c0, c1 = offs[o].c1;
+      const double* __restrict kk = K[o].data() + a;
+      const double* __restrict ll = L[o].data() + a;
+      const Index shift = off - n;  // column of the upper endpoint = c + shift
+#pragma omp simd
+      for (Index c = c0; c < c1; ++c) {
+        const Index p = a + c, q = p + off;
+        const double d0 = x[q] - x[p], d1 = y[q] - y[p], d2 = z[q] - z[p];
+        const double il = 1.0 / std::sqrt(d0 * d0 + d1 * d1 + d2 * d2 + std::numeric_limits<double>::min());
+        const double sc = kk[c] * (1.0 - ll[c] * il);
+        fx[p] += sc * d0;
+        fy[p] += sc * d1;
+        fz[p] += sc * d2;
+        bx[c + shift] -= sc * d0;
+        by[c + shift] -= sc * d1;
+        bz[c + shift] -= sc * d2;
+      }
+    }
+  };
+  const auto finalise_row = [&](Index row) {
+    const Index a = row * n;
+#pragma omp simd
+    for (Index c = 0; c < n; ++c) {
+      const Index i = a + c;
+      const double fr = pin[i] ? 0.0 : 1.0;
+      VX[i] += h * W[i] * FX[i];
+      VY[i] += h * (W[i] * FY[i] + fr * g);
+      VZ[i] += h * W[i] * FZ[i];
+      X[i] += h * VX[i];
+      Y[i] += h * VY[i];
+      Z[i] += h * VZ[i];
+      FX[i] = FY[i] = FZ[i] = 0.0;
+    }
+  };
+  const auto step = [&] {
+#pragma omp parallel num_threads(nt)
+    {
+      const int t = omp_get_thread_num();
+      const Index r0 = n * t / nt, r1 = n * (t + 1) / nt;
+      double* nb = border.data() + static_cast<std::size_t>((t + 1) % nt) * 3 * static_cast<std::size_t>(n);
+      for (Index row = r0; row < r1; ++row) {
+        const bool last = row == r1 - 1 && t + 1 < nt;
+        const Index up = (row + 1) * n;
+        spring_row(row, last ? nb : FX.data() + up, last ? nb + n : FY.data() + up, last ? nb + 2 * n : FZ.data() + up);
+        if (row > r0 || t == 0) finalise_row(row);
+      }
+#pragma omp barrier
+      if (t > 0) {
+        double* mb = border.data() + static_cast<std::size_t>(t) * 3 * static_cast<std::size_t>(n);
+        const Index a = r0 * n;
+        for (Index c = 0; c < n; ++c) {
+          FX[a + c] += mb[c];
+          FY[a + c] += mb[n + c];
+          FZ[a + c] += mb[2 * n + c];
+          mb[c] = mb[n + c] = mb[2 * n + c] = 0.0;
+        }
+        finalise_row(r0);
+      }
+    }
+  };
+  // The floor computes the step: 20 steps from a rippled state against a plain loop over the
+  // springs (forces summed per spring, then v += h (w f + g), x += h v); counter check_dx, the
+  // largest difference of a position (m), a few roundings of the positions (about 1) at most.
+  {
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> u(-0.2 * dx, 0.2 * dx);
+    for (Index i = 0; i < N; ++i)
+      if (!pin[i]) Z[i] = u(rng);
+    std::vector<double> x(3 * N), v(3 * N, 0.0), f(3 * N);
+    for (Index i = 0; i < N; ++i) x[3 * i] = X[i], x[3 * i + 1] = Y[i], x[3 * i + 2] = Z[i];
+    for (int it = 0; it < 20; ++it) {
+      step();
+      std::fill(f.begin(), f.end(), 0.0);
+      for (int o = 0; o < 5; ++o)
+        for (Index i = 0; i < N; ++i) {
+          const Index c = i % n, row = i / n, j = i + offs[o].off;
+          if (c < offs[o].c0 || c >= offs[o].c1 || (offs[o].vertical && row >= n - 1)) continue;
+          double d[3], l2 = 0;
+          for (int e = 0; e < 3; ++e) d[e] = x[3 * j + e] - x[3 * i + e], l2 += d[e] * d[e];
+          const double sc = k * (1.0 - L[o][i] / std::sqrt(l2));
+          for (int e = 0; e < 3; ++e) f[3 * i + e] += sc * d[e], f[3 * j + e] -= sc * d[e];
+        }
+      for (Index i = 0; i < 3 * N; ++i) {
+        v[i] += h * (W[i / 3] * f[i] + (i % 3 == 1 && !pin[i / 3] ? g : 0.0));
+        x[i] += h * v[i];
+      }
+    }
+    double worst = 0;
+    for (Index i = 0; i < N; ++i)
+      worst = std::max({worst, std::abs(X[i] - x[3 * i]), std::abs(Y[i] - x[3 * i + 1]), std::abs(Z[i] - x[3 * i + 2])});
+    st.counters["check_dx"] = worst;
+    if (!(worst < 1e-12)) st.SkipWithError(("the floor's step differs from the plain loop's by " + std::to_string(worst) + " m").c_str());
+  }
+  std::vector<double> ux(3 * N), uv(3 * N);  // the user's interleaved x and v (BM_SeFloor_double_aos)
+  for (Index i = 0; i < N; ++i) ux[3 * i] = X[i], ux[3 * i + 1] = Y[i], ux[3 * i + 2] = Z[i];
+  for (auto _ : st) {
+    if (aos) {
+#pragma omp parallel for schedule(static) num_threads(nt)
+      for (Index i = 0; i < N; ++i) {
+        X[i] = ux[3 * i], Y[i] = ux[3 * i + 1], Z[i] = ux[3 * i + 2];
+        VX[i] = uv[3 * i], VY[i] = uv[3 * i + 1], VZ[i] = uv[3 * i + 2];
+      }
+    }
+    step();
+    if (aos) {
+#pragma omp parallel for schedule(static) num_threads(nt)
+      for (Index i = 0; i < N; ++i) {
+        ux[3 * i] = X[i], ux[3 * i + 1] = Y[i], ux[3 * i + 2] = Z[i];
+        uv[3 * i] = VX[i], uv[3 * i + 1] = VY[i], uv[3 * i + 2] = VZ[i];
+      }
+    }
+  }
+  benchmark::DoNotOptimize(X.data());
+  benchmark::DoNotOptimize(ux.data());
+  st.counters["sweep_springs"] = springs;
+  set_counters(st, r, threads, 16.0 * springs + 105.0 * static_cast<double>(N));
+}
+void BM_SeFloor_double(benchmark::State& st) { se_floor(st, false); }
+void BM_SeFloor_double_aos(benchmark::State& st) { se_floor(st, true); }
+
 // The machine's memory bandwidth: STREAM-like triad, 3 x 128 MB, 24 bytes per element.
 void BM_Triad(benchmark::State& st) {
   const int threads = static_cast<int>(st.range(0));
@@ -643,6 +853,8 @@ BENCHMARK(BM_SeStep_double_unfused)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_notwin)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_scalarfin)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_nomerge)->Apply(rows_args);
+BENCHMARK(BM_SeFloor_double)->Apply(rows_args);
+BENCHMARK(BM_SeFloor_double_aos)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double_plain)->Apply(rows_args);
