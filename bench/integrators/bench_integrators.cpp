@@ -556,10 +556,14 @@ void BM_HoStep_shuffled_rcm(benchmark::State& st) { ho_shuffled(st, HoReorder::R
 // layout built for this one grid and no user-facing interleaved state. Its bytes are what it
 // reads and writes: k and l0 per spring (16 B); x, v read and written, the inverse mass and a
 // pin flag per vertex (the SE rows' per-vertex model, without their segment tables).
-// BM_SeFloor_double_aos: the same with the user's interleaved x and v (x0 y0 z0 x1 ...) read
+// BM_HoFloor_double: the harmonic-oscillation step the same way (velocity variant, the impulse of
+// kernels::ho_spring_velocity with the constants of two interior vertices, three constants per
+// spring streamed as in the sweep: 24 B). BM_SeFloor_double_aos: the SE floor with the user's
+// interleaved x and v (x0 y0 z0 x1 ...) read
 // into the structure of arrays before the step and written back after it, each a pass over all
 // vertices (no window): an upper bound on what converting the layout costs a step.
-void se_floor(benchmark::State& st, bool aos) {
+template <bool Ho>
+void step_floor(benchmark::State& st, bool aos) {
   const Row& r = rows()[st.range(0)];
   const int threads = static_cast<int>(st.range(1));
   triad_bandwidth(threads);
@@ -586,10 +590,14 @@ void se_floor(benchmark::State& st, bool aos) {
   };
   const Off offs[5] = {{1, 0, n - 1, false}, {2, 0, n - 2, false}, {n, 0, n, true}, {n + 1, 0, n - 1, true},
                        {n - 1, 1, n, true}};
-  std::vector<double> K[5], L[5];
+  // HO: the impulse constants of a spring between two interior vertices (kernels/ho.hpp), every
+  // spring its own copy as in the sweep; the impulse s n, s = kx (l - l0) + kv (n . (v_j - v_i)).
+  const kernels::HoCoeffs<double> co = kernels::ho_coefficients<double>(k, 0.0, W[n + 1], W[n + 1], h);
+  std::vector<double> K[5], L[5], KV[5];
   double springs = 0;
   for (int o = 0; o < 5; ++o) {
-    K[o].assign(N, k);
+    K[o].assign(N, Ho ? co.kx : k);
+    if (Ho) KV[o].assign(N, co.kv);
     L[o].assign(N, 0.0);
     for (Index i = 0; i < N; ++i) {
       const Index c = i % n, row = i / n, j = i + offs[o].off;
@@ -607,6 +615,21 @@ void se_floor(benchmark::State& st, bool aos) {
     const double* __restrict x = X.data();
     const double* __restrict y = Y.data();
     const double* __restrict z = Z.data();
+    const double* __restrict vx = VX.data();
+    const double* __restrict vy = VY.data();
+    const double* __restrict vz = VZ.data();
+    // The factor of d = x_q - x_p in the spring's force (SE) or impulse per unit inverse mass (HO).
+    const auto scale = [&](Index p, Index q, double kx, double l0, double kvel) {
+      const double d0 = x[q] - x[p], d1 = y[q] - y[p], d2 = z[q] - z[p];
+      const double l2 = d0 * d0 + d1 * d1 + d2 * d2;
+      if constexpr (Ho) {
+        const double l = std::sqrt(l2), inv = 1.0 / (l + std::numeric_limits<double>::min());
+        const double ddot = (d0 * (vx[q] - vx[p]) + d1 * (vy[q] - vy[p]) + d2 * (vz[q] - vz[p])) * inv;
+        return (kx * (l - l0) + kvel * ddot) * inv;
+      } else {
+        return kx * (1.0 - l0 / std::sqrt(l2 + std::numeric_limits<double>::min()));
+      }
+    };
     const Index a = row * n;
     // horizontal springs (offsets 1 and 2): forces into a row buffer, then one pass per vertex
     alignas(64) double g1[3][400], g2[3][400];
@@ -615,12 +638,12 @@ void se_floor(benchmark::State& st, bool aos) {
       const Index off = offs[o].off, len = offs[o].c1;
       const double* __restrict kk = K[o].data() + a;
       const double* __restrict ll = L[o].data() + a;
+      const double* __restrict kv = Ho ? KV[o].data() + a : kk;
 #pragma omp simd
       for (Index c = 0; c < len; ++c) {
         const Index p = a + c, q = p + off;
         const double d0 = x[q] - x[p], d1 = y[q] - y[p], d2 = z[q] - z[p];
-        const double il = 1.0 / std::sqrt(d0 * d0 + d1 * d1 + d2 * d2 + std::numeric_limits<double>::min());
-        const double sc = kk[c] * (1.0 - ll[c] * il);
+        const double sc = scale(p, q, kk[c], ll[c], kv[c]);
         G[0][c] = sc * d0;
         G[1][c] = sc * d1;
         G[2][c] = sc * d2;
@@ -642,13 +665,13 @@ void se_floor(benchmark::State& st, bool aos) {
       const Index off = offs[o].off, c0 = offs[o].c0, c1 = offs[o].c1;
       const double* __restrict kk = K[o].data() + a;
       const double* __restrict ll = L[o].data() + a;
+      const double* __restrict kv = Ho ? KV[o].data() + a : kk;
       const Index shift = off - n;  // column of the upper endpoint = c + shift
 #pragma omp simd
       for (Index c = c0; c < c1; ++c) {
         const Index p = a + c, q = p + off;
         const double d0 = x[q] - x[p], d1 = y[q] - y[p], d2 = z[q] - z[p];
-        const double il = 1.0 / std::sqrt(d0 * d0 + d1 * d1 + d2 * d2 + std::numeric_limits<double>::min());
-        const double sc = kk[c] * (1.0 - ll[c] * il);
+        const double sc = scale(p, q, kk[c], ll[c], kv[c]);
         fx[p] += sc * d0;
         fy[p] += sc * d1;
         fz[p] += sc * d2;
@@ -664,9 +687,15 @@ void se_floor(benchmark::State& st, bool aos) {
     for (Index c = 0; c < n; ++c) {
       const Index i = a + c;
       const double fr = pin[i] ? 0.0 : 1.0;
-      VX[i] += h * W[i] * FX[i];
-      VY[i] += h * (W[i] * FY[i] + fr * g);
-      VZ[i] += h * W[i] * FZ[i];
+      if constexpr (Ho) {  // F: impulses per unit inverse mass
+        VX[i] += W[i] * FX[i];
+        VY[i] += W[i] * FY[i] + h * fr * g;
+        VZ[i] += W[i] * FZ[i];
+      } else {
+        VX[i] += h * W[i] * FX[i];
+        VY[i] += h * (W[i] * FY[i] + fr * g);
+        VZ[i] += h * W[i] * FZ[i];
+      }
       X[i] += h * VX[i];
       Y[i] += h * VY[i];
       Z[i] += h * VZ[i];
@@ -718,11 +747,20 @@ void se_floor(benchmark::State& st, bool aos) {
           if (c < offs[o].c0 || c >= offs[o].c1 || (offs[o].vertical && row >= n - 1)) continue;
           double d[3], l2 = 0;
           for (int e = 0; e < 3; ++e) d[e] = x[3 * j + e] - x[3 * i + e], l2 += d[e] * d[e];
-          const double sc = k * (1.0 - L[o][i] / std::sqrt(l2));
-          for (int e = 0; e < 3; ++e) f[3 * i + e] += sc * d[e], f[3 * j + e] -= sc * d[e];
+          const double l = std::sqrt(l2);
+          double gi[3];
+          if (Ho) {  // kernels::ho_spring_velocity's impulse
+            double nn[3], ddot = 0;
+            for (int e = 0; e < 3; ++e) nn[e] = d[e] / l, ddot += nn[e] * (v[3 * j + e] - v[3 * i + e]);
+            for (int e = 0; e < 3; ++e) gi[e] = (co.kx * (l - L[o][i]) + co.kv * ddot) * nn[e];
+          } else {
+            for (int e = 0; e < 3; ++e) gi[e] = k * (l - L[o][i]) * d[e] / l;
+          }
+          for (int e = 0; e < 3; ++e) f[3 * i + e] += gi[e], f[3 * j + e] -= gi[e];
         }
       for (Index i = 0; i < 3 * N; ++i) {
-        v[i] += h * (W[i / 3] * f[i] + (i % 3 == 1 && !pin[i / 3] ? g : 0.0));
+        const double grav = i % 3 == 1 && !pin[i / 3] ? g : 0.0;
+        v[i] += Ho ? W[i / 3] * f[i] + h * grav : h * (W[i / 3] * f[i] + grav);
         x[i] += h * v[i];
       }
     }
@@ -754,10 +792,11 @@ void se_floor(benchmark::State& st, bool aos) {
   benchmark::DoNotOptimize(X.data());
   benchmark::DoNotOptimize(ux.data());
   st.counters["sweep_springs"] = springs;
-  set_counters(st, r, threads, 16.0 * springs + 105.0 * static_cast<double>(N));
+  set_counters(st, r, threads, (Ho ? 24.0 : 16.0) * springs + 105.0 * static_cast<double>(N));
 }
-void BM_SeFloor_double(benchmark::State& st) { se_floor(st, false); }
-void BM_SeFloor_double_aos(benchmark::State& st) { se_floor(st, true); }
+void BM_SeFloor_double(benchmark::State& st) { step_floor<false>(st, false); }
+void BM_SeFloor_double_aos(benchmark::State& st) { step_floor<false>(st, true); }
+void BM_HoFloor_double(benchmark::State& st) { step_floor<true>(st, false); }
 
 // The machine's memory bandwidth: STREAM-like triad, 3 x 128 MB, 24 bytes per element.
 void BM_Triad(benchmark::State& st) {
@@ -859,6 +898,7 @@ BENCHMARK(BM_SeStep_double_scalarfin)->Apply(rows_args);
 BENCHMARK(BM_SeStep_double_nomerge)->Apply(rows_args);
 BENCHMARK(BM_SeFloor_double)->Apply(rows_args);
 BENCHMARK(BM_SeFloor_double_aos)->Apply(rows_args);
+BENCHMARK(BM_HoFloor_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_float)->Apply(rows_args);
 BENCHMARK(BM_Rk4Fused_double_plain)->Apply(rows_args);
