@@ -593,6 +593,11 @@ void step_floor(benchmark::State& st, bool aos) {
   // HO: the impulse constants of a spring between two interior vertices (kernels/ho.hpp), every
   // spring its own copy as in the sweep; the impulse s n, s = kx (l - l0) + kv (n . (v_j - v_i)).
   const kernels::HoCoeffs<double> co = kernels::ho_coefficients<double>(k, 0.0, W[n + 1], W[n + 1], h);
+  // whether vertex i is the lower endpoint of a spring of offset o
+  const auto has_spring = [&](int o, Index i) {
+    const Index c = i % n;
+    return c >= offs[o].c0 && c < offs[o].c1 && !(offs[o].vertical && i / n >= n - 1);
+  };
   std::vector<double> K[5], L[5], KV[5];
   double springs = 0;
   for (int o = 0; o < 5; ++o) {
@@ -600,8 +605,8 @@ void step_floor(benchmark::State& st, bool aos) {
     if (Ho) KV[o].assign(N, co.kv);
     L[o].assign(N, 0.0);
     for (Index i = 0; i < N; ++i) {
-      const Index c = i % n, row = i / n, j = i + offs[o].off;
-      if (c < offs[o].c0 || c >= offs[o].c1 || (offs[o].vertical && row >= n - 1)) continue;
+      if (!has_spring(o, i)) continue;
+      const Index j = i + offs[o].off;
       L[o][i] = std::sqrt((X[j] - X[i]) * (X[j] - X[i]) + (Y[j] - Y[i]) * (Y[j] - Y[i]));
       springs += 1;
     }
@@ -619,8 +624,7 @@ void step_floor(benchmark::State& st, bool aos) {
     const double* __restrict vy = VY.data();
     const double* __restrict vz = VZ.data();
     // The factor of d = x_q - x_p in the spring's force (SE) or impulse per unit inverse mass (HO).
-    const auto scale = [&](Index p, Index q, double kx, double l0, double kvel) {
-      const double d0 = x[q] - x[p], d1 = y[q] - y[p], d2 = z[q] - z[p];
+    const auto scale = [&](Index p, Index q, double d0, double d1, double d2, double kx, double l0, double kvel) {
       const double l2 = d0 * d0 + d1 * d1 + d2 * d2;
       if constexpr (Ho) {
         const double l = std::sqrt(l2), inv = 1.0 / (l + std::numeric_limits<double>::min());
@@ -643,7 +647,7 @@ void step_floor(benchmark::State& st, bool aos) {
       for (Index c = 0; c < len; ++c) {
         const Index p = a + c, q = p + off;
         const double d0 = x[q] - x[p], d1 = y[q] - y[p], d2 = z[q] - z[p];
-        const double sc = scale(p, q, kk[c], ll[c], kv[c]);
+        const double sc = scale(p, q, d0, d1, d2, kk[c], ll[c], kv[c]);
         G[0][c] = sc * d0;
         G[1][c] = sc * d1;
         G[2][c] = sc * d2;
@@ -671,7 +675,7 @@ void step_floor(benchmark::State& st, bool aos) {
       for (Index c = c0; c < c1; ++c) {
         const Index p = a + c, q = p + off;
         const double d0 = x[q] - x[p], d1 = y[q] - y[p], d2 = z[q] - z[p];
-        const double sc = scale(p, q, kk[c], ll[c], kv[c]);
+        const double sc = scale(p, q, d0, d1, d2, kk[c], ll[c], kv[c]);
         fx[p] += sc * d0;
         fy[p] += sc * d1;
         fz[p] += sc * d2;
@@ -743,8 +747,8 @@ void step_floor(benchmark::State& st, bool aos) {
       std::fill(f.begin(), f.end(), 0.0);
       for (int o = 0; o < 5; ++o)
         for (Index i = 0; i < N; ++i) {
-          const Index c = i % n, row = i / n, j = i + offs[o].off;
-          if (c < offs[o].c0 || c >= offs[o].c1 || (offs[o].vertical && row >= n - 1)) continue;
+          if (!has_spring(o, i)) continue;
+          const Index j = i + offs[o].off;
           double d[3], l2 = 0;
           for (int e = 0; e < 3; ++e) d[e] = x[3 * j + e] - x[3 * i + e], l2 += d[e] * d[e];
           const double l = std::sqrt(l2);

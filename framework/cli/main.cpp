@@ -241,6 +241,16 @@ int finish(int code) {
   return code;
 }
 
+// The fix for a dt above the estimated stable step (loom validate's warning, a divergence).
+std::string step_limit_fix(const loom::StepLimit& lim) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf,
+                "Fix: set integrator.dt <= %.3g (with integrator.frame_time the frames keep their spacing), lower "
+                "the stiffness, or use baraff_witkin.",
+                0.9 * lim.h_max);
+  return buf;
+}
+
 // After `loom run SCENE` diverged: the stable-step estimate of the scene's initial state (what
 // `loom validate` prints), so that the message says whether dt was above it. Explicit
 // integrators only (the estimate has no meaning for the others, and their scenes, e.g. with a
@@ -249,7 +259,7 @@ int finish(int code) {
 // Nothing is printed when that fails.
 void print_step_estimate(const Args& args, const std::string& integrator) {
   if (args.command != "run" || !loom::is_output_rank()) return;
-  if (integrator != "symplectic_euler" && integrator != "rk4" && integrator != "harmonic_oscillation") return;
+  if (loom::stable_step_factor(integrator) == 0.0) return;
   try {
     loom::Registry registry;
     loom::PluginLoader loader(registry);
@@ -264,9 +274,8 @@ void print_step_estimate(const Args& args, const std::string& integrator) {
     if (dt > lim->h_max)
       std::snprintf(buf, sizeof buf,
                     "loom: dt = %.3g s exceeds the largest stable step of %s estimated at the initial state, %.3g s "
-                    "(loom validate prints it before a run). Fix: set integrator.dt <= %.3g (with "
-                    "integrator.frame_time the frames keep their spacing), lower the stiffness, or use baraff_witkin.",
-                    dt, fresh.integrator_name().c_str(), lim->h_max, 0.9 * lim->h_max);
+                    "(loom validate prints it before a run). %s",
+                    dt, fresh.integrator_name().c_str(), lim->h_max, step_limit_fix(*lim).c_str());
     else
       std::snprintf(buf, sizeof buf,
                     "loom: dt = %.3g s is within the largest stable step of %s estimated at the initial state, %.3g s: "
@@ -364,9 +373,8 @@ int main(int argc, char** argv) {
           step_warning = true;
           std::snprintf(buf, sizeof buf,
                         "loom: warning: dt = %.3g s exceeds the estimated stable step %.3g s: this run will most likely "
-                        "diverge. Fix: set integrator.dt <= %.3g (with integrator.frame_time the frames keep their "
-                        "spacing), lower the stiffness, or use baraff_witkin.",
-                        sim.dt(), lim->h_max, 0.9 * lim->h_max);
+                        "diverge. %s",
+                        sim.dt(), lim->h_max, step_limit_fix(*lim).c_str());
           std::cerr << buf << "\n";
         }
       }

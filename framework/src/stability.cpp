@@ -10,12 +10,16 @@
 
 namespace loom {
 
+double stable_step_factor(const std::string& integrator) {
+  if (integrator == "symplectic_euler") return 2.0;
+  if (integrator == "rk4") return 2.0 * std::sqrt(2.0);
+  if (integrator == "harmonic_oscillation") return std::sqrt(2.0);
+  return 0.0;
+}
+
 std::optional<StepLimit> estimate_step_limit(Scene& sc, const std::string& integrator) {
-  double c = 0;
-  if (integrator == "symplectic_euler") c = 2.0;
-  else if (integrator == "rk4") c = 2.0 * std::sqrt(2.0);
-  else if (integrator == "harmonic_oscillation") c = std::sqrt(2.0);
-  else return std::nullopt;
+  const double c = stable_step_factor(integrator);
+  if (c == 0.0) return std::nullopt;
   if (!sc.material || !sc.material->has_jacobian()) return std::nullopt;
   const State& s = sc.state;
   const Index n = s.size();

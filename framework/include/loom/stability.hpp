@@ -20,6 +20,9 @@ struct StepLimit {
   int iterations = 0;      ///< power iterations used
 };
 
+/// c for an integrator (above), 0 for one without a stable-step estimate (implicit ones).
+double stable_step_factor(const std::string& integrator);
+
 /// nullopt when the integrator is not one of the explicit ones above or the material has no
 /// Jacobian. Builds a temporary Jacobian pattern (the material is re-bound by any later
 /// prepare()); cost: one Jacobian and up to 200 sparse products.
