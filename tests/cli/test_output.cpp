@@ -194,6 +194,9 @@ TEST(Output, KillNineLeavesOnlyCompleteFrames) {
             static_cast<char*>(nullptr));
       _exit(127);
     }
+    // the random delay counts from when the run has made its folder (a kill during start-up
+    // tests nothing, and a slow start-up, as under the sanitizers, left no folder to read)
+    for (int t = 0; t < 2000 && !fs::exists(out); ++t) std::this_thread::sleep_for(std::chrono::milliseconds(5));
     std::this_thread::sleep_for(std::chrono::milliseconds(ms(rng)));
     kill(pid, SIGKILL);
     waitpid(pid, nullptr, 0);
