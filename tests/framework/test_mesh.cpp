@@ -6,13 +6,17 @@
 #include <fstream>
 #include <sstream>
 
+#include <unistd.h>
+
 #include "common/tube_obj.hpp"
 #include "loom/mesh.hpp"
 #include "loom/output.hpp"
 
 namespace {
+// The process id in the name: ctest runs each test in its own process, two at a time, and tests
+// that wrote the same name raced (one read the other's bad.obj under the sanitizers).
 std::string write_temp(const std::string& name, const std::string& text) {
-  const auto p = std::filesystem::temp_directory_path() / ("loom_test_" + name);
+  const auto p = std::filesystem::temp_directory_path() / ("loom_test_" + std::to_string(::getpid()) + "_" + name);
   std::ofstream(p) << text;
   return p.string();
 }
