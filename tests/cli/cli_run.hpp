@@ -1,14 +1,16 @@
 // Shared by the CLI tests: run the built `loom` (through a shell, with the test plugins on
-// LOOM_PLUGIN_PATH unless told otherwise) and make a fresh scratch folder.
+// LOOM_PLUGIN_PATH unless told otherwise), make a fresh scratch folder, wait for a file.
 #pragma once
 
 #include <sys/wait.h>
 
 #include <array>
+#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 
 namespace loom_cli_test {
 
@@ -41,6 +43,17 @@ inline std::filesystem::path scratch_dir(const std::string& prefix, const std::s
   std::filesystem::remove_all(d);
   std::filesystem::create_directories(d);
   return d;
+}
+
+/// Wait (polling every 5 ms) until path exists, at most `timeout`; whether it does. For tests that
+/// signal a running loom once it has written something.
+inline bool wait_for_path(const std::filesystem::path& path, std::chrono::milliseconds timeout) {
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  while (!std::filesystem::exists(path)) {
+    if (std::chrono::steady_clock::now() >= end) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return true;
 }
 
 /// DIR/scene.yaml, returned: a 6 x 5 grid (30 vertices, 40 triangles) falling under gravity,

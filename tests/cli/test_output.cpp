@@ -196,7 +196,7 @@ TEST(Output, KillNineLeavesOnlyCompleteFrames) {
     }
     // the random delay counts from when the run has made its folder (a kill during start-up
     // tests nothing, and a slow start-up, as under the sanitizers, left no folder to read)
-    for (int t = 0; t < 2000 && !fs::exists(out); ++t) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    loom_cli_test::wait_for_path(out, std::chrono::seconds(10));
     std::this_thread::sleep_for(std::chrono::milliseconds(ms(rng)));
     kill(pid, SIGKILL);
     waitpid(pid, nullptr, 0);
@@ -240,8 +240,7 @@ TEST(Output, CtrlCStopsCleanlyAndSaysWhatWasKept) {
   }
   // the signal once the first frame is written (or after 20 s), so that a slow start does not
   // interrupt the run before it has kept anything
-  const fs::path first = fs::path(out) / "frame_00000.obj";
-  for (int t = 0; t < 200 && !fs::exists(first); ++t) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  loom_cli_test::wait_for_path(fs::path(out) / "frame_00000.obj", std::chrono::seconds(20));
   std::this_thread::sleep_for(std::chrono::milliseconds(100));
   kill(pid, SIGINT);
   int status = 0;

@@ -374,7 +374,7 @@ int run_and_stop(const std::vector<std::string>& args, const fs::path& out, int 
   }
   char name[32];
   std::snprintf(name, sizeof name, "frame_%05d.obj", after);
-  for (int k = 0; k < 2000 && !fs::exists(out / name); ++k) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  loom_cli_test::wait_for_path(out / name, std::chrono::seconds(10));
   kill(pid, sig);
   int status = 0;
   waitpid(pid, &status, 0);
