@@ -5,6 +5,10 @@
 #include <time.h>
 #include <unistd.h>
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
 #include <algorithm>
 #include <charconv>
 #include <cstdio>
@@ -158,6 +162,23 @@ std::vector<int> affinity_cpus() {
   cpu_set_t set;
   CPU_ZERO(&set);
   if (sched_getaffinity(0, sizeof(set), &set) == 0) {
+#ifdef _OPENMP
+    // When the OpenMP runtime binds threads (OMP_PROC_BIND set, or OMP_PLACES), libgomp builds
+    // its places from the process's mask at start-up and then binds the initial thread to the
+    // first place: this thread's own mask is then one place (with OMP_PLACES=cores, one core,
+    // and `threads: 2` was capped at 1). The team runs on all the places: their CPUs count.
+    if (omp_get_proc_bind() != omp_proc_bind_false) {
+      std::vector<int> ids;
+      for (int p = 0; p < omp_get_num_places(); ++p) {
+        const int m = omp_get_place_num_procs(p);
+        if (m <= 0) continue;
+        ids.assign(static_cast<std::size_t>(m), -1);
+        omp_get_place_proc_ids(p, ids.data());
+        for (int id : ids)
+          if (id >= 0 && id < CPU_SETSIZE) CPU_SET(id, &set);
+      }
+    }
+#endif
     for (int c = 0; c < CPU_SETSIZE; ++c)
       if (CPU_ISSET(c, &set)) out.push_back(c);
   }

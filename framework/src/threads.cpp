@@ -13,19 +13,21 @@
 #include <string>
 #include <thread>
 #include <chrono>
+#include <vector>
 
 namespace loom {
 
 namespace {
 
+// The CPUs this process may use: its affinity mask, or the OpenMP places' CPUs when the runtime
+// binds threads (affinity_cpus, loom/cpu_load.hpp).
 int affinity_cores() {
-  cpu_set_t set;
-  CPU_ZERO(&set);
-  if (sched_getaffinity(0, sizeof(set), &set) != 0) {
+  const std::vector<int> cpus = affinity_cpus();
+  if (cpus.empty()) {
     const long n = sysconf(_SC_NPROCESSORS_ONLN);
     return n > 0 ? static_cast<int>(n) : 1;
   }
-  return std::max(1, CPU_COUNT(&set));
+  return std::max(1, static_cast<int>(cpus.size()));
 }
 
 // cgroup v2 "cpu.max" ("max 100000" or "<quota> <period>") and v1 cfs files; 0 = no quota.

@@ -1,6 +1,11 @@
 // End-to-end tests of the `loom` executable: exit codes, files, messages.
 #include <gtest/gtest.h>
 
+#include <sched.h>
+
+#include <cctype>
+#include <cstdlib>
+
 #include "cli_run.hpp"
 
 #include <array>
@@ -404,6 +409,43 @@ TEST(Cli, ThreadsAutoIsTheDefaultAndCountsAreCapped) {
   EXPECT_NE(r.out.find("capped at"), std::string::npos) << r.out;
   r = run("validate " + write_scene(dir, kScene) + " --set threads=auto");
   EXPECT_EQ(r.code, 0) << r.out;
+}
+
+// OpenMP binding (OMP_PROC_BIND, OMP_PLACES) binds the initial thread to the first place before
+// loom counts the cores it may use; the count is the places' CPUs, not that one place's (it was:
+// `threads: 2` capped at 1 under OMP_PLACES=cores on two cores). A narrower mask (taskset)
+// still caps it.
+TEST(Cli, ThreadCapCountsEveryOpenMpPlace) {
+  const auto dir = scratch("threads_places");
+  const std::string scene = write_scene(dir, kScene);
+  const auto usable = [&](const std::string& env) {
+    const Result r = loom_cli_test::run_loom_shell(env + " LOOM_PLUGIN_PATH=" LOOM_TEST_PLUGIN_DIR " " +
+                                                   std::string(LOOM_EXE) + " validate " + scene + " --set threads=1000");
+    EXPECT_EQ(r.code, 0) << r.out;
+    const std::size_t at = r.out.find(" usable cores");
+    EXPECT_NE(at, std::string::npos) << r.out;
+    if (at == std::string::npos) return -1;
+    std::size_t b = at;
+    while (b > 0 && std::isdigit(static_cast<unsigned char>(r.out[b - 1]))) --b;
+    return std::atoi(r.out.substr(b, at - b).c_str());
+  };
+  const int plain = usable("env -u OMP_PROC_BIND -u OMP_PLACES");
+  ASSERT_GE(plain, 1);
+  EXPECT_EQ(usable("env OMP_PROC_BIND=close OMP_PLACES=cores"), plain);
+  EXPECT_EQ(usable("env OMP_PROC_BIND=spread OMP_PLACES=threads"), plain);
+  EXPECT_EQ(usable("env OMP_PROC_BIND=true"), plain);
+  // one CPU of the mask (the first one this process may use), bound or not: 1
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  ASSERT_EQ(sched_getaffinity(0, sizeof(set), &set), 0);
+  int first = 0;
+  while (first < CPU_SETSIZE && !CPU_ISSET(first, &set)) ++first;
+  ASSERT_LT(first, CPU_SETSIZE);
+  if (std::system("command -v taskset > /dev/null 2>&1") == 0) {
+    const std::string ts = "taskset -c " + std::to_string(first) + " env";
+    EXPECT_EQ(usable(ts + " OMP_PROC_BIND=close OMP_PLACES=cores"), 1);
+    EXPECT_EQ(usable(ts + " -u OMP_PROC_BIND -u OMP_PLACES"), 1);
+  }
 }
 
 // `loom validate` predicts divergence: the README's scene template (dt 1e-3 with k = 2000 on a

@@ -74,7 +74,8 @@ char parse_stat_state(std::string_view text);
 /// files); -1 when unknown.
 int read_others_runnable(const ProcSource* src = nullptr);
 
-/// The CPUs this process may run on (sched_getaffinity), in increasing order.
+/// The CPUs this process may run on (sched_getaffinity; with OpenMP binding threads, also the
+/// CPUs of every OpenMP place: the initial thread is then bound to one place), in increasing order.
 std::vector<int> affinity_cpus();
 
 /// Others' CPU use on a set of CPUs over a window between two readings.
