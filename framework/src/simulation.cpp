@@ -562,8 +562,8 @@ int Simulation::resume(int frames) {
   linear_iters_ = r.linear_iterations;
   // The integrator took the built state in prepare(); one that keeps x and v to itself between
   // steps (the CUDA backend) would go on from it. prepare() again takes the restart point's
-  // state (Integrator::prepare: "called again whenever ... changes"), then its carried state.
-  integrator_->prepare(*scene_, dt_);
+  // state, then set_restart_state its carried state.
+  state_changed();
   if (!integrator_->set_restart_state(r.integrator_state))
     throw InputError(where + ": its integrator state (" + std::to_string(r.integrator_state.size()) +
                      " numbers) does not fit integrator '" + integrator_name_ +

@@ -236,6 +236,27 @@ TEST_F(Fixture, ResumeHandsTheRestartStateToAnIntegratorWithItsOwnCopy) {
   }
 }
 
+// A program that changes the state between steps (sync_state(), change, state_changed()) gets the
+// same steps from an integrator with its own copy as from one without.
+TEST_F(Fixture, StateChangedHandsTheProgramsStateToTheIntegrator) {
+  std::vector<double> x[2];
+  for (bool own : {false, true}) {
+    std::string s = kBase;
+    if (own) s.replace(s.find("type: test_explicit_euler"), 25, "type: test_explicit_euler\n  own_copy: true");
+    auto sim = make(s);
+    for (int k = 0; k < 3; ++k) sim->step();
+    sim->sync_state();
+    sim->scene().state.v[3 * 6] += 2.0;   // a kick to vertex 6 (free)
+    sim->state_changed();
+    for (int k = 0; k < 3; ++k) sim->step();
+    sim->sync_state();
+    x[own] = sim->scene().state.x;
+  }
+  ASSERT_EQ(x[0].size(), x[1].size());
+  EXPECT_EQ(x[1], x[0]);
+  EXPECT_GT(std::abs(x[0][3 * 6] - x[0][3 * 5]), 0.0);
+}
+
 TEST_F(Fixture, RunWritesObjFramesAndStats) {
   const fs::path out = fs::temp_directory_path() / "loom_test_run";
   fs::remove_all(out);

@@ -72,6 +72,10 @@ class Simulation {
   /// Bring scene().state.x and .v up to date with the integrator's own copy (the CUDA backend
   /// keeps them on the device; on the CPU backend this does nothing).
   void sync_state() { integrator_->sync_to_host(*scene_); }
+  /// Hand scene().state.x and .v to the integrator after the program changed them (call
+  /// sync_state() before changing them): an integrator that keeps its own copy (the CUDA backend)
+  /// takes them again (Integrator::prepare); on the CPU backends' default it changes nothing.
+  void state_changed() { integrator_->prepare(*scene_, dt_); }
   Integrator& integrator() { return *integrator_; }
   double dt() const { return dt_; }
   int substeps() const { return substeps_; }
