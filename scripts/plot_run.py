@@ -39,7 +39,10 @@ def main(src, dst):
     it.set_title("solver work")
     it.legend(fontsize=8)
     w = ax[1][1]
-    w.plot(t, col("wall_ms_per_step"), color="C2")
+    w.plot(t, col("wall_ms_per_step"), color="C2", label="whole step")
+    if "self_collision_ms_per_step" in rows[0]:  # scenes with self_collision
+        w.plot(t, col("self_collision_ms_per_step"), color="C1", label="of it self-collision")
+        w.legend(fontsize=8)
     w.set_ylabel("wall time per step (ms)")
     w.set_title("step time")
     for a in (it, w):

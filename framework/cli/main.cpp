@@ -241,6 +241,29 @@ int finish(int code) {
   return code;
 }
 
+// `loom run`'s summary of self-collision over the steps of this run (SelfCollisionTotals):
+// what it cost beside the whole step, and what it did.
+void print_self_collision_summary(const loom::SelfCollisionTotals& t, long long steps, double step_seconds,
+                                  long long self_contacts) {
+  const double per = 1e3 / static_cast<double>(steps);
+  std::string search;
+  if (t.search_seconds > 0) {
+    char b[160];
+    std::snprintf(b, sizeof b, "; the integrator's self-contact search %.3g ms, %.4g contacts per step in its solve",
+                  per * t.search_seconds, static_cast<double>(self_contacts) / static_cast<double>(steps));
+    search = b;
+  }
+  std::printf("loom: self-collision: %.3g ms per step, %.0f %% of the step time (after-step pass %.3g ms: broad "
+              "phase %.3g, proximity %.3g, CCD and fail-safe %.3g%s); %lld impulses (%lld proximity, %lld CCD), "
+              "%lld vertices frozen by the fail-safe%s; candidate lists rebuilt %lld times, %lld vertices "
+              "refreshed\n",
+              per * t.seconds(), step_seconds > 0 ? 100.0 * t.seconds() / step_seconds : 0.0, per * t.resolve_seconds,
+              per * t.broad_seconds, per * t.narrow_seconds, per * t.response_seconds, search.c_str(), t.impulses(),
+              t.proximity, t.ccd_collisions, t.frozen,
+              t.frozen > 0 ? " (each held at its start of step for one step; docs/CONTACT.md)" : "", t.rebuilds,
+              t.refreshed);
+}
+
 // The fix for a dt above the estimated stable step (loom validate's warning, a divergence).
 std::string step_limit_fix(const loom::StepLimit& lim) {
   char buf[256];
@@ -436,6 +459,9 @@ int main(int argc, char** argv) {
                   static_cast<long long>(st.scene().state.step - first_step), el,
                   st.scene().state.step > first_step ? 1e3 * st.step_seconds_total() / (st.scene().state.step - first_step) : 0.0, f.max_strain,
                   f.kinetic + f.gravitational + f.elastic, f.kinetic, f.elastic, st.force_evaluations(), st.linear_iterations());
+      if (const auto* sc = st.scene().self_collision.get(); sc && st.scene().state.step > first_step)
+        print_self_collision_summary(sc->totals(), st.scene().state.step - first_step, st.step_seconds_total(),
+                                     st.self_contacts_total());
       if (st.step_retries() > 0)
         std::printf("loom: %lld step halving%s after failed linear solves (integrator.on_solver_failure: halve_step): "
                     "those steps were solved again as two halves\n",

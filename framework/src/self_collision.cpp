@@ -1324,6 +1324,21 @@ double relative_motion(bool vt, const Index idx[4], const double* p, const doubl
 }  // namespace
 
 void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
+  const auto t_call = Clock::now();
+  resolve_step(s, h, colliders);
+  totals_.steps += 1;
+  totals_.resolve_seconds += seconds_since(t_call);
+  totals_.broad_seconds += stats_.broad_seconds;
+  totals_.narrow_seconds += stats_.narrow_seconds;
+  totals_.response_seconds += stats_.response_seconds;
+  totals_.proximity += stats_.proximity;
+  totals_.ccd_collisions += stats_.ccd_collisions;
+  totals_.frozen += stats_.frozen;
+  totals_.rebuilds += stats_.rebuilds;
+  totals_.refreshed += stats_.refreshed;
+}
+
+void SelfCollision::resolve_step(State& s, double h, const ColliderSet* colliders) {
   stats_ = SelfCollisionStats{};
   for (const Index v : touched_) touched_flag_[v] = 0;
   touched_.clear();
@@ -1578,6 +1593,16 @@ void SelfCollision::resolve(State& s, double h, const ColliderSet* colliders) {
 namespace loom {
 
 void SelfCollision::proximity_pairs(const double* x, const double* d, std::vector<ProximityPair>& out) {
+  const auto t_call = Clock::now();
+  const int rebuilds = stats_.rebuilds;
+  const Index refreshed = stats_.refreshed;
+  find_pairs(x, d, out);
+  totals_.search_seconds += seconds_since(t_call);
+  totals_.rebuilds += stats_.rebuilds - rebuilds;
+  totals_.refreshed += stats_.refreshed - refreshed;
+}
+
+void SelfCollision::find_pairs(const double* x, const double* d, std::vector<ProximityPair>& out) {
   out.clear();
   large_steps_ = true;
   const double th = opt_.thickness;

@@ -282,6 +282,8 @@ void Simulation::step() {
   force_evals_ += s.force_evaluations;
   linear_iters_ += s.linear_iterations;
   retries_ += s.retries;
+  self_contacts_in_frame_ += s.self_contacts;
+  self_contacts_total_ += s.self_contacts;
   if (scene_->state.step % guard_.check_every == 0) check_state(false);
   if (on_step_) on_step_();
 }
@@ -303,6 +305,14 @@ Simulation::FrameStats Simulation::measure(int frame) const {
   fs.wall_ms_per_step = steps_in_frame_ > 0 ? 1e3 * step_seconds_ / steps_in_frame_ : 0.0;
   fs.force_evaluations = force_evals_;
   fs.linear_iterations = linear_iters_;
+  if (sc.self_collision) {
+    const SelfCollisionTotals& now = sc.self_collision->totals();
+    const SelfCollisionTotals& then = self_collision_at_frame_;
+    fs.self_collision_ms_per_step = steps_in_frame_ > 0 ? 1e3 * (now.seconds() - then.seconds()) / steps_in_frame_ : 0.0;
+    fs.self_collision_impulses = now.impulses() - then.impulses();
+    fs.self_collision_frozen = now.frozen - then.frozen;
+    fs.self_collision_contacts = steps_in_frame_ > 0 ? static_cast<double>(self_contacts_in_frame_) / steps_in_frame_ : 0.0;
+  }
   return fs;
 }
 
@@ -333,6 +343,12 @@ void Simulation::claim_output_dir(const std::string& scene_text) const {
   }
 }
 
+namespace {
+// stats.csv's columns of a scene with self_collision, after the pin columns (docs/OUTPUT.md).
+constexpr const char* kSelfCollisionColumns =
+    ",self_collision_ms_per_step,self_collision_impulses,self_collision_frozen,self_collision_contacts";
+}  // namespace
+
 void Simulation::run(const std::function<void(int, int)>& progress) {
   // The initial state passes the same guards as every step before anything is written.
   try {
@@ -345,6 +361,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   const int first_frame = start_frame();
   std::ofstream stats;
   std::streamoff stats_complete = 0;  // bytes of stats.csv that hold complete rows
+  bool stats_self_columns = scene_->self_collision != nullptr;  // the self_collision columns of stats.csv
   std::unique_ptr<OutputLock> lock;
   std::error_code ec;
   const std::string abs_base = fs::absolute(base_dir_, ec).lexically_normal().string();
@@ -368,6 +385,12 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     if (output_.stats && resuming) {
       const std::string path = (fs::path(output_.dir) / "stats.csv").string();
       stats_complete = static_cast<std::streamoff>(fs::file_size(path));  // trimmed to complete rows
+      // The rows continue the header's columns (a run begun by a Loom before the
+      // self_collision columns goes on without them).
+      std::ifstream head(path);
+      std::string header;
+      std::getline(head, header);
+      stats_self_columns = stats_self_columns && header.find(kSelfCollisionColumns) != std::string::npos;
       stats.open(path, std::ios::app);
       if (!stats) throw InputError("cannot write " + path + ". Fix: check the folder's permissions.");
       stats.precision(10);
@@ -376,7 +399,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       if (!stats) throw InputError("cannot write " + output_.dir + "/stats.csv. Fix: choose a writable --out folder.");
       stats << "frame,time,kinetic_energy,gravitational_energy,elastic_energy,total_energy,max_strain,"
                "wall_ms_per_step,force_evaluations,linear_iterations"
-            << scene_->pins.csv_header() << '\n';
+            << scene_->pins.csv_header() << (stats_self_columns ? kSelfCollisionColumns : "") << '\n';
       stats.precision(10);
       stats.flush();
       if (!stats) throw OutputError("cannot write " + output_.dir + "/stats.csv (" + std::strerror(errno) + "; disk full?)");
@@ -462,6 +485,9 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
         scene_->pins.reactions(scene_->state, *scene_->material, scene_->gravity, reaction_work, reactions);
         for (double r : reactions) stats << ',' << r;
       }
+      if (stats_self_columns)
+        stats << ',' << f.self_collision_ms_per_step << ',' << f.self_collision_impulses << ',' << f.self_collision_frozen
+              << ',' << f.self_collision_contacts;
       stats << '\n';
       stats.flush();
       if (!stats) {
@@ -504,6 +530,8 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
     for (int f = first_frame + 1; f <= frames_; ++f) {
       step_seconds_ = 0;
       steps_in_frame_ = 0;
+      if (scene_->self_collision) self_collision_at_frame_ = scene_->self_collision->totals();
+      self_contacts_in_frame_ = 0;
       advance_frame();
       emit(f);
       if (progress) progress(f, frames_);

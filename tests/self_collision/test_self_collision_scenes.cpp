@@ -10,6 +10,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <map>
+#include <sstream>
 #include <sys/wait.h>
 #include <utility>
 
@@ -497,4 +500,122 @@ TEST_F(SelfCollisionScenes, StatsOfAStepAreReported) {
   // (below 2.5 m/s), and a rebuild gives each vertex at least half the thickness (2 mm) of room.
   EXPECT_GE(rebuilds, 1);
   EXPECT_LT(rebuilds, steps / 2);
+}
+
+namespace {
+
+// stats.csv as rows of named columns.
+std::vector<std::map<std::string, std::string>> read_stats(const fs::path& path, std::string* header_out = nullptr) {
+  std::ifstream in(path);
+  std::string header;
+  std::getline(in, header);
+  if (header_out) *header_out = header;
+  std::vector<std::string> names;
+  std::stringstream hs(header);
+  for (std::string c; std::getline(hs, c, ',');) names.push_back(c);
+  std::vector<std::map<std::string, std::string>> rows;
+  for (std::string line; std::getline(in, line);) {
+    std::stringstream ls(line);
+    std::map<std::string, std::string> row;
+    std::size_t k = 0;
+    for (std::string c; std::getline(ls, c, ','); ++k) row[k < names.size() ? names[k] : "extra" + std::to_string(k)] = c;
+    EXPECT_EQ(k, names.size()) << line;
+    rows.push_back(row);
+  }
+  return rows;
+}
+
+}  // namespace
+
+// What a run says about self-collision (docs/OUTPUT.md, docs/CONTACT.md): stats.csv's four
+// columns per frame and the summary line of `loom run`. The folding cloth collapses into folds
+// within its 0.5 s, so there are impulses. The per-frame impulses and frozen vertices must equal an
+// independent count: the same scene stepped in this process, summing SelfCollision::last_stats()
+// step by step (the run is deterministic on one thread); the self-collision time is part of the
+// step's; baraff_witkin reports the self-contacts of its solves. A scene without self_collision
+// has none of the columns, and a run whose stats.csv was begun without them resumes without them.
+TEST_F(SelfCollisionScenes, StatsCsvAndTheSummarySayWhatSelfCollisionDid) {
+  const fs::path dir = fresh_dir("loom_selfcol_stats");
+  const std::string self = "self_collision: {thickness: 0.004, friction: 0.3}\n";
+  const std::string exe = std::string(LOOM_EXE);
+  const int frames = kFoldFrames;
+  for (const int which : {0, 3}) {  // symplectic_euler, baraff_witkin
+    const std::string yaml = folding_cloth(kFoldIntegrators[which], self);
+    const fs::path scene = dir / ("fold" + std::to_string(which) + ".yaml"), out = dir / ("run" + std::to_string(which));
+    std::ofstream(scene) << yaml;
+    auto [rc, text] = run_command(exe + " run " + scene.string() + " --frames " + std::to_string(frames) + " --out " + out.string());
+    ASSERT_EQ(rc, 0) << text;
+    std::string header;
+    const auto rows = read_stats(out / "stats.csv", &header);
+    ASSERT_EQ(rows.size(), static_cast<std::size_t>(frames + 1));
+    EXPECT_NE(header.find(",self_collision_ms_per_step,self_collision_impulses,self_collision_frozen,self_collision_contacts"),
+              std::string::npos)
+        << header;
+    // The independent count.
+    auto sim = make(yaml);
+    long long impulses_total = 0, frozen_total = 0;
+    double contacts_max = 0;
+    for (int f = 1; f <= frames; ++f) {
+      long long impulses = 0, frozen = 0;
+      for (int k = 0; k < sim->substeps(); ++k) {
+        sim->step();
+        const auto& st = sim->scene().self_collision->last_stats();
+        impulses += st.proximity + st.ccd_collisions;
+        frozen += st.frozen;
+      }
+      const auto& row = rows[static_cast<std::size_t>(f)];
+      EXPECT_EQ(std::stoll(row.at("self_collision_impulses")), impulses) << "frame " << f << ", integrator " << which;
+      EXPECT_EQ(std::stoll(row.at("self_collision_frozen")), frozen) << "frame " << f << ", integrator " << which;
+      const double ms = std::stod(row.at("self_collision_ms_per_step")), wall = std::stod(row.at("wall_ms_per_step"));
+      EXPECT_GT(ms, 0.0) << "frame " << f;
+      EXPECT_LE(ms, wall) << "frame " << f << ": self-collision is part of the step";
+      const double contacts = std::stod(row.at("self_collision_contacts"));
+      if (which == 0) EXPECT_EQ(contacts, 0.0) << "frame " << f;
+      contacts_max = std::max(contacts_max, contacts);
+      impulses_total += impulses;
+      frozen_total += frozen;
+    }
+    if (which == 0) EXPECT_GT(impulses_total, 0) << "the layers met: the check is not vacuous";
+    if (which == 3) EXPECT_GT(contacts_max, 0.0) << "baraff_witkin entered self-contacts into its solves";
+    // The summary line: the run's totals.
+    const std::string want = std::to_string(impulses_total) + " impulses (";
+    EXPECT_NE(text.find("loom: self-collision: "), std::string::npos) << text;
+    EXPECT_NE(text.find(want), std::string::npos) << want << "\n" << text;
+    EXPECT_NE(text.find(std::to_string(frozen_total) + " vertices frozen by the fail-safe"), std::string::npos) << text;
+    if (which == 3) EXPECT_NE(text.find("the integrator's self-contact search"), std::string::npos) << text;
+    if (verbose()) std::printf("%s", text.c_str());
+  }
+  // Without self_collision: no such columns and no summary line.
+  {
+    const fs::path scene = dir / "plain.yaml", out = dir / "plain";
+    std::ofstream(scene) << folding_cloth(kFoldIntegrators[0], "");
+    auto [rc, text] = run_command(exe + " run " + scene.string() + " --frames 2 --out " + out.string());
+    ASSERT_EQ(rc, 0) << text;
+    std::string header;
+    read_stats(out / "stats.csv", &header);
+    EXPECT_EQ(header.find("self_collision"), std::string::npos) << header;
+    EXPECT_EQ(text.find("loom: self-collision"), std::string::npos) << text;
+  }
+  // A run begun without the columns (a stats.csv written before they existed) resumes without them.
+  {
+    const fs::path out = dir / "run0";
+    auto rows_before = read_stats(out / "stats.csv");
+    std::ifstream in(out / "stats.csv");
+    std::string text((std::istreambuf_iterator<char>(in)), {});
+    in.close();
+    std::string old;
+    std::stringstream ls(text);
+    for (std::string line; std::getline(ls, line);) {
+      for (int k = 0; k < 4; ++k) line.erase(line.rfind(','));  // drop the four columns
+      old += line + "\n";
+    }
+    std::ofstream(out / "stats.csv", std::ios::trunc) << old;
+    auto [rc, t2] = run_command(exe + " run --resume " + out.string() + " --quiet --frames " + std::to_string(frames + 2));
+    ASSERT_EQ(rc, 0) << t2;
+    std::string header;
+    const auto rows = read_stats(out / "stats.csv", &header);  // every row as many fields as the header
+    EXPECT_EQ(rows.size(), static_cast<std::size_t>(frames + 3));
+    EXPECT_EQ(header.find("self_collision"), std::string::npos) << header;
+  }
+  fs::remove_all(dir);
 }

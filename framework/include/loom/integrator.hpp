@@ -24,6 +24,7 @@ struct StepStats {
   double assemble_seconds = 0;
   double solve_seconds = 0;
   int retries = 0;               ///< step halvings after failed solves
+  Index self_contacts = 0;       ///< self-contacts entered into the step's last solve (baraff_witkin)
 };
 
 class Integrator {

@@ -235,6 +235,24 @@ struct SelfCollisionStats {
   double broad_seconds = 0, narrow_seconds = 0, response_seconds = 0;
 };
 
+/// What self-collision did and cost since it was built (SelfCollision::totals()): the sums of
+/// SelfCollisionStats over the resolve() calls, plus the time of the whole calls and of the
+/// integrators' searches through proximity_pairs() (baraff_witkin's self-contacts). The run's
+/// stats.csv columns and `loom run`'s summary line come from it (docs/OUTPUT.md).
+struct SelfCollisionTotals {
+  long long steps = 0;            ///< resolve() calls
+  double resolve_seconds = 0;     ///< wall time in resolve() (the after-step pass), all of it
+  double broad_seconds = 0, narrow_seconds = 0, response_seconds = 0;  ///< its phases
+  double search_seconds = 0;      ///< wall time in proximity_pairs(x, d, out) (an integrator's self-contacts)
+  long long proximity = 0;        ///< repulsion / friction impulses
+  long long ccd_collisions = 0;   ///< CCD impulses
+  long long frozen = 0;           ///< vertices the fail-safe returned to their start of step
+  long long rebuilds = 0;         ///< full rebuilds of the candidate lists
+  long long refreshed = 0;        ///< vertices whose pairs alone were re-examined
+  double seconds() const { return resolve_seconds + search_seconds; }
+  long long impulses() const { return proximity + ccd_collisions; }
+};
+
 /// A vertex-triangle or edge-edge pair of non-adjacent elements near each other (see
 /// SelfCollision::proximity_pairs). sum_i w[i] x[v[i]] is the vector from the closest point of
 /// the triangle to the vertex (from the first edge's closest point to the second's); normal
@@ -285,6 +303,8 @@ class SelfCollision {
   /// both free of self-intersections and outside the colliders whenever the step's start was.
   void resolve(State& s, double h, const ColliderSet* colliders = nullptr);
   const SelfCollisionStats& last_stats() const { return stats_; }
+  /// The sums since construction (stats.csv's self_collision columns, the run's summary).
+  const SelfCollisionTotals& totals() const { return totals_; }
 
   /// The pairs that can end a step within the thickness: every non-adjacent vertex-triangle
   /// and edge-edge pair whose distance at positions x (3 per vertex), less the largest relative
@@ -326,6 +346,9 @@ class SelfCollision {
   void proximity_pairs(const double* x, double within, std::vector<Proximity>& vt, std::vector<Proximity>& ee);
 
  private:
+  // resolve() and proximity_pairs(x, d, out) without the totals' bookkeeping.
+  void resolve_step(State& s, double h, const ColliderSet* colliders);
+  void find_pairs(const double* x, const double* d, std::vector<ProximityPair>& out);
   struct Pair {
     Index a, b;         ///< vertex, triangle  or  edge, edge
     double dist_ref;    ///< distance at the broad phase's start positions
@@ -437,6 +460,7 @@ class SelfCollision {
   /// grows by one step's displacement instead of two (see reach_for in self_collision.cpp).
   bool large_steps_ = false;
   SelfCollisionStats stats_;
+  SelfCollisionTotals totals_;
 };
 
 inline void SelfCollision::pair_vertices(bool vt, const Pair& p, Index idx[4]) const {

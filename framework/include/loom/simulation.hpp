@@ -100,6 +100,8 @@ class Simulation {
   long long step_retries() const { return retries_; }
   /// Seconds spent inside Integrator::step since construction.
   double step_seconds_total() const { return step_seconds_total_; }
+  /// StepStats::self_contacts summed over the steps since construction or resume.
+  long long self_contacts_total() const { return self_contacts_total_; }
 
   /// Lines describing what was built (counts, plugins, backend), for `loom validate`.
   std::vector<std::string> describe() const;
@@ -129,6 +131,13 @@ class Simulation {
     double wall_ms_per_step = 0;
     long long force_evaluations = 0;
     long long linear_iterations = 0;
+    /// With self_collision, over the steps since the last frame: wall ms per step in
+    /// self-collision (the after-step pass and an integrator's self-contact search), impulses
+    /// (proximity and CCD), and vertices the fail-safe returned to their start of step.
+    double self_collision_ms_per_step = 0;
+    long long self_collision_impulses = 0;
+    long long self_collision_frozen = 0;
+    double self_collision_contacts = 0;  ///< per step: StepStats::self_contacts (baraff_witkin's)
   };
   /// Energies and strain of the current state.
   FrameStats measure(int frame) const;
@@ -176,6 +185,9 @@ class Simulation {
   double step_seconds_ = 0;
   double step_seconds_total_ = 0;
   long long steps_in_frame_ = 0;
+  SelfCollisionTotals self_collision_at_frame_;  ///< self_collision->totals() when the frame began
+  long long self_contacts_in_frame_ = 0;         ///< StepStats::self_contacts summed over the frame's steps
+  long long self_contacts_total_ = 0;            ///< ... over every step since construction or resume
   std::function<void()> on_step_;
   std::unique_ptr<ThreadController> thread_ctl_;  ///< `threads: auto`'s step-time controller (null: fixed count)
 

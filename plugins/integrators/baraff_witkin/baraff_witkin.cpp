@@ -621,6 +621,7 @@ void BaraffWitkin::step(Scene& scene, double h) {
   t0_ = scene.state.time;
   advance(scene, h, 0, st);
   finish_step(scene.state, h);
+  if (self_contact_) st.self_contacts = self_contact_->stats().contacts;
   last_ = st;
 }
 
