@@ -857,8 +857,7 @@ bool SelfCollision::respond(const Index idx[4], const double w[4], const double 
         touched_flag_[idx[i]] = 1;
         touched_.push_back(idx[i]);  // within the capacity reserved for every vertex
       }
-      const double* di = &d_[3 * idx[i]];
-      step_len_[idx[i]] = std::sqrt(selfcol::dot(di, di));
+      step_len_[idx[i]] = frame_step(&d_[3 * idx[i]]);
       max_growth_ = std::max(max_growth_, step_len_[idx[i]] - len0_[idx[i]]);
     }
   responded_ |= changed;
@@ -1048,6 +1047,8 @@ void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
   ee_.clear();
   traverse(gap, exact, false);
   std::fill(moved_.begin(), moved_.end(), 0.0);
+  shift_[0] = shift_[1] = shift_[2] = 0;  // the reference positions are the positions now
+  frame_reset_ = true;
   have_candidates_ = true;
   stats_.rebuilt = true;
   ++stats_.rebuilds;
@@ -1097,7 +1098,7 @@ void SelfCollision::refresh(const double* x0) {
   refresh_e_.clear();
   for (const Index v : refresh_v_) {
     vflag_[v] = 1;
-    for (int k = 0; k < 3; ++k) ref_x_[3 * v + k] = x0[3 * v + k];
+    for (int k = 0; k < 3; ++k) ref_x_[3 * v + k] = x0[3 * v + k] - shift_[k];  // in the lists' frame
     reach_[v] = reach_for(v);
     moved_[v] = 0;
     for (Index j = vt_off_[v]; j < vt_off_[v + 1]; ++j)
@@ -1222,8 +1223,7 @@ bool SelfCollision::keep_outside(State& s, double h, const ColliderSet& collider
     moved = true;
     touched_flag_[v] = 2;  // put back: freeze_pass(s, true) re-checks its pairs
     for (int k = 0; k < 3; ++k) d_[3 * v + k] = y[k] - x0_[3 * v + k];
-    const double* dv = &d_[3 * v];
-    step_len_[v] = std::sqrt(selfcol::dot(dv, dv));
+    step_len_[v] = frame_step(&d_[3 * v]);
     max_growth_ = std::max(max_growth_, step_len_[v] - len0_[v]);
   }
   return moved;
@@ -1291,11 +1291,11 @@ Index SelfCollision::freeze_pass(State& s, bool changed_only, const double* d_re
             change = std::max(change, std::sqrt(c2));
           }
           inv_mass_[v] = 0;
-          step_len_[v] = 0;
           for (int k = 0; k < 3; ++k) {
             d_[3 * v + k] = 0;
             s.v[3 * v + k] = 0;
           }
+          step_len_[v] = frame_step(&d_[3 * v]);
         }
       }
     }
@@ -1349,24 +1349,42 @@ void SelfCollision::resolve_step(State& s, double h, const ColliderSet* collider
   // One pass over the vertices. The candidate lists
   // are reused while every vertex stays within its reach of the positions they were built at
   // (motion since then plus this step's displacement); otherwise they are rebuilt.
+  // Motions are measured in the lists' frame (shift_, drift_: see the header): a sheet moving as
+  // a whole keeps its lists. The frame's sums per fixed chunk, added in chunk order, so the next
+  // frame does not depend on the thread count.
   int invalid = have_candidates_ ? 0 : 1;
+  double part[kFrameChunks][6];
+  const double T[3] = {shift_[0], shift_[1], shift_[2]}, D[3] = {drift_[0], drift_[1], drift_[2]};
 #pragma omp parallel for reduction(+ : invalid) schedule(static) if (n >= kParallelMinVertices)
-  for (Index i = 0; i < n; ++i) {
-    double l2 = 0, m2 = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double a = x0_[3 * i + k], b = x[3 * i + k];
-      const double dk = b - a;
-      const double mk = a - ref_x_[3 * i + k];
-      d_[3 * i + k] = dk;
-      l2 += dk * dk;
-      m2 += mk * mk;
+  for (int c = 0; c < kFrameChunks; ++c) {
+    double su[3] = {0, 0, 0}, sd[3] = {0, 0, 0};
+    const Index i1 = static_cast<Index>(static_cast<std::int64_t>(n) * (c + 1) / kFrameChunks);
+    for (Index i = static_cast<Index>(static_cast<std::int64_t>(n) * c / kFrameChunks); i < i1; ++i) {
+      double l2 = 0, m2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const double a = x0_[3 * i + k], b = x[3 * i + k];
+        const double dk = b - a;
+        const double mk = a - ref_x_[3 * i + k] - T[k];
+        const double ek = dk - D[k];
+        d_[3 * i + k] = dk;
+        su[k] += mk;
+        sd[k] += dk;
+        l2 += ek * ek;
+        m2 += mk * mk;
+      }
+      step_len_[i] = len0_[i] = std::sqrt(l2);
+      moved_[i] = std::sqrt(m2);
+      invalid += moved_[i] + step_len_[i] > reach_[i] ? 1 : 0;
+      inv_mass_[i] = s.inv_mass[i];
+      frozen_[i] = 0;
     }
-    step_len_[i] = len0_[i] = std::sqrt(l2);
-    moved_[i] = std::sqrt(m2);
-    invalid += moved_[i] + step_len_[i] > reach_[i] ? 1 : 0;
-    inv_mass_[i] = s.inv_mass[i];
-    frozen_[i] = 0;
+    for (int k = 0; k < 3; ++k) part[c][k] = su[k], part[c][3 + k] = sd[k];
   }
+  double mean_u[3] = {0, 0, 0}, mean_d[3] = {0, 0, 0};
+  for (int c = 0; c < kFrameChunks; ++c)
+    for (int k = 0; k < 3; ++k) mean_u[k] += part[c][k], mean_d[k] += part[c][3 + k];
+  for (int k = 0; k < 3; ++k) mean_u[k] /= std::max<Index>(n, 1), mean_d[k] /= std::max<Index>(n, 1);
+  frame_reset_ = false;
   if (invalid > 0) update_candidates(x0_.data());
   stats_.candidates_vt = static_cast<Index>(vt_.size());
   stats_.candidates_ee = static_cast<Index>(ee_.size());
@@ -1585,6 +1603,13 @@ void SelfCollision::resolve_step(State& s, double h, const ColliderSet* collider
   if (responded_)
     for (Index i = 0; i < n; ++i)
       for (int k = 0; k < 3; ++k) x[3 * i + k] = x0_[3 * i + k] + d_[3 * i + k];
+  // The next step's frame: centred on the vertices' mean motion since the lists' reference
+  // (none when the lists were rebuilt in this step) plus this step's mean displacement, which
+  // also predicts the next step's.
+  for (int k = 0; k < 3; ++k) {
+    shift_[k] += (frame_reset_ ? 0.0 : mean_u[k]) + mean_d[k];
+    drift_[k] = mean_d[k];
+  }
   stats_.response_seconds = seconds_since(t0);
 }
 
@@ -1613,8 +1638,8 @@ void SelfCollision::find_pairs(const double* x, const double* d, std::vector<Pro
   for (Index i = 0; i < nv_; ++i) {
     double l2 = 0, m2 = 0;
     for (int k = 0; k < 3; ++k) {
-      const double dk = d[3 * i + k], mk = x[3 * i + k] - ref_x_[3 * i + k];
-      l2 += dk * dk;
+      const double ek = d[3 * i + k] - drift_[k], mk = x[3 * i + k] - ref_x_[3 * i + k] - shift_[k];
+      l2 += ek * ek;
       m2 += mk * mk;
     }
     step_len_[i] = std::sqrt(l2);

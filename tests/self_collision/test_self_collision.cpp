@@ -430,10 +430,13 @@ State shaken_sheet_state(const Mesh& mesh) {
   return s;
 }
 
-void shake(State& s, std::mt19937& rng, std::normal_distribution<double>& N, Index fast, double h) {
+// Every vertex moved at random (every `fast`-th vertex four times as far), plus `common` (a
+// displacement of the whole sheet in the step, if given).
+void shake(State& s, std::mt19937& rng, std::normal_distribution<double>& N, Index fast, double h,
+           const double* common = nullptr) {
   for (Index i = 0; i < s.size(); ++i)
     for (int k = 0; k < 3; ++k) {
-      const double dx = (i % fast == 0 ? 0.006 : 0.0015) * N(rng);
+      const double dx = (i % fast == 0 ? 0.006 : 0.0015) * N(rng) + (common ? common[k] : 0.0);
       s.x[3 * i + k] += dx;
       s.v[3 * i + k] = dx / h;
     }
@@ -446,11 +449,15 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
   // that vertices leave their reach at different steps. After each resolve(), every
   // non-adjacent pair closer than the thickness at the start, middle or end of the step (all
   // pairs, brute force) must be in the candidate lists: once keeping them by refreshes alone
-  // (refresh_fraction 1), once by full rebuilds alone (0).
+  // (refresh_fraction 1), once by full rebuilds alone (0). Then the same while the whole sheet
+  // also moves, by several thicknesses per step in a direction that turns from step to step:
+  // the lists measure motion after the sheet's mean motion is taken off (their frame), which
+  // must keep them complete whatever the common motion does.
   const Mesh mesh = make_grid(10, 10, 0.3, 0.3, GridPlane::XZ);  // edge 0.033
   const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
   const auto edges = mesh.edges();
   const double th = 0.006, h = 0.01;
+  for (const bool moving : {false, true})
   for (const double fraction : {1.0, 0.0}) {
     SelfCollision sc(shaken_sheet_options(th, fraction), mesh);
     State s = shaken_sheet_state(mesh);
@@ -461,7 +468,9 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
     for (int step = 0; step < 150; ++step) {
       const std::vector<double> x0 = s.x;
       sc.begin_step(s);
-      shake(s, rng, N, 17, h);
+      const double turn = 0.05 * step;  // rad: the common motion (5 thicknesses per step) turns
+      const double common[3] = {0.03 * std::cos(turn), 0.01 * std::sin(3 * turn), 0.03 * std::sin(turn)};
+      shake(s, rng, N, 17, h, moving ? common : nullptr);
       sc.resolve(s, h);
       refreshed += sc.last_stats().refreshed;
       rebuilds += sc.last_stats().rebuilds;
@@ -479,7 +488,8 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
           if (d >= th) continue;
           ++near_pairs;
           ASSERT_TRUE(std::binary_search(vt.begin(), vt.end(), std::array<Index, 2>{v, t}))
-              << "vertex " << v << " triangle " << t << " at distance " << d << ", step " << step << ", fraction " << fraction;
+              << "vertex " << v << " triangle " << t << " at distance " << d << ", step " << step << ", fraction "
+              << fraction << ", moving " << moving;
         }
       for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
         for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
@@ -491,16 +501,17 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
           if (d >= th) continue;
           ++near_pairs;
           ASSERT_TRUE(std::binary_search(ee.begin(), ee.end(), std::array<Index, 2>{e, f}))
-              << "edges " << e << ", " << f << " at distance " << d << ", step " << step << ", fraction " << fraction;
+              << "edges " << e << ", " << f << " at distance " << d << ", step " << step << ", fraction " << fraction
+              << ", moving " << moving;
         }
     }
     EXPECT_GT(near_pairs, 100) << fraction;  // the sheet did crumple: the check is not vacuous
     if (fraction == 1.0) {
-      EXPECT_GT(refreshed, 100);
+      EXPECT_GT(refreshed, 50) << "moving " << moving;  // the refreshes were exercised
       EXPECT_EQ(rebuilds, 1);  // the first step only
     } else {
       EXPECT_EQ(refreshed, 0);
-      EXPECT_GT(rebuilds, 10);
+      EXPECT_GT(rebuilds, 10) << "moving " << moving;
     }
   }
 }
@@ -883,4 +894,59 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshesOfManyVerticesOnAShakenFoldEqualTheBr
   EXPECT_GT(refreshed, 2 * nv);
   EXPECT_GT(far_in_mesh, 1000u) << "stacked pairs (found through the hierarchy, not the neighbour lists)";
   EXPECT_GT(checked, 10000u);
+}
+
+TEST(SelfCollisionBvh, AClothMovingAsAWholeKeepsItsListsInTheFrameOfItsMeanMotion) {
+  // A folded cloth (two layers 1.5 thicknesses apart) thrown sideways and falling: every vertex
+  // has the same velocity v = (2, 1, 0) m/s + g t, so with h = 0.01 s it moves about 2.2 cm (1.3
+  // thicknesses) per step along a path that bends with gravity. Distances between elements do
+  // not change under a common motion, and the lists measure motion after the cloth's mean
+  // motion is taken off (their frame): after the first step's build they are neither rebuilt
+  // nor refreshed in 100 steps, and stay the same pairs. (A reach measured in absolute motion,
+  // at most 2|d| + th for a vertex moving |d| per step, is used up within two steps here; the
+  // lists were rebuilt every second step before the frame.) The cloth's motion is left as it is:
+  // no pair comes within the thickness, so there is no impulse. Both the explicit path
+  // (resolve() alone) and baraff_witkin's (proximity_pairs, then resolve()).
+  const Mesh mesh = make_grid(16, 16, 1.0, 1.0, GridPlane::XZ);  // edge 1/15
+  const double th = 0.25 / 15, h = 0.01, g = -9.81;
+  for (const bool large : {false, true}) {
+    SelfCollision sc(shaken_sheet_options(th, 1.0 / 256), mesh);
+    State s = shaken_sheet_state(mesh);
+    s.x = folded_sheet(mesh, 0.75 * th, 41);
+    for (Index i = 0; i < s.size(); ++i) s.v[3 * i] = 2.0, s.v[3 * i + 1] = 1.0;
+    std::vector<std::array<Index, 2>> vt0, ee0, vt, ee;
+    std::vector<double> d(s.x.size()), expect;
+    std::vector<ProximityPair> out;
+    int rebuilds = 0;
+    Index refreshed = 0, impulses = 0;
+    for (int step = 0; step < 100; ++step) {
+      for (Index i = 0; i < s.size(); ++i) {
+        s.v[3 * i + 1] += g * h;
+        for (int k = 0; k < 3; ++k) d[3 * i + k] = h * s.v[3 * i + k];
+      }
+      if (large) sc.proximity_pairs(s.x.data(), d.data(), out);
+      if (large) EXPECT_TRUE(out.empty()) << "step " << step;
+      sc.begin_step(s);
+      for (std::size_t q = 0; q < s.x.size(); ++q) s.x[q] += d[q];
+      expect = s.x;
+      sc.resolve(s, h);
+      EXPECT_EQ(s.x, expect) << "step " << step;
+      const SelfCollisionTotals& t = sc.totals();
+      if (step == 0) {
+        sc.candidate_lists(vt0, ee0);
+        ASSERT_GT(vt0.size() + ee0.size(), 0u);
+        rebuilds = static_cast<int>(t.rebuilds);
+        refreshed = static_cast<Index>(t.refreshed);
+      }
+      impulses = static_cast<Index>(t.impulses());
+    }
+    EXPECT_EQ(rebuilds, 1) << "large " << large;
+    EXPECT_EQ(sc.totals().rebuilds, rebuilds) << "no rebuild after the first step, large " << large;
+    EXPECT_EQ(sc.totals().refreshed, refreshed) << "no refresh after the first step, large " << large;
+    EXPECT_EQ(impulses, 0);
+    sc.candidate_lists(vt, ee);
+    EXPECT_EQ(vt, vt0);
+    EXPECT_EQ(ee, ee0);
+    EXPECT_EQ(sc.totals().steps, 100);
+  }
 }

@@ -10,6 +10,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -431,9 +432,22 @@ class SelfCollision {
   /// as CSR offsets and pair indices, and the pairs of them that the current refresh re-tests.
   std::vector<Index> nbv_off_, nbv_idx_, nbt_off_, nbt_idx_, nbe_off_, nbe_idx_;
   std::vector<Index> refresh_nbvt_, refresh_nbee_;
-  std::vector<double> ref_x_;                    ///< start positions at the last broad phase
-  std::vector<double> moved_;                    ///< per vertex |x0 - ref_x| this step
-  std::vector<double> step_len_;                 ///< per vertex |d| this step
+  std::vector<double> ref_x_;                    ///< reference positions of the lists (in their frame, below)
+  /// The lists' frame. Distances between elements do not change when every vertex moves by the
+  /// same vector, so the lists' bounds measure each vertex's motion after a common one is taken
+  /// off: since the reference, x0 - ref_x - shift_; in the step, d - drift_. Any common vector
+  /// keeps every bound valid; these follow the cloth's mean motion (updated at the end of each
+  /// resolve(); shift_ is zero when the lists are rebuilt), so a sheet falling or sliding as a
+  /// whole does not renew its lists, nor widen its reaches, for that motion.
+  double shift_[3] = {0, 0, 0}, drift_[3] = {0, 0, 0};
+  bool frame_reset_ = false;                     ///< the lists were rebuilt in this resolve()
+  static constexpr int kFrameChunks = 64;        ///< fixed chunks of the frame's sums (order fixed)
+  double frame_step(const double* d) const {
+    const double e[3] = {d[0] - drift_[0], d[1] - drift_[1], d[2] - drift_[2]};
+    return std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+  }
+  std::vector<double> moved_;                    ///< per vertex |x0 - ref_x - shift_| this step
+  std::vector<double> step_len_;                 ///< per vertex |d - drift_| this step
   std::vector<Pair> vt_, ee_;
   std::vector<std::uint8_t> near_flag_;          ///< per pair (VT then EE): could be within the thickness this step
   std::vector<Index> near_;                      ///< those pairs (index into VT then EE)
