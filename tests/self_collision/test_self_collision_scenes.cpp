@@ -19,6 +19,7 @@
 #include "loom/simulation.hpp"
 #include "loom/intersection_check.hpp"
 #include "loom/restart.hpp"
+#include "common/csv_table.hpp"
 #include "common/restart_file.hpp"
 
 namespace fs = std::filesystem;
@@ -504,25 +505,15 @@ TEST_F(SelfCollisionScenes, StatsOfAStepAreReported) {
 
 namespace {
 
-// stats.csv as rows of named columns.
+// stats.csv as rows of named columns; every row must have as many fields as the header.
 std::vector<std::map<std::string, std::string>> read_stats(const fs::path& path, std::string* header_out = nullptr) {
-  std::ifstream in(path);
-  std::string header;
-  std::getline(in, header);
-  if (header_out) *header_out = header;
-  std::vector<std::string> names;
-  std::stringstream hs(header);
-  for (std::string c; std::getline(hs, c, ',');) names.push_back(c);
-  std::vector<std::map<std::string, std::string>> rows;
-  for (std::string line; std::getline(in, line);) {
-    std::stringstream ls(line);
-    std::map<std::string, std::string> row;
-    std::size_t k = 0;
-    for (std::string c; std::getline(ls, c, ','); ++k) row[k < names.size() ? names[k] : "extra" + std::to_string(k)] = c;
-    EXPECT_EQ(k, names.size()) << line;
-    rows.push_back(row);
+  const loom_test::CsvTable t = loom_test::read_csv_table(path);
+  if (header_out) {
+    header_out->clear();
+    for (std::size_t k = 0; k < t.header.size(); ++k) *header_out += (k ? "," : "") + t.header[k];
   }
-  return rows;
+  for (const auto& r : t.rows) EXPECT_EQ(r.size(), t.header.size()) << path;
+  return t.by_name();
 }
 
 }  // namespace

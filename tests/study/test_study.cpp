@@ -2,6 +2,8 @@
 // stability bisection brackets the linear limit.
 #include <gtest/gtest.h>
 
+#include "common/csv_table.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -32,27 +34,7 @@ int run(const std::string& args, std::string& out) {
 }
 
 std::vector<std::map<std::string, std::string>> read_csv(const fs::path& p) {
-  std::ifstream in(p);
-  std::string line;
-  std::getline(in, line);
-  std::vector<std::string> head;
-  std::stringstream hs(line);
-  for (std::string h; std::getline(hs, h, ',');) head.push_back(h);
-  std::vector<std::map<std::string, std::string>> rows;
-  while (std::getline(in, line)) {
-    std::map<std::string, std::string> r;
-    std::size_t col = 0;
-    std::string cur;
-    bool quoted = false;
-    for (char c : line) {
-      if (c == '"') quoted = !quoted;
-      else if (c == ',' && !quoted) { r[head[col++]] = cur; cur.clear(); }
-      else cur += c;
-    }
-    r[head[col]] = cur;
-    rows.push_back(r);
-  }
-  return rows;
+  return loom_test::read_csv_table(p).by_name();
 }
 
 // An empty folder under the temporary directory with the test scene in it.
