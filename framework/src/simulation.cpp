@@ -311,6 +311,7 @@ Simulation::FrameStats Simulation::measure(int frame) const {
     fs.self_collision_ms_per_step = steps_in_frame_ > 0 ? 1e3 * (now.seconds() - then.seconds()) / steps_in_frame_ : 0.0;
     fs.self_collision_impulses = now.impulses() - then.impulses();
     fs.self_collision_frozen = now.frozen - then.frozen;
+    fs.self_collision_rebuilds = now.rebuilds - then.rebuilds;
     fs.self_collision_contacts = steps_in_frame_ > 0 ? static_cast<double>(self_contacts_in_frame_) / steps_in_frame_ : 0.0;
   }
   return fs;
@@ -347,6 +348,8 @@ namespace {
 // stats.csv's columns of a scene with self_collision, after the pin columns (docs/OUTPUT.md).
 constexpr const char* kSelfCollisionColumns =
     ",self_collision_ms_per_step,self_collision_impulses,self_collision_frozen,self_collision_contacts";
+// Then the lists' rebuilds (added 2026-12-02: a run begun before resumes without the column).
+constexpr const char* kSelfCollisionRebuildColumn = ",self_collision_rebuilds";
 }  // namespace
 
 void Simulation::run(const std::function<void(int, int)>& progress) {
@@ -362,6 +365,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
   std::ofstream stats;
   std::streamoff stats_complete = 0;  // bytes of stats.csv that hold complete rows
   bool stats_self_columns = scene_->self_collision != nullptr;  // the self_collision columns of stats.csv
+  bool stats_rebuild_column = stats_self_columns;                // and the rebuilds' column after them
   std::unique_ptr<OutputLock> lock;
   std::error_code ec;
   const std::string abs_base = fs::absolute(base_dir_, ec).lexically_normal().string();
@@ -391,6 +395,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       std::string header;
       std::getline(head, header);
       stats_self_columns = stats_self_columns && header.find(kSelfCollisionColumns) != std::string::npos;
+      stats_rebuild_column = stats_self_columns && header.find(kSelfCollisionRebuildColumn) != std::string::npos;
       stats.open(path, std::ios::app);
       if (!stats) throw InputError("cannot write " + path + ". Fix: check the folder's permissions.");
       stats.precision(10);
@@ -399,7 +404,8 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       if (!stats) throw InputError("cannot write " + output_.dir + "/stats.csv. Fix: choose a writable --out folder.");
       stats << "frame,time,kinetic_energy,gravitational_energy,elastic_energy,total_energy,max_strain,"
                "wall_ms_per_step,force_evaluations,linear_iterations"
-            << scene_->pins.csv_header() << (stats_self_columns ? kSelfCollisionColumns : "") << '\n';
+            << scene_->pins.csv_header() << (stats_self_columns ? kSelfCollisionColumns : "")
+            << (stats_rebuild_column ? kSelfCollisionRebuildColumn : "") << '\n';
       stats.precision(10);
       stats.flush();
       if (!stats) throw OutputError("cannot write " + output_.dir + "/stats.csv (" + std::strerror(errno) + "; disk full?)");
@@ -488,6 +494,7 @@ void Simulation::run(const std::function<void(int, int)>& progress) {
       if (stats_self_columns)
         stats << ',' << f.self_collision_ms_per_step << ',' << f.self_collision_impulses << ',' << f.self_collision_frozen
               << ',' << f.self_collision_contacts;
+      if (stats_rebuild_column) stats << ',' << f.self_collision_rebuilds;
       stats << '\n';
       stats.flush();
       if (!stats) {

@@ -518,11 +518,12 @@ std::vector<std::map<std::string, std::string>> read_stats(const fs::path& path,
 
 }  // namespace
 
-// What a run says about self-collision (docs/OUTPUT.md, docs/CONTACT.md): stats.csv's four
+// What a run says about self-collision (docs/OUTPUT.md, docs/CONTACT.md): stats.csv's five
 // columns per frame and the summary line of `loom run`. The folding cloth collapses into folds
-// within its 0.5 s, so there are impulses. The per-frame impulses and frozen vertices must equal an
-// independent count: the same scene stepped in this process, summing SelfCollision::last_stats()
-// step by step (the run is deterministic on one thread); the self-collision time is part of the
+// within its 0.5 s, so there are impulses. The per-frame impulses, frozen vertices and list
+// rebuilds must equal an independent count: the same scene stepped in this process, summing
+// SelfCollision::last_stats() step by step (the run is deterministic on one thread; baraff_witkin's
+// rebuilds from the totals, its search rebuilds outside last_stats()); the self-collision time is part of the
 // step's; baraff_witkin reports the self-contacts of its solves. A scene without self_collision
 // has none of the columns, and a run whose stats.csv was begun without them resumes without them.
 TEST_F(SelfCollisionScenes, StatsCsvAndTheSummarySayWhatSelfCollisionDid) {
@@ -539,24 +540,31 @@ TEST_F(SelfCollisionScenes, StatsCsvAndTheSummarySayWhatSelfCollisionDid) {
     std::string header;
     const auto rows = read_stats(out / "stats.csv", &header);
     ASSERT_EQ(rows.size(), static_cast<std::size_t>(frames + 1));
-    EXPECT_NE(header.find(",self_collision_ms_per_step,self_collision_impulses,self_collision_frozen,self_collision_contacts"),
+    EXPECT_NE(header.find(",self_collision_ms_per_step,self_collision_impulses,self_collision_frozen,self_collision_contacts,"
+                          "self_collision_rebuilds"),
               std::string::npos)
         << header;
     // The independent count.
     auto sim = make(yaml);
-    long long impulses_total = 0, frozen_total = 0;
+    long long impulses_total = 0, frozen_total = 0, rebuilds_total = 0;
     double contacts_max = 0;
     for (int f = 1; f <= frames; ++f) {
-      long long impulses = 0, frozen = 0;
+      long long impulses = 0, frozen = 0, rebuilds = 0;
+      const long long rebuilds_before = sim->scene().self_collision->totals().rebuilds;
       for (int k = 0; k < sim->substeps(); ++k) {
         sim->step();
         const auto& st = sim->scene().self_collision->last_stats();
         impulses += st.proximity + st.ccd_collisions;
         frozen += st.frozen;
+        rebuilds += st.rebuilds;  // the after-step pass's (baraff_witkin's search rebuilds too: below)
       }
+      // symplectic_euler rebuilds only in the after-step pass, so its step-by-step count is the
+      // whole; baraff_witkin's search rebuilds before it, counted by the run's totals.
+      if (which == 3) rebuilds = sim->scene().self_collision->totals().rebuilds - rebuilds_before;
       const auto& row = rows[static_cast<std::size_t>(f)];
       EXPECT_EQ(std::stoll(row.at("self_collision_impulses")), impulses) << "frame " << f << ", integrator " << which;
       EXPECT_EQ(std::stoll(row.at("self_collision_frozen")), frozen) << "frame " << f << ", integrator " << which;
+      EXPECT_EQ(std::stoll(row.at("self_collision_rebuilds")), rebuilds) << "frame " << f << ", integrator " << which;
       const double ms = std::stod(row.at("self_collision_ms_per_step")), wall = std::stod(row.at("wall_ms_per_step"));
       EXPECT_GT(ms, 0.0) << "frame " << f;
       EXPECT_LE(ms, wall) << "frame " << f << ": self-collision is part of the step";
@@ -565,7 +573,10 @@ TEST_F(SelfCollisionScenes, StatsCsvAndTheSummarySayWhatSelfCollisionDid) {
       contacts_max = std::max(contacts_max, contacts);
       impulses_total += impulses;
       frozen_total += frozen;
+      rebuilds_total += rebuilds;
     }
+    EXPECT_GT(rebuilds_total, 0) << "the lists were built: the column is not vacuous";
+    EXPECT_NE(text.find("candidate lists rebuilt " + std::to_string(rebuilds_total) + " times"), std::string::npos) << text;
     if (which == 0) EXPECT_GT(impulses_total, 0) << "the layers met: the check is not vacuous";
     if (which == 3) EXPECT_GT(contacts_max, 0.0) << "baraff_witkin entered self-contacts into its solves";
     // The summary line: the run's totals.
@@ -587,17 +598,19 @@ TEST_F(SelfCollisionScenes, StatsCsvAndTheSummarySayWhatSelfCollisionDid) {
     EXPECT_EQ(header.find("self_collision"), std::string::npos) << header;
     EXPECT_EQ(text.find("loom: self-collision"), std::string::npos) << text;
   }
-  // A run begun without the columns (a stats.csv written before they existed) resumes without them.
-  {
-    const fs::path out = dir / "run0";
-    auto rows_before = read_stats(out / "stats.csv");
+  // A run begun without the columns (a stats.csv written before they existed) resumes without
+  // them; one begun with the first four but without the rebuilds' column (added later) resumes
+  // with the four.
+  fs::copy(dir / "run0", dir / "run0b", fs::copy_options::recursive);
+  for (const int dropped : {5, 1}) {
+    const fs::path out = dir / (dropped == 5 ? "run0" : "run0b");
     std::ifstream in(out / "stats.csv");
     std::string text((std::istreambuf_iterator<char>(in)), {});
     in.close();
     std::string old;
     std::stringstream ls(text);
     for (std::string line; std::getline(ls, line);) {
-      for (int k = 0; k < 4; ++k) line.erase(line.rfind(','));  // drop the four columns
+      for (int k = 0; k < dropped; ++k) line.erase(line.rfind(','));  // drop the last columns
       old += line + "\n";
     }
     std::ofstream(out / "stats.csv", std::ios::trunc) << old;
@@ -606,7 +619,13 @@ TEST_F(SelfCollisionScenes, StatsCsvAndTheSummarySayWhatSelfCollisionDid) {
     std::string header;
     const auto rows = read_stats(out / "stats.csv", &header);  // every row as many fields as the header
     EXPECT_EQ(rows.size(), static_cast<std::size_t>(frames + 3));
-    EXPECT_EQ(header.find("self_collision"), std::string::npos) << header;
+    if (dropped == 5) {
+      EXPECT_EQ(header.find("self_collision"), std::string::npos) << header;
+    } else {
+      EXPECT_NE(header.find(",self_collision_contacts"), std::string::npos) << header;
+      EXPECT_EQ(header.find("self_collision_rebuilds"), std::string::npos) << header;
+      EXPECT_GT(std::stod(rows.back().at("self_collision_ms_per_step")), 0.0) << "the resumed frames have the four";
+    }
   }
   fs::remove_all(dir);
 }

@@ -138,6 +138,7 @@ class Simulation {
     long long self_collision_impulses = 0;
     long long self_collision_frozen = 0;
     double self_collision_contacts = 0;  ///< per step: StepStats::self_contacts (baraff_witkin's)
+    long long self_collision_rebuilds = 0;  ///< full rebuilds of the candidate lists (SelfCollisionTotals::rebuilds)
   };
   /// Energies and strain of the current state.
   FrameStats measure(int frame) const;
