@@ -857,7 +857,7 @@ bool SelfCollision::respond(const Index idx[4], const double w[4], const double 
         touched_flag_[idx[i]] = 1;
         touched_.push_back(idx[i]);  // within the capacity reserved for every vertex
       }
-      step_len_[idx[i]] = frame_step(&d_[3 * idx[i]]);
+      step_len_[idx[i]] = frame_step(&x0_[3 * idx[i]], &d_[3 * idx[i]]);
       max_growth_ = std::max(max_growth_, step_len_[idx[i]] - len0_[idx[i]]);
     }
   responded_ |= changed;
@@ -1047,7 +1047,10 @@ void SelfCollision::broad_phase(const double* x0_in, double gap, bool exact) {
   ee_.clear();
   traverse(gap, exact, false);
   std::fill(moved_.begin(), moved_.end(), 0.0);
-  shift_[0] = shift_[1] = shift_[2] = 0;  // the reference positions are the positions now
+  // The reference positions are the positions now: the frame F is the identity (its motion
+  // over the step, f, stays: step_len_ does not change).
+  for (int k = 0; k < 9; ++k) frame_R_[k] = k % 4 == 0 ? 1.0 : 0.0;
+  frame_T_[0] = frame_T_[1] = frame_T_[2] = 0;
   frame_reset_ = true;
   have_candidates_ = true;
   stats_.rebuilt = true;
@@ -1098,7 +1101,7 @@ void SelfCollision::refresh(const double* x0) {
   refresh_e_.clear();
   for (const Index v : refresh_v_) {
     vflag_[v] = 1;
-    for (int k = 0; k < 3; ++k) ref_x_[3 * v + k] = x0[3 * v + k] - shift_[k];  // in the lists' frame
+    frame_reference(&x0[3 * v], &ref_x_[3 * v]);  // in the lists' frame: F(ref_x) = x0
     reach_[v] = reach_for(v);
     moved_[v] = 0;
     for (Index j = vt_off_[v]; j < vt_off_[v + 1]; ++j)
@@ -1145,6 +1148,97 @@ void SelfCollision::refresh(const double* x0) {
   for (const Index e : refresh_e_) eflag_[e] = 0;
   stats_.rebuilt = true;
   stats_.refreshed += static_cast<Index>(refresh_v_.size());
+}
+
+void SelfCollision::frame_reference(const double* y, double* X) const {
+  const double r[3] = {y[0] - frame_T_[0], y[1] - frame_T_[1], y[2] - frame_T_[2]};
+  for (int k = 0; k < 3; ++k) X[k] = frame_R_[k] * r[0] + frame_R_[3 + k] * r[1] + frame_R_[6 + k] * r[2];  // R^T r
+}
+
+namespace {
+
+// w solving M w = b for the symmetric 3x3 M (xx, yy, zz, xy, xz, yz), or zero when M is
+// singular for its size (the cloth's points on a line) or anything is not finite.
+void solve_sym3(const double M[6], const double b[3], double w[3]) {
+  const double a = M[0], e = M[1], i = M[2], bq = M[3], c = M[4], f = M[5];
+  const double c0 = e * i - f * f, c1 = c * f - bq * i, c2 = bq * f - c * e;  // first row of the adjugate
+  const double det = a * c0 + bq * c1 + c * c2;
+  const double scale = (a + e + i) / 3;
+  w[0] = w[1] = w[2] = 0;
+  if (!(std::abs(det) > 1e-9 * scale * scale * scale) || !std::isfinite(det)) return;
+  const double adj[3][3] = {{c0, c1, c2}, {c1, a * i - c * c, bq * c - a * f}, {c2, bq * c - a * f, a * e - bq * bq}};
+  for (int k = 0; k < 3; ++k) w[k] = (adj[k][0] * b[0] + adj[k][1] * b[1] + adj[k][2] * b[2]) / det;
+  if (!(std::isfinite(w[0]) && std::isfinite(w[1]) && std::isfinite(w[2]))) w[0] = w[1] = w[2] = 0;
+}
+
+// The rotation by angle |w| about w (Rodrigues), row-major.
+void rotation(const double w[3], double Q[9]) {
+  const double th = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+  for (int k = 0; k < 9; ++k) Q[k] = k % 4 == 0 ? 1.0 : 0.0;
+  if (!(th > 0) || !std::isfinite(th)) return;
+  const double a[3] = {w[0] / th, w[1] / th, w[2] / th};
+  const double sn = std::sin(th), cs = 1 - std::cos(th);
+  const double K[9] = {0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0};
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      double k2 = 0;
+      for (int m = 0; m < 3; ++m) k2 += K[3 * r + m] * K[3 * m + c];
+      Q[3 * r + c] += sn * K[3 * r + c] + cs * k2;
+    }
+}
+
+}  // namespace
+
+void SelfCollision::advance_frame(const double (*part)[kFrameSums], Index n) {
+  double S[kFrameSums] = {};
+  for (int c = 0; c < kFrameChunks; ++c)
+    for (int k = 0; k < kFrameSums; ++k) S[k] += part[c][k];
+  const double inv = 1.0 / static_cast<double>(std::max<Index>(n, 1));
+  for (double& v : S) v *= inv;
+  const double c[3] = {S[0], S[1], S[2]};  // centroid of the step's start positions
+  const double ub[3] = {frame_reset_ ? 0.0 : S[15], frame_reset_ ? 0.0 : S[16], frame_reset_ ? 0.0 : S[17]};
+  const double db[3] = {S[18], S[19], S[20]};
+  // Least squares: u - ub ~ w x (x0 - c), so J w = mean (x0 - c) x (u - ub) with J the
+  // points' inertia about c, tr(C) 1 - C (C their covariance); the same for d.
+  const double C[6] = {S[3] - c[0] * c[0], S[4] - c[1] * c[1], S[5] - c[2] * c[2],
+                       S[6] - c[0] * c[1], S[7] - c[0] * c[2], S[8] - c[1] * c[2]};
+  const double tr = C[0] + C[1] + C[2];
+  const double J[6] = {tr - C[0], tr - C[1], tr - C[2], -C[3], -C[4], -C[5]};
+  auto torque = [&](int at, const double* mean) {
+    return std::array<double, 3>{S[at] - (c[1] * mean[2] - c[2] * mean[1]), S[at + 1] - (c[2] * mean[0] - c[0] * mean[2]),
+                                 S[at + 2] - (c[0] * mean[1] - c[1] * mean[0])};
+  };
+  const std::array<double, 3> tu = torque(9, ub), td = torque(12, db);
+  double wu[3] = {0, 0, 0}, wd[3];
+  if (!frame_reset_) solve_sym3(J, tu.data(), wu);
+  solve_sym3(J, td.data(), wd);
+  // F' = Q (F - c) + c + ub + db, Q the rotation by wu + wd (after a rebuild F is the identity).
+  const double w[3] = {wu[0] + wd[0], wu[1] + wd[1], wu[2] + wd[2]};
+  double Q[9], R[9], T[3];
+  rotation(w, Q);
+  for (int r = 0; r < 3; ++r) {
+    for (int k = 0; k < 3; ++k)
+      R[3 * r + k] = Q[3 * r] * frame_R_[k] + Q[3 * r + 1] * frame_R_[3 + k] + Q[3 * r + 2] * frame_R_[6 + k];
+    T[r] = c[r] + ub[r] + db[r];
+    for (int k = 0; k < 3; ++k) T[r] += Q[3 * r + k] * (frame_T_[k] - c[k]);
+  }
+  // R stays a rotation (Gram-Schmidt on its rows against rounding over many steps).
+  auto normalise = [](double* v) {
+    const double l = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    for (int k = 0; k < 3; ++k) v[k] /= l;
+  };
+  normalise(&R[0]);
+  const double p01 = R[0] * R[3] + R[1] * R[4] + R[2] * R[5];
+  for (int k = 0; k < 3; ++k) R[3 + k] -= p01 * R[k];
+  normalise(&R[3]);
+  R[6] = R[1] * R[5] - R[2] * R[4], R[7] = R[2] * R[3] - R[0] * R[5], R[8] = R[0] * R[4] - R[1] * R[3];
+  bool finite = true;
+  for (int k = 0; k < 9; ++k) finite = finite && std::isfinite(R[k]);
+  for (int k = 0; k < 3; ++k) finite = finite && std::isfinite(T[k]) && std::isfinite(db[k]) && std::isfinite(c[k]);
+  if (!finite) return;  // a diverging step: the frame stays (any frame keeps the bounds valid)
+  std::memcpy(frame_R_, R, sizeof R);
+  std::memcpy(frame_T_, T, sizeof T);
+  for (int k = 0; k < 3; ++k) spin_[k] = wd[k], drift_[k] = db[k], centre_[k] = c[k] + db[k];
 }
 
 bool SelfCollision::candidates_valid() const {
@@ -1223,7 +1317,7 @@ bool SelfCollision::keep_outside(State& s, double h, const ColliderSet& collider
     moved = true;
     touched_flag_[v] = 2;  // put back: freeze_pass(s, true) re-checks its pairs
     for (int k = 0; k < 3; ++k) d_[3 * v + k] = y[k] - x0_[3 * v + k];
-    step_len_[v] = frame_step(&d_[3 * v]);
+    step_len_[v] = frame_step(&x0_[3 * v], &d_[3 * v]);
     max_growth_ = std::max(max_growth_, step_len_[v] - len0_[v]);
   }
   return moved;
@@ -1295,7 +1389,7 @@ Index SelfCollision::freeze_pass(State& s, bool changed_only, const double* d_re
             d_[3 * v + k] = 0;
             s.v[3 * v + k] = 0;
           }
-          step_len_[v] = frame_step(&d_[3 * v]);
+          step_len_[v] = frame_step(&x0_[3 * v], &d_[3 * v]);
         }
       }
     }
@@ -1349,41 +1443,42 @@ void SelfCollision::resolve_step(State& s, double h, const ColliderSet* collider
   // One pass over the vertices. The candidate lists
   // are reused while every vertex stays within its reach of the positions they were built at
   // (motion since then plus this step's displacement); otherwise they are rebuilt.
-  // Motions are measured in the lists' frame (shift_, drift_: see the header): a sheet moving as
-  // a whole keeps its lists. The frame's sums per fixed chunk, added in chunk order, so the next
+  // Motions are measured in the lists' frame (see the header): a sheet moving or turning as a
+  // whole keeps its lists. The frame's sums per fixed chunk, added in chunk order, so the next
   // frame does not depend on the thread count.
   int invalid = have_candidates_ ? 0 : 1;
-  double part[kFrameChunks][6];
-  const double T[3] = {shift_[0], shift_[1], shift_[2]}, D[3] = {drift_[0], drift_[1], drift_[2]};
+  // Per chunk: sums of x0 (3), x0 x0^T (6: xx, yy, zz, xy, xz, yz), x0 x u (3), x0 x d (3), u
+  // (3) and d (3), u = x0 - F(ref_x): advance_frame() fits the next frame to them.
+  double part[kFrameChunks][kFrameSums];
+  const double kappa = frame_stretch();
 #pragma omp parallel for reduction(+ : invalid) schedule(static) if (n >= kParallelMinVertices)
   for (int c = 0; c < kFrameChunks; ++c) {
-    double su[3] = {0, 0, 0}, sd[3] = {0, 0, 0};
+    double sum[kFrameSums] = {};
     const Index i1 = static_cast<Index>(static_cast<std::int64_t>(n) * (c + 1) / kFrameChunks);
     for (Index i = static_cast<Index>(static_cast<std::int64_t>(n) * c / kFrameChunks); i < i1; ++i) {
-      double l2 = 0, m2 = 0;
+      const double* a = &x0_[3 * i];
+      const double* X = &ref_x_[3 * i];
+      double u[3], dk[3], m2 = 0;
       for (int k = 0; k < 3; ++k) {
-        const double a = x0_[3 * i + k], b = x[3 * i + k];
-        const double dk = b - a;
-        const double mk = a - ref_x_[3 * i + k] - T[k];
-        const double ek = dk - D[k];
-        d_[3 * i + k] = dk;
-        su[k] += mk;
-        sd[k] += dk;
-        l2 += ek * ek;
-        m2 += mk * mk;
+        dk[k] = x[3 * i + k] - a[k];
+        d_[3 * i + k] = dk[k];
+        u[k] = a[k] - (frame_R_[3 * k] * X[0] + frame_R_[3 * k + 1] * X[1] + frame_R_[3 * k + 2] * X[2] + frame_T_[k]);
+        m2 += u[k] * u[k];
       }
-      step_len_[i] = len0_[i] = std::sqrt(l2);
-      moved_[i] = std::sqrt(m2);
+      step_len_[i] = len0_[i] = frame_step(a, dk);
+      moved_[i] = kappa * std::sqrt(m2);
       invalid += moved_[i] + step_len_[i] > reach_[i] ? 1 : 0;
       inv_mass_[i] = s.inv_mass[i];
       frozen_[i] = 0;
+      sum[0] += a[0], sum[1] += a[1], sum[2] += a[2];
+      sum[3] += a[0] * a[0], sum[4] += a[1] * a[1], sum[5] += a[2] * a[2];
+      sum[6] += a[0] * a[1], sum[7] += a[0] * a[2], sum[8] += a[1] * a[2];
+      sum[9] += a[1] * u[2] - a[2] * u[1], sum[10] += a[2] * u[0] - a[0] * u[2], sum[11] += a[0] * u[1] - a[1] * u[0];
+      sum[12] += a[1] * dk[2] - a[2] * dk[1], sum[13] += a[2] * dk[0] - a[0] * dk[2], sum[14] += a[0] * dk[1] - a[1] * dk[0];
+      for (int k = 0; k < 3; ++k) sum[15 + k] += u[k], sum[18 + k] += dk[k];
     }
-    for (int k = 0; k < 3; ++k) part[c][k] = su[k], part[c][3 + k] = sd[k];
+    for (int k = 0; k < kFrameSums; ++k) part[c][k] = sum[k];
   }
-  double mean_u[3] = {0, 0, 0}, mean_d[3] = {0, 0, 0};
-  for (int c = 0; c < kFrameChunks; ++c)
-    for (int k = 0; k < 3; ++k) mean_u[k] += part[c][k], mean_d[k] += part[c][3 + k];
-  for (int k = 0; k < 3; ++k) mean_u[k] /= std::max<Index>(n, 1), mean_d[k] /= std::max<Index>(n, 1);
   frame_reset_ = false;
   if (invalid > 0) update_candidates(x0_.data());
   stats_.candidates_vt = static_cast<Index>(vt_.size());
@@ -1603,13 +1698,10 @@ void SelfCollision::resolve_step(State& s, double h, const ColliderSet* collider
   if (responded_)
     for (Index i = 0; i < n; ++i)
       for (int k = 0; k < 3; ++k) x[3 * i + k] = x0_[3 * i + k] + d_[3 * i + k];
-  // The next step's frame: centred on the vertices' mean motion since the lists' reference
-  // (none when the lists were rebuilt in this step) plus this step's mean displacement, which
-  // also predicts the next step's.
-  for (int k = 0; k < 3; ++k) {
-    shift_[k] += (frame_reset_ ? 0.0 : mean_u[k]) + mean_d[k];
-    drift_[k] = mean_d[k];
-  }
+  // The next step's frame, fitted to the motion since the lists' reference (none when the
+  // lists were rebuilt in this step) and to this step's displacement, which also predicts the
+  // next step's.
+  advance_frame(part, n);
   stats_.response_seconds = seconds_since(t0);
 }
 
@@ -1635,15 +1727,10 @@ void SelfCollision::find_pairs(const double* x, const double* d, std::vector<Pro
   // motion since the lists' reference positions plus the predicted step d; otherwise refreshed
   // or rebuilt at x (update_candidates), and resolve() after the step reuses them.
   int invalid = have_candidates_ ? 0 : 1;
+  const double kappa = frame_stretch();
   for (Index i = 0; i < nv_; ++i) {
-    double l2 = 0, m2 = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double ek = d[3 * i + k] - drift_[k], mk = x[3 * i + k] - ref_x_[3 * i + k] - shift_[k];
-      l2 += ek * ek;
-      m2 += mk * mk;
-    }
-    step_len_[i] = std::sqrt(l2);
-    moved_[i] = std::sqrt(m2);
+    step_len_[i] = frame_step(&x[3 * i], &d[3 * i]);
+    moved_[i] = frame_moved(i, &x[3 * i], kappa);
     invalid += moved_[i] + step_len_[i] > reach_[i] ? 1 : 0;
   }
   if (invalid > 0) update_candidates(x);

@@ -452,13 +452,16 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
   // (refresh_fraction 1), once by full rebuilds alone (0). Then the same while the whole sheet
   // also moves, by several thicknesses per step in a direction that turns from step to step:
   // the lists measure motion after the sheet's mean motion is taken off (their frame), which
-  // must keep them complete whatever the common motion does.
+  // must keep them complete whatever the common motion does. Then the same again while the
+  // sheet also turns about its centroid by 0.08 rad per step (up to 2.8 thicknesses) about an
+  // axis that wanders from step to step: the frame takes off the mean rotation too.
   const Mesh mesh = make_grid(10, 10, 0.3, 0.3, GridPlane::XZ);  // edge 0.033
   const Index nv = mesh.num_vertices(), nt = mesh.num_triangles();
   const auto edges = mesh.edges();
   const double th = 0.006, h = 0.01;
-  for (const bool moving : {false, true})
+  for (const int motion : {0, 1, 2})  // shaken only; and moving; and moving and turning
   for (const double fraction : {1.0, 0.0}) {
+    const bool moving = motion > 0;
     SelfCollision sc(shaken_sheet_options(th, fraction), mesh);
     State s = shaken_sheet_state(mesh);
     std::mt19937 rng(23);
@@ -471,6 +474,24 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
       const double turn = 0.05 * step;  // rad: the common motion (5 thicknesses per step) turns
       const double common[3] = {0.03 * std::cos(turn), 0.01 * std::sin(3 * turn), 0.03 * std::sin(turn)};
       shake(s, rng, N, 17, h, moving ? common : nullptr);
+      if (motion == 2) {  // the chord of a turn by 0.08 rad about a wandering axis through the centroid
+        double c[3] = {0, 0, 0}, a[3] = {std::sin(turn), 1.0, std::cos(3 * turn)};
+        const double la = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        for (double& ak : a) ak /= la;
+        for (Index i = 0; i < nv; ++i)
+          for (int k = 0; k < 3; ++k) c[k] += x0[3 * i + k] / static_cast<double>(nv);
+        const double sn = std::sin(0.08), cs = std::cos(0.08);
+        for (Index i = 0; i < nv; ++i) {
+          const double r[3] = {s.x[3 * i] - c[0], s.x[3 * i + 1] - c[1], s.x[3 * i + 2] - c[2]};
+          const double ar = a[0] * r[0] + a[1] * r[1] + a[2] * r[2];
+          const double axr[3] = {a[1] * r[2] - a[2] * r[1], a[2] * r[0] - a[0] * r[2], a[0] * r[1] - a[1] * r[0]};
+          for (int k = 0; k < 3; ++k) {
+            const double turned = c[k] + r[k] * cs + axr[k] * sn + a[k] * ar * (1 - cs);  // Rodrigues
+            s.v[3 * i + k] += (turned - s.x[3 * i + k]) / h;
+            s.x[3 * i + k] = turned;
+          }
+        }
+      }
       sc.resolve(s, h);
       refreshed += sc.last_stats().refreshed;
       rebuilds += sc.last_stats().rebuilds;
@@ -489,7 +510,7 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
           ++near_pairs;
           ASSERT_TRUE(std::binary_search(vt.begin(), vt.end(), std::array<Index, 2>{v, t}))
               << "vertex " << v << " triangle " << t << " at distance " << d << ", step " << step << ", fraction "
-              << fraction << ", moving " << moving;
+              << fraction << ", motion " << motion;
         }
       for (Index e = 0; e < static_cast<Index>(edges.size()); ++e)
         for (Index f = e + 1; f < static_cast<Index>(edges.size()); ++f) {
@@ -502,16 +523,16 @@ TEST(SelfCollisionBvh, ListsKeptByRefreshOrRebuildHoldEveryPairThatComesWithinTh
           ++near_pairs;
           ASSERT_TRUE(std::binary_search(ee.begin(), ee.end(), std::array<Index, 2>{e, f}))
               << "edges " << e << ", " << f << " at distance " << d << ", step " << step << ", fraction " << fraction
-              << ", moving " << moving;
+              << ", motion " << motion;
         }
     }
     EXPECT_GT(near_pairs, 100) << fraction;  // the sheet did crumple: the check is not vacuous
     if (fraction == 1.0) {
-      EXPECT_GT(refreshed, 50) << "moving " << moving;  // the refreshes were exercised
+      EXPECT_GT(refreshed, 50) << "motion " << motion;  // the refreshes were exercised
       EXPECT_EQ(rebuilds, 1);  // the first step only
     } else {
       EXPECT_EQ(refreshed, 0);
-      EXPECT_GT(rebuilds, 10) << "moving " << moving;
+      EXPECT_GT(rebuilds, 10) << "motion " << motion;
     }
   }
 }
@@ -948,5 +969,82 @@ TEST(SelfCollisionBvh, AClothMovingAsAWholeKeepsItsListsInTheFrameOfItsMeanMotio
     EXPECT_EQ(vt, vt0);
     EXPECT_EQ(ee, ee0);
     EXPECT_EQ(sc.totals().steps, 100);
+  }
+}
+
+TEST(SelfCollisionBvh, AClothTurningAsAWholeKeepsItsListsInTheFrameOfItsRotation) {
+  // The same folded cloth turning as a rigid body at 3 rad/s about a tilted axis through its
+  // centroid while it drifts at 0.5 m/s: each step moves every vertex along the chord of its
+  // circle (0.03 rad per step, up to 2.2 cm or 1.3 thicknesses at the far corners), and over the
+  // 100 steps the cloth turns by 3 rad, so motion measured after the mean motion only (the
+  // frame before 2026-12-02) would renew the lists within a few steps. Distances do not change
+  // under a rotation, and the lists' frame follows the cloth's mean rotation too: after the
+  // first step's build they are neither rebuilt nor refreshed, and stay the same pairs, on the
+  // explicit path and baraff_witkin's. No pair comes within the thickness, so no impulse.
+  const Mesh mesh = make_grid(16, 16, 1.0, 1.0, GridPlane::XZ);
+  const double th = 0.25 / 15, h = 0.01, omega = 3.0;
+  const double len = std::sqrt(0.3 * 0.3 + 1.0 + 0.2 * 0.2);
+  const double a[3] = {0.3 / len, 1.0 / len, 0.2 / len}, drift[3] = {0.5, 0.0, -0.1};
+  // The rotation by omega h about a (Rodrigues), row-major.
+  double Q[9];
+  {
+    const double t = omega * h, sn = std::sin(t), cs = 1 - std::cos(t);
+    const double K[9] = {0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0};
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) {
+        double k2 = 0;
+        for (int m = 0; m < 3; ++m) k2 += K[3 * r + m] * K[3 * m + c];
+        Q[3 * r + c] = (r == c ? 1.0 : 0.0) + sn * K[3 * r + c] + cs * k2;
+      }
+  }
+  for (const bool large : {false, true}) {
+    SelfCollision sc(shaken_sheet_options(th, 1.0 / 256), mesh);
+    State s = shaken_sheet_state(mesh);
+    s.x = folded_sheet(mesh, 0.75 * th, 41);
+    const std::vector<double> start = s.x;
+    std::vector<std::array<Index, 2>> vt0, ee0, vt, ee;
+    std::vector<double> d(s.x.size()), expect;
+    std::vector<ProximityPair> out;
+    long long rebuilds = 0, refreshed = 0;
+    for (int step = 0; step < 100; ++step) {
+      double c[3] = {0, 0, 0};
+      for (Index i = 0; i < s.size(); ++i)
+        for (int k = 0; k < 3; ++k) c[k] += s.x[3 * i + k] / static_cast<double>(s.size());
+      for (Index i = 0; i < s.size(); ++i) {
+        const double r[3] = {s.x[3 * i] - c[0], s.x[3 * i + 1] - c[1], s.x[3 * i + 2] - c[2]};
+        for (int k = 0; k < 3; ++k)
+          d[3 * i + k] = Q[3 * k] * r[0] + Q[3 * k + 1] * r[1] + Q[3 * k + 2] * r[2] - r[k] + h * drift[k];
+      }
+      if (large) sc.proximity_pairs(s.x.data(), d.data(), out);
+      if (large) EXPECT_TRUE(out.empty()) << "step " << step;
+      sc.begin_step(s);
+      for (std::size_t q = 0; q < s.x.size(); ++q) s.x[q] += d[q];
+      expect = s.x;
+      sc.resolve(s, h);
+      EXPECT_EQ(s.x, expect) << "step " << step;
+      if (step == 0) {
+        sc.candidate_lists(vt0, ee0);
+        ASSERT_GT(vt0.size() + ee0.size(), 0u);
+        rebuilds = sc.totals().rebuilds;
+        refreshed = sc.totals().refreshed;
+      }
+    }
+    EXPECT_EQ(rebuilds, 1) << "large " << large;
+    EXPECT_EQ(sc.totals().rebuilds, rebuilds) << "no rebuild after the first step, large " << large;
+    EXPECT_EQ(sc.totals().refreshed, refreshed) << "no refresh after the first step, large " << large;
+    EXPECT_EQ(sc.totals().impulses(), 0);
+    sc.candidate_lists(vt, ee);
+    EXPECT_EQ(vt, vt0);
+    EXPECT_EQ(ee, ee0);
+    // Not vacuous: after the mean motion is taken off, vertices moved far beyond any reach.
+    double mean[3] = {0, 0, 0}, far = 0;
+    for (Index i = 0; i < s.size(); ++i)
+      for (int k = 0; k < 3; ++k) mean[k] += (s.x[3 * i + k] - start[3 * i + k]) / static_cast<double>(s.size());
+    for (Index i = 0; i < s.size(); ++i) {
+      double m2 = 0;
+      for (int k = 0; k < 3; ++k) m2 += std::pow(s.x[3 * i + k] - start[3 * i + k] - mean[k], 2);
+      far = std::max(far, std::sqrt(m2));
+    }
+    EXPECT_GT(far, 20 * th);
   }
 }

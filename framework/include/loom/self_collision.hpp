@@ -433,21 +433,47 @@ class SelfCollision {
   std::vector<Index> nbv_off_, nbv_idx_, nbt_off_, nbt_idx_, nbe_off_, nbe_idx_;
   std::vector<Index> refresh_nbvt_, refresh_nbee_;
   std::vector<double> ref_x_;                    ///< reference positions of the lists (in their frame, below)
-  /// The lists' frame. Distances between elements do not change when every vertex moves by the
-  /// same vector, so the lists' bounds measure each vertex's motion after a common one is taken
-  /// off: since the reference, x0 - ref_x - shift_; in the step, d - drift_. Any common vector
-  /// keeps every bound valid; these follow the cloth's mean motion (updated at the end of each
-  /// resolve(); shift_ is zero when the lists are rebuilt), so a sheet falling or sliding as a
-  /// whole does not renew its lists, nor widen its reaches, for that motion.
-  double shift_[3] = {0, 0, 0}, drift_[3] = {0, 0, 0};
+  /// The lists' frame. Distances between elements do not change under a rigid motion, so the
+  /// lists' bounds measure each vertex's motion after one is taken off. Since the reference:
+  /// u = x0 - F(ref_x), F(X) = R X + T a rotation and translation (frame_R_, frame_T_; the
+  /// identity when the lists are rebuilt); in the step: e = d - f(x0), f(y) = spin_ x (y -
+  /// centre_) + drift_ the frame's own motion over the step. The map y -> y + s f(y) never
+  /// shortens a distance (its linear part I + s [spin_]x has singular values >= 1) and
+  /// stretches u by at most kappa = sqrt(1 + |spin_|^2), so a vertex stays within kappa |u| +
+  /// |e| of its reference point's image: moved_ = kappa |u|, step_len_ = |e|. Any rigid F and
+  /// any f keep every bound valid; these follow the cloth's mean motion and mean rotation
+  /// (fitted at the end of each resolve(), docs/NUMERICS.md), so a sheet falling, sliding or
+  /// turning as a whole does not renew its lists, nor widen its reaches, for that motion.
+  double frame_R_[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1}, frame_T_[3] = {0, 0, 0};
+  double spin_[3] = {0, 0, 0}, centre_[3] = {0, 0, 0}, drift_[3] = {0, 0, 0};
   bool frame_reset_ = false;                     ///< the lists were rebuilt in this resolve()
   static constexpr int kFrameChunks = 64;        ///< fixed chunks of the frame's sums (order fixed)
-  double frame_step(const double* d) const {
-    const double e[3] = {d[0] - drift_[0], d[1] - drift_[1], d[2] - drift_[2]};
+  static constexpr int kFrameSums = 21;          ///< per chunk: see resolve_step()
+  /// |d - f(y)|: vertex motion d over the step from start position y, the frame's taken off.
+  double frame_step(const double* y, const double* d) const {
+    const double r[3] = {y[0] - centre_[0], y[1] - centre_[1], y[2] - centre_[2]};
+    const double e[3] = {d[0] - drift_[0] - (spin_[1] * r[2] - spin_[2] * r[1]),
+                         d[1] - drift_[1] - (spin_[2] * r[0] - spin_[0] * r[2]),
+                         d[2] - drift_[2] - (spin_[0] * r[1] - spin_[1] * r[0])};
     return std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
   }
-  std::vector<double> moved_;                    ///< per vertex |x0 - ref_x - shift_| this step
-  std::vector<double> step_len_;                 ///< per vertex |d - drift_| this step
+  /// kappa |y - F(X)| (see above), X = ref_x_ of vertex i, kappa = frame_stretch().
+  double frame_moved(Index i, const double* y, double kappa) const {
+    const double* X = &ref_x_[3 * static_cast<std::size_t>(i)];
+    double m2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double u = y[k] - (frame_R_[3 * k] * X[0] + frame_R_[3 * k + 1] * X[1] + frame_R_[3 * k + 2] * X[2] + frame_T_[k]);
+      m2 += u * u;
+    }
+    return kappa * std::sqrt(m2);
+  }
+  double frame_stretch() const { return std::sqrt(1 + spin_[0] * spin_[0] + spin_[1] * spin_[1] + spin_[2] * spin_[2]); }
+  /// The frame's reference point of start position y (F^-1(y)), for a refreshed vertex.
+  void frame_reference(const double* y, double* X) const;
+  /// The next step's frame from this step's sums (kFrameSums per chunk, see resolve_step()).
+  void advance_frame(const double (*part)[kFrameSums], Index n);
+  std::vector<double> moved_;                    ///< per vertex kappa |x0 - F(ref_x)| this step
+  std::vector<double> step_len_;                 ///< per vertex |d - f(x0)| this step
   std::vector<Pair> vt_, ee_;
   std::vector<std::uint8_t> near_flag_;          ///< per pair (VT then EE): could be within the thickness this step
   std::vector<Index> near_;                      ///< those pairs (index into VT then EE)
