@@ -6,6 +6,7 @@
 #include <sstream>
 
 #include "loom/material.hpp"
+#include "loom/rotation.hpp"
 
 namespace loom {
 
@@ -165,17 +166,7 @@ Placement placement(const PinGroup& g, double t) {
     p.omega[k] = w * a[k];
     p.alpha[k] = dw * a[k];
   }
-  // Rodrigues: R = cos I + sin [a]x + (1 - cos) a a^T.
-  const double th = m.angle(t), c = std::cos(th), s = std::sin(th), oc = 1.0 - c;
-  p.R[0] = c + oc * a[0] * a[0];
-  p.R[1] = oc * a[0] * a[1] - s * a[2];
-  p.R[2] = oc * a[0] * a[2] + s * a[1];
-  p.R[3] = oc * a[1] * a[0] + s * a[2];
-  p.R[4] = c + oc * a[1] * a[1];
-  p.R[5] = oc * a[1] * a[2] - s * a[0];
-  p.R[6] = oc * a[2] * a[0] - s * a[1];
-  p.R[7] = oc * a[2] * a[1] + s * a[0];
-  p.R[8] = c + oc * a[2] * a[2];
+  axis_angle_matrix(a.data(), m.angle(t), p.R);  // Rodrigues
   return p;
 }
 

@@ -1,4 +1,5 @@
 #include "loom/self_collision.hpp"
+#include "loom/rotation.hpp"
 #include "loom/intersection_check.hpp"
 
 #include "loom/collider.hpp"
@@ -1171,20 +1172,13 @@ void solve_sym3(const double M[6], const double b[3], double w[3]) {
   if (!(std::isfinite(w[0]) && std::isfinite(w[1]) && std::isfinite(w[2]))) w[0] = w[1] = w[2] = 0;
 }
 
-// The rotation by angle |w| about w (Rodrigues), row-major.
+// The rotation by angle |w| about w, row-major (the identity for w = 0).
 void rotation(const double w[3], double Q[9]) {
-  const double th = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+  const double th = std::sqrt(selfcol::dot(w, w));
   for (int k = 0; k < 9; ++k) Q[k] = k % 4 == 0 ? 1.0 : 0.0;
   if (!(th > 0) || !std::isfinite(th)) return;
   const double a[3] = {w[0] / th, w[1] / th, w[2] / th};
-  const double sn = std::sin(th), cs = 1 - std::cos(th);
-  const double K[9] = {0, -a[2], a[1], a[2], 0, -a[0], -a[1], a[0], 0};
-  for (int r = 0; r < 3; ++r)
-    for (int c = 0; c < 3; ++c) {
-      double k2 = 0;
-      for (int m = 0; m < 3; ++m) k2 += K[3 * r + m] * K[3 * m + c];
-      Q[3 * r + c] += sn * K[3 * r + c] + cs * k2;
-    }
+  axis_angle_matrix(a, th, Q);
 }
 
 }  // namespace
@@ -1457,25 +1451,20 @@ void SelfCollision::resolve_step(State& s, double h, const ColliderSet* collider
     const Index i1 = static_cast<Index>(static_cast<std::int64_t>(n) * (c + 1) / kFrameChunks);
     for (Index i = static_cast<Index>(static_cast<std::int64_t>(n) * c / kFrameChunks); i < i1; ++i) {
       const double* a = &x0_[3 * i];
-      const double* X = &ref_x_[3 * i];
-      double u[3], dk[3], m2 = 0;
-      for (int k = 0; k < 3; ++k) {
-        dk[k] = x[3 * i + k] - a[k];
-        d_[3 * i + k] = dk[k];
-        u[k] = a[k] - (frame_R_[3 * k] * X[0] + frame_R_[3 * k + 1] * X[1] + frame_R_[3 * k + 2] * X[2] + frame_T_[k]);
-        m2 += u[k] * u[k];
-      }
+      double u[3], dk[3], au[3], ad[3];
+      for (int k = 0; k < 3; ++k) d_[3 * i + k] = dk[k] = x[3 * i + k] - a[k];
+      frame_residual(i, a, u);
       step_len_[i] = len0_[i] = frame_step(a, dk);
-      moved_[i] = kappa * std::sqrt(m2);
+      moved_[i] = kappa * std::sqrt(selfcol::dot(u, u));
       invalid += moved_[i] + step_len_[i] > reach_[i] ? 1 : 0;
       inv_mass_[i] = s.inv_mass[i];
       frozen_[i] = 0;
       sum[0] += a[0], sum[1] += a[1], sum[2] += a[2];
       sum[3] += a[0] * a[0], sum[4] += a[1] * a[1], sum[5] += a[2] * a[2];
       sum[6] += a[0] * a[1], sum[7] += a[0] * a[2], sum[8] += a[1] * a[2];
-      sum[9] += a[1] * u[2] - a[2] * u[1], sum[10] += a[2] * u[0] - a[0] * u[2], sum[11] += a[0] * u[1] - a[1] * u[0];
-      sum[12] += a[1] * dk[2] - a[2] * dk[1], sum[13] += a[2] * dk[0] - a[0] * dk[2], sum[14] += a[0] * dk[1] - a[1] * dk[0];
-      for (int k = 0; k < 3; ++k) sum[15 + k] += u[k], sum[18 + k] += dk[k];
+      selfcol::cross(a, u, au);
+      selfcol::cross(a, dk, ad);
+      for (int k = 0; k < 3; ++k) sum[9 + k] += au[k], sum[12 + k] += ad[k], sum[15 + k] += u[k], sum[18 + k] += dk[k];
     }
     for (int k = 0; k < kFrameSums; ++k) part[c][k] = sum[k];
   }

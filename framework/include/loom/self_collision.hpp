@@ -457,15 +457,17 @@ class SelfCollision {
                          d[2] - drift_[2] - (spin_[0] * r[1] - spin_[1] * r[0])};
     return std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
   }
-  /// kappa |y - F(X)| (see above), X = ref_x_ of vertex i, kappa = frame_stretch().
-  double frame_moved(Index i, const double* y, double kappa) const {
+  /// u = y - F(X), X = ref_x_ of vertex i: its motion since the reference, the frame's taken off.
+  void frame_residual(Index i, const double* y, double u[3]) const {
     const double* X = &ref_x_[3 * static_cast<std::size_t>(i)];
-    double m2 = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double u = y[k] - (frame_R_[3 * k] * X[0] + frame_R_[3 * k + 1] * X[1] + frame_R_[3 * k + 2] * X[2] + frame_T_[k]);
-      m2 += u * u;
-    }
-    return kappa * std::sqrt(m2);
+    for (int k = 0; k < 3; ++k)
+      u[k] = y[k] - (frame_R_[3 * k] * X[0] + frame_R_[3 * k + 1] * X[1] + frame_R_[3 * k + 2] * X[2] + frame_T_[k]);
+  }
+  /// kappa |y - F(X)| (see above), kappa = frame_stretch().
+  double frame_moved(Index i, const double* y, double kappa) const {
+    double u[3];
+    frame_residual(i, y, u);
+    return kappa * std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
   }
   double frame_stretch() const { return std::sqrt(1 + spin_[0] * spin_[0] + spin_[1] * spin_[1] + spin_[2] * spin_[2]); }
   /// The frame's reference point of start position y (F^-1(y)), for a refreshed vertex.
