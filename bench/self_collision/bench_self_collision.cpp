@@ -20,6 +20,8 @@
 // WITH self_collision (the same thickness) for 0.35 s from the flat start (it has landed and
 // folds start; 7 000 steps at 128^2, 126 s on one thread; 924 s at 256^2), cached as draped_sesc_N.bin; every run of both
 // integrators starts from that state, which draped() checks has no intersecting triangle pair.
+// LOOM_BENCH_DRAPE_TIME=T (seconds) drapes for T instead: a later state (at 1.7 s the cloth has
+// settled on the ball and turns with it), cached as draped_sesc_N_tT.bin.
 // Until 2026-11-29 the cloth was draped WITHOUT self_collision (draped_se_N.bin): that state
 // was tangled (BM_StartState: 46 intersecting triangle pairs at 64^2, 1 420 at 128^2, layers
 // 0.0002 thickness apart), so with self_collision switched on the response fought the
@@ -67,6 +69,16 @@
 namespace {
 
 constexpr double kDrapeTime = 0.35;  // s
+// LOOM_BENCH_DRAPE_TIME=T (seconds) drapes for T instead (a later, more settled state; its
+// cache files carry the time in their names).
+double drape_time() {
+  const char* t = std::getenv("LOOM_BENCH_DRAPE_TIME");
+  return t ? std::atof(t) : kDrapeTime;
+}
+std::string drape_tag() {
+  const char* t = std::getenv("LOOM_BENCH_DRAPE_TIME");
+  return t ? std::string("_t") + t : std::string();
+}
 double se_dt(int n) { return 5.0e-5 * 127.0 / (n - 1); }
 
 // integrator "baraff_witkin_sa_amg": baraff_witkin with the multilevel preconditioner (the
@@ -120,11 +132,11 @@ const loom::State& draped(int n, bool with_self = true) {
   if (!sim) {
     sim = loom::Simulation::from_string(scene(n, "symplectic_euler", with_self), "bench.yaml", ".", {}, loader());
     const char* dir = std::getenv("LOOM_BENCH_DRAPE_CACHE");
-    const std::string name = (with_self ? "/draped_sesc_" : "/draped_se_") + std::to_string(n) + ".bin";
+    const std::string name = (with_self ? "/draped_sesc_" : "/draped_se_") + std::to_string(n) + drape_tag() + ".bin";
     const std::string path = dir ? std::string(dir) + name : "";
     auto& s = sim->scene().state;
     if (path.empty() || !read_cache(path, s)) {
-      const int steps = static_cast<int>(std::lround(kDrapeTime / se_dt(n)));
+      const int steps = static_cast<int>(std::lround(drape_time() / se_dt(n)));
       for (int k = 0; k < steps; ++k) sim->step();
       if (!path.empty()) {
         std::ofstream out(path, std::ios::binary);
@@ -194,7 +206,10 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
 // per step (pairs in the lists, near pairs, impulses, broad-phase exact distance tests, CCD
 // cubics solved), and the motion that renews the lists (fast_vertices: vertices that moved
 // more than a quarter of the thickness in the step; largest_step_th: the largest displacement
-// in the step, in thicknesses), per step.
+// in the step, in thicknesses), per step. `other_broad_ms`, `other_narrow_ms`,
+// `other_response_ms`: the self-collision phases of the steps that neither rebuilt nor refreshed
+// their lists (the per-step pass alone: the reach check and the lists' frame, the near filter
+// and proximity, the response).
 double thread_cpu_seconds() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
@@ -217,6 +232,7 @@ void BM_StepSplit(benchmark::State& st) {
   }
   double t_full = 0, t_refresh = 0, t_other = 0;
   double n_full = 0, n_refresh = 0, n_other = 0;
+  double other_broad = 0, other_narrow = 0, other_response = 0;  // phases of the steps that keep their lists
   double candidates = 0, near = 0, impulses = 0, exact = 0, refreshed = 0, full = 0, ccd = 0, fast = 0, largest = 0;
   const double quarter = 0.25 * 0.25 / (n - 1);  // a quarter of the scene's thickness, m
   std::vector<double> before;
@@ -247,6 +263,7 @@ void BM_StepSplit(benchmark::State& st) {
         t_refresh += dt, ++n_refresh;
       } else {
         t_other += dt, ++n_other;
+        other_broad += s.broad_seconds, other_narrow += s.narrow_seconds, other_response += s.response_seconds;
       }
       candidates += static_cast<double>(s.candidates_vt + s.candidates_ee);
       near += static_cast<double>(s.near);
@@ -264,6 +281,9 @@ void BM_StepSplit(benchmark::State& st) {
   st.counters["full_step_ms"] = n_full > 0 ? 1e3 * t_full / n_full : 0;
   st.counters["refresh_step_ms"] = n_refresh > 0 ? 1e3 * t_refresh / n_refresh : 0;
   st.counters["other_step_ms"] = n_other > 0 ? 1e3 * t_other / n_other : 0;
+  st.counters["other_broad_ms"] = n_other > 0 ? 1e3 * other_broad / n_other : 0;
+  st.counters["other_narrow_ms"] = n_other > 0 ? 1e3 * other_narrow / n_other : 0;
+  st.counters["other_response_ms"] = n_other > 0 ? 1e3 * other_response / n_other : 0;
   st.counters["full_share"] = n_full / total;
   st.counters["refresh_share"] = n_refresh / total;
   st.counters["full_rebuilds"] = full / total;
