@@ -388,9 +388,6 @@ void TriangleBvh::build(const std::vector<double>& centroids) {
     if (nodes_[i].tri < 0) nodes_[i].first = nodes_[nodes_[i].left].first;
   parent_.assign(nodes_.size(), -1);
   leaf_.assign(nt, -1);
-  marked_.assign(nodes_.size(), 0);
-  marked_list_.clear();
-  marked_list_.reserve(nodes_.size());
   for (std::size_t i = 0; i < nodes_.size(); ++i) {
     const Node& n = nodes_[i];
     if (n.tri >= 0) {
@@ -406,19 +403,6 @@ void TriangleBvh::set_vertices(const std::vector<Index>& tris) {
   for (Leaf& l : leaves_)
     for (int k = 0; k < 3; ++k) l.v[k] = tris[3 * static_cast<std::size_t>(l.tri) + k];
   have_vertices_ = true;
-}
-
-void TriangleBvh::mark(Index tri) {
-  if (marked_.size() != nodes_.size()) marked_.assign(nodes_.size(), 0);
-  for (Index i = leaf_[tri]; i >= 0 && !marked_[i]; i = parent_[i]) {
-    marked_[i] = 1;
-    marked_list_.push_back(i);
-  }
-}
-
-void TriangleBvh::clear_marks() {
-  for (const Index i : marked_list_) marked_[i] = 0;
-  marked_list_.clear();
 }
 
 void TriangleBvh::update_leaf(Index tri, const double* lo, const double* hi) {
@@ -880,24 +864,28 @@ void SelfCollision::triangle_box(Index t, double gap) {
   }
 }
 
-void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
+void SelfCollision::traverse(double gap, bool exact, bool refreshed) {
   // Traversal: a fixed number of independent node pairs (tasks) shared out among the threads,
   // each task filling its own lists (kept between calls: no allocation once they have grown),
   // then joined in task order. The tasks do not depend on the thread count, so neither does
   // the order in which the response visits the pairs, and no sort is needed.
   const bool par = nv_ >= kParallelMinVertices;
   const int nth = par ? std::max(1, omp_get_max_threads()) : 1;
-  bvh_.split(par ? kTraversalTasks : 1, tasks_);
+  // A rebuild traverses the hierarchy's node pairs from kTraversalTasks fixed tasks; a refresh
+  // (`refreshed`) queries it once per group of refreshed triangles (refresh_group_).
+  if (!refreshed) bvh_.split(par ? kTraversalTasks : 1, tasks_);
+  const std::size_t ngroups = refresh_group_.empty() ? 0 : refresh_group_.size() - 1;
   // The leaf pairs of triangles sharing a vertex are left to the neighbour lists (nb_vt_,
-  // nb_ee_): tasks ntrav.. test their chunks; a refresh (marked_only) tests only the pairs of
+  // nb_ee_): tasks ntrav.. test their chunks; a refresh tests only the pairs of
   // them that refresh() selected (refresh_nbvt_, refresh_nbee_: a refreshed element in each).
-  const std::size_t ntrav = tasks_.size();
+  const std::size_t ntrav = refreshed ? ngroups : tasks_.size();
   const std::size_t ntasks = ntrav + kNeighbourChunks;
   if (task_vt_.size() < ntasks) {
     task_vt_.resize(ntasks);
     task_ee_.resize(ntasks);
   }
   if (static_cast<int>(tstack_.size()) < nth) tstack_.resize(nth);
+  if (static_cast<int>(qstacks_.size()) < nth) qstacks_.resize(nth);
   auto overlap = [](const double* alo, const double* ahi, const double* blo, const double* bhi) {
     return alo[0] <= bhi[0] && blo[0] <= ahi[0] && alo[1] <= bhi[1] && blo[1] <= ahi[1] && alo[2] <= bhi[2] &&
            blo[2] <= ahi[2];
@@ -961,7 +949,7 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
         if (v == T.v[0] || v == T.v[1] || v == T.v[2]) return;
         test_vt(v, &P.x[3 * k], P.r[k], t, T);
       };
-      // With marked_only (a refresh), a leaf pair has at least one refreshed triangle, and
+      // In a refresh, a leaf pair has at least one refreshed triangle, and
       // only the element pairs that the refresh dropped are looked at: those with a refreshed
       // vertex, triangle or edge (flags set by refresh()).
       auto emit = [&](Index A, Index B) {
@@ -974,7 +962,7 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
         if (exact && !adjacent && selfcol::triangles_farther_than(&RA.x[0], &RA.x[3], &RA.x[6], &RB.x[0], &RB.x[3], &RB.x[6],
                                                      gap + RA.tr + RB.tr))
           return;  // every element pair is listed below gap + its reaches <= gap + RA.tr + RB.tr
-        const bool all_a = !marked_only || tflag_[A], all_b = !marked_only || tflag_[B];
+        const bool all_a = !refreshed || tflag_[A], all_b = !refreshed || tflag_[B];
         for (int k = 0; k < 3; ++k)
           if ((RA.own >> k & 1u) && (all_b || vflag_[RA.v[k]])) vert_tri(RA, k, B, RB);
         for (int k = 0; k < 3; ++k)
@@ -990,7 +978,7 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
           edge_box(p0, p1, RA.er[ka] + half_gap, elo, ehi);
           // B's box holds its edges' boxes: an edge of A clear of it meets none of them.
           if (!overlap(elo, ehi, RB.lo, RB.hi)) continue;
-          const bool all_f = !marked_only || eflag_[e];
+          const bool all_f = !refreshed || eflag_[e];
           for (int kb = 0; kb < 3; ++kb) {
             if (!(RB.own >> (3 + kb) & 1u)) continue;
             const Index f = RB.e[kb];
@@ -1002,24 +990,57 @@ void SelfCollision::traverse(double gap, bool exact, bool marked_only) {
           }
         }
       };
+      if (q < ntrav && !refreshed) {
+        bvh_.pairs_from(tasks_[q], emit, tstack_[me], true);  // sharing pairs: in the lists below
+        continue;
+      }
       if (q < ntrav) {
-        bvh_.pairs_from(tasks_[q], emit, tstack_[me], marked_only, true);  // sharing pairs: in the lists below
+        // A group of refreshed triangles: one query with the union of their boxes; every leaf T
+        // it meets is paired with each group triangle t whose box overlaps T's (sharing no
+        // vertex: those pairs are the neighbour lists'). A pair of two refreshed triangles is
+        // taken from the lower index's side only (the other's group query meets it too).
+        const Index g0 = refresh_group_[q], g1 = refresh_group_[q + 1];
+        double ulo[3], uhi[3];
+        for (int c = 0; c < 3; ++c) {
+          ulo[c] = tlo_[3 * static_cast<std::size_t>(refresh_t_[g0]) + c];
+          uhi[c] = thi_[3 * static_cast<std::size_t>(refresh_t_[g0]) + c];
+        }
+        for (Index k = g0 + 1; k < g1; ++k)
+          for (int c = 0; c < 3; ++c) {
+            ulo[c] = std::min(ulo[c], tlo_[3 * static_cast<std::size_t>(refresh_t_[k]) + c]);
+            uhi[c] = std::max(uhi[c], thi_[3 * static_cast<std::size_t>(refresh_t_[k]) + c]);
+          }
+        bvh_.query(ulo, uhi, [&](Index T) {
+          const TriRecord& RT = trec_[tri_slot_[T]];
+          const bool t_refreshed = tflag_[T] != 0;
+          for (Index k = g0; k < g1; ++k) {
+            const Index t = refresh_t_[k];
+            if (t == T || (t_refreshed && T < t)) continue;
+            const TriRecord& Rt = trec_[tri_slot_[t]];
+            if (!overlap(Rt.lo, Rt.hi, RT.lo, RT.hi)) continue;
+            if (Rt.v[0] == RT.v[0] || Rt.v[0] == RT.v[1] || Rt.v[0] == RT.v[2] || Rt.v[1] == RT.v[0] ||
+                Rt.v[1] == RT.v[1] || Rt.v[1] == RT.v[2] || Rt.v[2] == RT.v[0] || Rt.v[2] == RT.v[1] ||
+                Rt.v[2] == RT.v[2])
+              continue;
+            emit(t, T);
+          }
+        }, qstacks_[me]);
         continue;
       }
       // A chunk of the neighbour lists: the element tests of vert_tri and of emit's edge pairs.
       const std::size_t c = q - ntrav;
-      const std::size_t nvt = marked_only ? refresh_nbvt_.size() : nb_vt_.size();
-      const std::size_t nee = marked_only ? refresh_nbee_.size() : nb_ee_.size();
+      const std::size_t nvt = refreshed ? refresh_nbvt_.size() : nb_vt_.size();
+      const std::size_t nee = refreshed ? refresh_nbee_.size() : nb_ee_.size();
       const std::size_t vt0 = nvt * c / kNeighbourChunks, vt1 = nvt * (c + 1) / kNeighbourChunks;
       const double* X = ref_x_.data();
       for (std::size_t k = vt0; k < vt1; ++k) {
-        const std::size_t i = marked_only ? static_cast<std::size_t>(refresh_nbvt_[k]) : k;
+        const std::size_t i = refreshed ? static_cast<std::size_t>(refresh_nbvt_[k]) : k;
         const Index v = nb_vt_[i][0], t = nb_vt_[i][1];
         test_vt(v, &X[3 * v], reach_[v], t, trec_[tri_slot_[t]]);
       }
       const std::size_t ee0 = nee * c / kNeighbourChunks, ee1 = nee * (c + 1) / kNeighbourChunks;
       for (std::size_t k = ee0; k < ee1; ++k) {
-        const std::size_t i = marked_only ? static_cast<std::size_t>(refresh_nbee_[k]) : k;
+        const std::size_t i = refreshed ? static_cast<std::size_t>(refresh_nbee_[k]) : k;
         const Index e = nb_ee_[i][0], f = nb_ee_[i][1];
         const double *p0 = &X[3 * edges_[e][0]], *p1 = &X[3 * edges_[e][1]];
         const double er = std::max(reach_[edges_[e][0]], reach_[edges_[e][1]]);
@@ -1100,7 +1121,10 @@ void SelfCollision::refresh(const double* x0) {
   const double th = opt_.thickness;
   refresh_t_.clear();
   refresh_e_.clear();
+  refresh_group_.clear();
   for (const Index v : refresh_v_) {
+    if (refresh_group_.empty() || refresh_group_.back() != static_cast<Index>(refresh_t_.size()))
+      refresh_group_.push_back(static_cast<Index>(refresh_t_.size()));
     vflag_[v] = 1;
     frame_reference(&x0[3 * v], &ref_x_[3 * v]);  // in the lists' frame: F(ref_x) = x0
     reach_[v] = reach_for(v);
@@ -1110,6 +1134,9 @@ void SelfCollision::refresh(const double* x0) {
     for (Index j = ve_off_[v]; j < ve_off_[v + 1]; ++j)
       if (!eflag_[ve_adj_[j]]) eflag_[ve_adj_[j]] = 1, refresh_e_.push_back(ve_adj_[j]);
   }
+  // Close the last group (a vertex that added no triangle leaves an empty one: dropped).
+  if (!refresh_group_.empty() && refresh_group_.back() == static_cast<Index>(refresh_t_.size())) refresh_group_.pop_back();
+  refresh_group_.push_back(static_cast<Index>(refresh_t_.size()));
   for (const Index t : refresh_t_) {
     triangle_box(t, th);
     bvh_.update_leaf(t, &tlo_[3 * t], &thi_[3 * t]);
@@ -1119,12 +1146,14 @@ void SelfCollision::refresh(const double* x0) {
             vt_.end());
   ee_.erase(std::remove_if(ee_.begin(), ee_.end(), [&](const Pair& p) { return eflag_[p.a] || eflag_[p.b]; }),
             ee_.end());
-  // ... and find them again: the traversal of a rebuild, restricted to the node pairs above a
-  // refreshed triangle, and in them to the element pairs just dropped. A pair (vertex v,
-  // triangle t) is met at the leaf pair (owner of v, t) and an edge pair at the pair of the
-  // edges' owners, exactly once each as in a rebuild; a refreshed vertex or edge lies in a
-  // refreshed owner, so every dropped pair has a marked leaf. As in a rebuild, the traversal
-  // skips the leaf pairs of triangles sharing a vertex: their element pairs among the dropped
+  // ... and find them again: the leaf pairs of a rebuild that hold a refreshed triangle, found
+  // by one hierarchy query per group (a refreshed vertex's triangles not in an earlier group,
+  // with the union of their boxes), and in them the element pairs just dropped. A pair (vertex
+  // v, triangle t) is met at the leaf pair (owner of v, t) and an edge pair at the pair of the
+  // edges' owners, exactly once each as in a rebuild (a leaf pair of two refreshed triangles
+  // from the lower index's group); a refreshed vertex or edge lies in a refreshed owner, so
+  // every dropped pair has a refreshed leaf. As in a rebuild, the leaf pairs of triangles
+  // sharing a vertex are skipped: their element pairs among the dropped
   // ones are taken from the neighbour lists, by element (each once: a pair of a refreshed
   // vertex from the vertex's entries, one of a refreshed triangle and a vertex that is not
   // from the triangle's, an edge pair from its lower refreshed edge).
@@ -1141,9 +1170,7 @@ void SelfCollision::refresh(const double* x0) {
       const Index other = pr[0] == e ? pr[1] : pr[0];
       if (!eflag_[other] || e < other) refresh_nbee_.push_back(nbe_idx_[j]);
     }
-  for (const Index t : refresh_t_) bvh_.mark(t);
   traverse(th, true, true);
-  bvh_.clear_marks();
   for (const Index v : refresh_v_) vflag_[v] = 0;
   for (const Index t : refresh_t_) tflag_[t] = 0;
   for (const Index e : refresh_e_) eflag_[e] = 0;

@@ -80,18 +80,13 @@ class TriangleBvh {
   template <class F>
   void self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack) const;
   /// The part of self_pairs below one task: {a, a} the pairs inside node a, {a, b} the pairs
-  /// between a and b. With marked_only, only the pairs with at least one marked leaf (mark()):
-  /// node pairs with no marked node below either side are skipped whole. With skip_sharing
-  /// (after set_vertices()), pairs of triangles that share a vertex are not emitted.
+  /// between a and b. With skip_sharing (after set_vertices()), pairs of triangles that share a
+  /// vertex are not emitted.
   template <class F>
   void pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack,
-                  bool marked_only = false, bool skip_sharing = false) const;
+                  bool skip_sharing = false) const;
   /// The vertices of the triangles (3 per triangle), for pairs_from's skip_sharing.
   void set_vertices(const std::vector<Index>& tris);
-  /// Mark triangle tri's leaf and its ancestors (for pairs_from's marked_only); clear_marks()
-  /// unmarks every node marked since the last clear. No allocation once grown.
-  void mark(Index tri);
-  void clear_marks();
   /// Independent tasks for a parallel traversal (at least `target` where the tree has them):
   /// self_pairs emits exactly the union of pairs_from over the tasks, each pair once.
   /// `tasks` is overwritten; it allocates only when it must grow.
@@ -122,8 +117,6 @@ class TriangleBvh {
   std::vector<Index> leaf_nodes_;  ///< leaf node indices in depth-first order (Node::first indexes it)
   std::vector<Index> parent_;  ///< per node (-1 for the root)
   std::vector<Index> leaf_;    ///< per triangle: its leaf node
-  std::vector<std::uint8_t> marked_;  ///< per node: a marked leaf lies below (mark())
-  std::vector<Index> marked_list_;    ///< the marked nodes, for clear_marks()
 };
 
 template <class F>
@@ -153,7 +146,7 @@ void TriangleBvh::self_pairs(F&& emit, std::vector<std::array<Index, 2>>& stack)
 
 template <class F>
 void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<std::array<Index, 2>>& stack,
-                             bool marked_only, bool skip_sharing) const {
+                             bool skip_sharing) const {
   auto overlap = [](const auto& a, const auto& b) {
     return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
            a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
@@ -169,7 +162,6 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
   while (!stack.empty()) {
     const auto [a, b] = stack.back();
     stack.pop_back();
-    if (marked_only && !marked_[a] && !marked_[b]) continue;
     const Node& A = nodes_[a];
     if (a == b) {
       if (A.tri >= 0) continue;
@@ -177,10 +169,8 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
         // Inside a small subtree: every overlapping pair of its leaves, in the order the descent would find them.
         for (Index i = A.first; i < A.first + A.count; ++i) {
           const Leaf& LA = leaves_[i];
-          const bool ma = marked_only && marked_[leaf_nodes_[i]];
           for (Index j = i + 1; j < A.first + A.count; ++j) {
             const Leaf& LB = leaves_[j];
-            if (marked_only && !ma && !marked_[leaf_nodes_[j]]) continue;
             if (skip_sharing && share(LA, LB)) continue;
             if (overlap(LA, LB)) emit(LA.tri, LB.tri);
           }
@@ -200,10 +190,8 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
       // Two small subtrees: every overlapping pair of their leaves (the same pairs the descent finds).
       for (Index i = A.first; i < A.first + A.count; ++i) {
         const Leaf& LA = leaves_[i];
-        const bool ma = marked_only && marked_[leaf_nodes_[i]];
         for (Index j = B.first; j < B.first + B.count; ++j) {
           const Leaf& LB = leaves_[j];
-          if (marked_only && !ma && !marked_[leaf_nodes_[j]]) continue;
           if (skip_sharing && share(LA, LB)) continue;
           if (overlap(LA, LB)) emit(LA.tri, LB.tri);
         }
@@ -359,9 +347,9 @@ class SelfCollision {
   // gap / 2) overlap; with `exact`, only those closer than gap + the two elements' reaches.
   void broad_phase(const double* x0, double gap, bool exact);
   // The traversal of broad_phase (boxes and hierarchy ready, at ref_x_): appends the pairs to
-  // vt_, ee_. With marked_only, only the pairs that refresh() dropped (a refreshed vertex,
-  // triangle or edge), through the node pairs above the marked (refreshed) triangles.
-  void traverse(double gap, bool exact, bool marked_only);
+  // vt_, ee_. With `refreshed`, only the pairs that refresh() dropped (a refreshed vertex,
+  // triangle or edge), through one hierarchy query per group of refreshed triangles.
+  void traverse(double gap, bool exact, bool refreshed);
   // The step's lists: reach_ from this step's displacements (step_len_), then broad_phase.
   void rebuild(const double* x0);
   // Keep the lists complete for this step: nothing when every vertex is within its reach;
@@ -494,6 +482,11 @@ class SelfCollision {
   std::vector<std::vector<std::array<Index, 2>>> tstack_;  ///< per-thread traversal stacks
   std::vector<Index> vt_off_, vt_adj_, ve_off_, ve_adj_;   ///< vertex -> incident triangles / edges (CSR)
   std::vector<Index> refresh_v_, refresh_t_, refresh_e_;   ///< refresh(): the vertices and their elements
+  /// refresh(): refresh_t_ in groups, one per refreshed vertex that added triangles to it (its
+  /// star's triangles not in an earlier group): group g is refresh_t_[refresh_group_[g],
+  /// refresh_group_[g + 1]). The traversal queries the hierarchy once per group.
+  std::vector<Index> refresh_group_;
+  std::vector<std::vector<Index>> qstacks_;                ///< per-thread TriangleBvh::query stacks
   std::vector<std::uint8_t> vflag_, tflag_, eflag_;        ///< refresh(): membership of those lists
   std::vector<Index> qstack_;                              ///< TriangleBvh::query stack
   std::vector<std::uint8_t> frozen_;
