@@ -658,7 +658,6 @@ SelfCollision::SelfCollision(const Options& o, const Mesh& mesh) : opt_(o) {
   refresh_v_.reserve(nv_);
   refresh_t_.reserve(nt_);
   refresh_e_.reserve(edges_.size());
-  qstack_.reserve(256);
   reach_.assign(nv_, 0.0);
   trec_.assign(nt_, TriRecord{});
   tri_slot_.assign(nt_, 0);
@@ -886,6 +885,11 @@ void SelfCollision::traverse(double gap, bool exact, bool refreshed) {
   }
   if (static_cast<int>(tstack_.size()) < nth) tstack_.resize(nth);
   if (static_cast<int>(qstacks_.size()) < nth) qstacks_.resize(nth);
+  // Triangles that share a vertex (their element pairs are the neighbour lists').
+  auto share_vertex = [](const TriRecord& A, const TriRecord& B) {
+    return A.v[0] == B.v[0] || A.v[0] == B.v[1] || A.v[0] == B.v[2] || A.v[1] == B.v[0] || A.v[1] == B.v[1] ||
+           A.v[1] == B.v[2] || A.v[2] == B.v[0] || A.v[2] == B.v[1] || A.v[2] == B.v[2];
+  };
   auto overlap = [](const double* alo, const double* ahi, const double* blo, const double* bhi) {
     return alo[0] <= bhi[0] && blo[0] <= ahi[0] && alo[1] <= bhi[1] && blo[1] <= ahi[1] && alo[2] <= bhi[2] &&
            blo[2] <= ahi[2];
@@ -956,9 +960,7 @@ void SelfCollision::traverse(double gap, bool exact, bool refreshed) {
         const TriRecord& RA = trec_[tri_slot_[A]];
         const TriRecord& RB = trec_[tri_slot_[B]];
         // (Triangles that share a vertex touch: the bound would not reject them.)
-        const bool adjacent = RA.v[0] == RB.v[0] || RA.v[0] == RB.v[1] || RA.v[0] == RB.v[2] || RA.v[1] == RB.v[0] ||
-                              RA.v[1] == RB.v[1] || RA.v[1] == RB.v[2] || RA.v[2] == RB.v[0] || RA.v[2] == RB.v[1] ||
-                              RA.v[2] == RB.v[2];
+        const bool adjacent = share_vertex(RA, RB);
         if (exact && !adjacent && selfcol::triangles_farther_than(&RA.x[0], &RA.x[3], &RA.x[6], &RB.x[0], &RB.x[3], &RB.x[6],
                                                      gap + RA.tr + RB.tr))
           return;  // every element pair is listed below gap + its reaches <= gap + RA.tr + RB.tr
@@ -1000,16 +1002,11 @@ void SelfCollision::traverse(double gap, bool exact, bool refreshed) {
         // vertex: those pairs are the neighbour lists'). A pair of two refreshed triangles is
         // taken from the lower index's side only (the other's group query meets it too).
         const Index g0 = refresh_group_[q], g1 = refresh_group_[q + 1];
-        double ulo[3], uhi[3];
-        for (int c = 0; c < 3; ++c) {
-          ulo[c] = tlo_[3 * static_cast<std::size_t>(refresh_t_[g0]) + c];
-          uhi[c] = thi_[3 * static_cast<std::size_t>(refresh_t_[g0]) + c];
+        double ulo[3] = {HUGE_VAL, HUGE_VAL, HUGE_VAL}, uhi[3] = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
+        for (Index k = g0; k < g1; ++k) {
+          const TriRecord& R = trec_[tri_slot_[refresh_t_[k]]];
+          for (int c = 0; c < 3; ++c) ulo[c] = std::min(ulo[c], R.lo[c]), uhi[c] = std::max(uhi[c], R.hi[c]);
         }
-        for (Index k = g0 + 1; k < g1; ++k)
-          for (int c = 0; c < 3; ++c) {
-            ulo[c] = std::min(ulo[c], tlo_[3 * static_cast<std::size_t>(refresh_t_[k]) + c]);
-            uhi[c] = std::max(uhi[c], thi_[3 * static_cast<std::size_t>(refresh_t_[k]) + c]);
-          }
         bvh_.query(ulo, uhi, [&](Index T) {
           const TriRecord& RT = trec_[tri_slot_[T]];
           const bool t_refreshed = tflag_[T] != 0;
@@ -1017,12 +1014,7 @@ void SelfCollision::traverse(double gap, bool exact, bool refreshed) {
             const Index t = refresh_t_[k];
             if (t == T || (t_refreshed && T < t)) continue;
             const TriRecord& Rt = trec_[tri_slot_[t]];
-            if (!overlap(Rt.lo, Rt.hi, RT.lo, RT.hi)) continue;
-            if (Rt.v[0] == RT.v[0] || Rt.v[0] == RT.v[1] || Rt.v[0] == RT.v[2] || Rt.v[1] == RT.v[0] ||
-                Rt.v[1] == RT.v[1] || Rt.v[1] == RT.v[2] || Rt.v[2] == RT.v[0] || Rt.v[2] == RT.v[1] ||
-                Rt.v[2] == RT.v[2])
-              continue;
-            emit(t, T);
+            if (overlap(Rt.lo, Rt.hi, RT.lo, RT.hi) && !share_vertex(Rt, RT)) emit(t, T);
           }
         }, qstacks_[me]);
         continue;
@@ -1121,10 +1113,8 @@ void SelfCollision::refresh(const double* x0) {
   const double th = opt_.thickness;
   refresh_t_.clear();
   refresh_e_.clear();
-  refresh_group_.clear();
+  refresh_group_.assign(1, 0);
   for (const Index v : refresh_v_) {
-    if (refresh_group_.empty() || refresh_group_.back() != static_cast<Index>(refresh_t_.size()))
-      refresh_group_.push_back(static_cast<Index>(refresh_t_.size()));
     vflag_[v] = 1;
     frame_reference(&x0[3 * v], &ref_x_[3 * v]);  // in the lists' frame: F(ref_x) = x0
     reach_[v] = reach_for(v);
@@ -1133,10 +1123,10 @@ void SelfCollision::refresh(const double* x0) {
       if (!tflag_[vt_adj_[j]]) tflag_[vt_adj_[j]] = 1, refresh_t_.push_back(vt_adj_[j]);
     for (Index j = ve_off_[v]; j < ve_off_[v + 1]; ++j)
       if (!eflag_[ve_adj_[j]]) eflag_[ve_adj_[j]] = 1, refresh_e_.push_back(ve_adj_[j]);
+    // The vertex's group ends here (none when all its triangles were in earlier groups).
+    if (static_cast<Index>(refresh_t_.size()) > refresh_group_.back())
+      refresh_group_.push_back(static_cast<Index>(refresh_t_.size()));
   }
-  // Close the last group (a vertex that added no triangle leaves an empty one: dropped).
-  if (!refresh_group_.empty() && refresh_group_.back() == static_cast<Index>(refresh_t_.size())) refresh_group_.pop_back();
-  refresh_group_.push_back(static_cast<Index>(refresh_t_.size()));
   for (const Index t : refresh_t_) {
     triangle_box(t, th);
     bvh_.update_leaf(t, &tlo_[3 * t], &thi_[3 * t]);

@@ -488,7 +488,6 @@ class SelfCollision {
   std::vector<Index> refresh_group_;
   std::vector<std::vector<Index>> qstacks_;                ///< per-thread TriangleBvh::query stacks
   std::vector<std::uint8_t> vflag_, tflag_, eflag_;        ///< refresh(): membership of those lists
-  std::vector<Index> qstack_;                              ///< TriangleBvh::query stack
   std::vector<std::uint8_t> frozen_;
   bool have_candidates_ = false;
   /// Set by proximity_pairs (an integrator with large steps, baraff_witkin): a vertex's reach
