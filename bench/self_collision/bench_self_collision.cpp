@@ -7,7 +7,10 @@
 // of the few vertices that left their reach, or full rebuilds: refit + parallel traversal;
 // `rebuilds` is the fraction of steps whose lists changed either way, `full_rebuilds` per step,
 // `refreshed` vertices per step), narrow phase (proximity distances) and response (repulsion,
-// CCD passes, fail-safe; it includes refreshes that responses cause).
+// CCD passes, fail-safe; it includes refreshes that responses cause); for baraff_witkin also the
+// search inside its step for its self-contact springs (`search_broad_ms`: renewing the lists,
+// `search_narrow_ms`: the pairs' filter and distances; SelfCollisionTotals::search_*), which
+// until 2026-12-02 no counter showed (it was only in the difference of the two steps).
 // Run (one line), then read the table, the phases and the log-log slope of cost against vertices:
 //   export LOOM_BENCH_DRAPE_CACHE=/tmp/loom_drape
 //   build/bin/bench_self_collision --benchmark_filter=BM_Step/symplectic_euler --benchmark_repetitions=3
@@ -168,9 +171,16 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
   omp_set_num_threads(static_cast<int>(st.range(1)));  // draped() may have built an auto scene
   for (int k = 0; k < 3; ++k) sim->step();  // warm-up: work arrays and candidate lists sized
   double broad = 0, narrow = 0, response = 0, rebuilds = 0, full = 0, refreshed = 0, candidates = 0, impulses = 0;
+  // The integrator's own search (baraff_witkin's self-contacts, SelfCollision::proximity_pairs),
+  // inside the step: renewing the lists, and the pairs' filter and distances.
+  double search_broad = 0, search_all = 0;
   for (auto _ : st) {
+    const auto* before = sim->scene().self_collision.get();
+    const loom::SelfCollisionTotals t0 = before ? before->totals() : loom::SelfCollisionTotals{};
     sim->step();
     if (const auto* sc = sim->scene().self_collision.get()) {
+      search_broad += sc->totals().search_broad_seconds - t0.search_broad_seconds;
+      search_all += sc->totals().search_seconds - t0.search_seconds;
       const auto& s = sc->last_stats();
       broad += s.broad_seconds;
       narrow += s.narrow_seconds;
@@ -188,6 +198,8 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
     st.counters["broad_ms"] = C(1e3 * broad, C::kAvgIterations);
     st.counters["narrow_ms"] = C(1e3 * narrow, C::kAvgIterations);
     st.counters["response_ms"] = C(1e3 * response, C::kAvgIterations);
+    st.counters["search_broad_ms"] = C(1e3 * search_broad, C::kAvgIterations);
+    st.counters["search_narrow_ms"] = C(1e3 * (search_all - search_broad), C::kAvgIterations);
     st.counters["rebuilds"] = C(rebuilds, C::kAvgIterations);
     st.counters["full_rebuilds"] = C(full, C::kAvgIterations);
     st.counters["refreshed"] = C(refreshed, C::kAvgIterations);

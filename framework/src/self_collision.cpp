@@ -515,10 +515,17 @@ constexpr double kCcdSeparation = 0.1;       ///< CCD impulses leave this gap, t
 // keeps its lists for about 24 steps instead of 16; on the draped cloth at 128^2 this cut the
 // full rebuilds from 7.0 % to 4.8 % of the steps for 26 % more pairs in the lists, see
 // docs/CONTACT.md "What it costs"), kReachMin th for large steps (implicit ones, which rebuild
-// every step or two with boxes a few displacements wide).
+// every step with boxes a displacement wide, see kLargeStepReachCap).
 constexpr double kReachMin = 0.5;
 constexpr double kReachSteps = 16.0;
 constexpr double kReachCap = 1.0;
+// cap / th for large steps. A vertex's neighbours in the sheet that share no vertex with it lie
+// at least about 0.71 edge = 2.83 th away (th a quarter of the edge, as recommended), and a pair
+// is listed below th + r_a + r_b: a reach of at most 0.9 th keeps them out of the lists. With
+// th/2 (until 2026-12-02) a slow vertex had reach th and the lists held all of them (25 000
+// pairs at 64^2 where 2 500 are needed); th/4 gives 0.75 th, and lists that last as long (the
+// lists are renewed about every step at 128^2 either way). docs/CONTACT.md "What it costs".
+constexpr double kLargeStepReachCap = 0.25;
 // Under proximity_pairs (large steps), a refresh instead of a rebuild up to this fraction of the vertices.
 constexpr double kLargeStepRefreshFraction = 1.0 / 16;
 // Traversal tasks of a parallel rebuild (fixed, so the pairs' order does not depend on the threads).
@@ -1075,8 +1082,9 @@ double SelfCollision::reach_for(Index i) const {
   const double th = opt_.thickness, s = step_len_[i];
   // Large steps (proximity_pairs' caller moves vertices by a thickness or more per step, so
   // the lists are renewed about every step whatever the reach): one displacement, not two,
-  // which halves the boxes' growth and so the pairs listed (about 2.5 million at 128^2).
-  const double cap = large_steps_ ? kReachMin : kReachCap;
+  // which halves the boxes' growth and so the pairs listed (about 2.5 million at 128^2), and a
+  // margin of at most th/4 (kLargeStepReachCap), which keeps the sheet's neighbours out.
+  const double cap = large_steps_ ? kLargeStepReachCap : kReachCap;
   return std::max(kReachMin * th, (large_steps_ ? 1 : 2) * s) + std::min(kReachSteps * s, cap * th);
 }
 
@@ -1739,7 +1747,11 @@ void SelfCollision::find_pairs(const double* x, const double* d, std::vector<Pro
     moved_[i] = frame_moved(i, &x[3 * i], kappa);
     invalid += moved_[i] + step_len_[i] > reach_[i] ? 1 : 0;
   }
-  if (invalid > 0) update_candidates(x);
+  if (invalid > 0) {
+    const auto t_renew = Clock::now();
+    update_candidates(x);
+    totals_.search_broad_seconds += seconds_since(t_renew);
+  }
   const Index nvt = static_cast<Index>(vt_.size()), npairs = nvt + static_cast<Index>(ee_.size());
   for (Index q = 0; q < npairs; ++q) {
     const bool vt = q < nvt;

@@ -689,9 +689,10 @@ TEST(SelfCollisionBvh, ListsHoldExactlyThePairsWithinThicknessPlusReachesAfterRe
 
 TEST(SelfCollisionBvh, ReachOfAFastVertexAtARebuildGrowsUpToOneThicknessForSmallSteps) {
   // The reach set at a rebuild (list_reference): max(th/2, 2|d|) + min(16|d|, th) after an
-  // explicit step (resolve() alone), max(th/2, |d|) + min(16|d|, th/2) once an integrator with
+  // explicit step (resolve() alone), max(th/2, |d|) + min(16|d|, th/4) once an integrator with
   // large steps has asked for proximity_pairs. A flat sheet translated by |d| = th/8 (first
-  // step: a rebuild): th/2 + th = 1.5 th, and th/2 + th/2 = th; by |d| = th/64: th/2 + th/4.
+  // step: a rebuild): th/2 + th = 1.5 th, and th/2 + th/4 = 0.75 th; by |d| = th/64: th/2 + th/4
+  // both (16 |d| = th/4).
   const Mesh mesh = make_grid(6, 6, 0.2, 0.2, GridPlane::XZ);
   const double th = 0.006, h = 0.01;
   for (const double step : {th / 8, th / 64})
@@ -709,7 +710,7 @@ TEST(SelfCollisionBvh, ReachOfAFastVertexAtARebuildGrowsUpToOneThicknessForSmall
       sc.resolve(s, h);
       std::vector<double> X, reach;
       sc.list_reference(X, reach);
-      const double expected = step == th / 8 ? (large ? th : 1.5 * th) : 0.5 * th + 16 * step;
+      const double expected = step == th / 8 ? (large ? 0.75 * th : 1.5 * th) : 0.5 * th + 16 * step;
       for (Index i = 0; i < mesh.num_vertices(); ++i)
         ASSERT_NEAR(reach[i], expected, 1e-12) << "vertex " << i << ", step " << step << ", large " << large;
     }

@@ -233,6 +233,7 @@ struct SelfCollisionTotals {
   double resolve_seconds = 0;     ///< wall time in resolve() (the after-step pass), all of it
   double broad_seconds = 0, narrow_seconds = 0, response_seconds = 0;  ///< its phases
   double search_seconds = 0;      ///< wall time in proximity_pairs(x, d, out) (an integrator's self-contacts)
+  double search_broad_seconds = 0;  ///< of search_seconds: renewing the lists (rebuilds, refreshes); the rest is the pairs' filter and distances
   long long proximity = 0;        ///< repulsion / friction impulses
   long long ccd_collisions = 0;   ///< CCD impulses
   long long frozen = 0;           ///< vertices the fail-safe returned to their start of step
