@@ -514,8 +514,8 @@ constexpr double kCcdSeparation = 0.1;       ///< CCD impulses leave this gap, t
 // kReachCap th for small steps (explicit integrators: a vertex moving th/16 or more per step
 // keeps its lists for about 24 steps instead of 16; on the draped cloth at 128^2 this cut the
 // full rebuilds from 7.0 % to 4.8 % of the steps for 26 % more pairs in the lists, see
-// docs/CONTACT.md "What it costs"), kReachMin th for large steps (implicit ones, which rebuild
-// every step with boxes a displacement wide, see kLargeStepReachCap).
+// docs/CONTACT.md "What it costs"), kLargeStepReachCap th for large steps (implicit ones, which
+// rebuild about every step with boxes a displacement wide).
 constexpr double kReachMin = 0.5;
 constexpr double kReachSteps = 16.0;
 constexpr double kReachCap = 1.0;
@@ -523,7 +523,7 @@ constexpr double kReachCap = 1.0;
 // at least about 0.71 edge = 2.83 th away (th a quarter of the edge, as recommended), and a pair
 // is listed below th + r_a + r_b: a reach of at most 0.9 th keeps them out of the lists. With
 // th/2 (until 2026-12-02) a slow vertex had reach th and the lists held all of them (25 000
-// pairs at 64^2 where 2 500 are needed); th/4 gives 0.75 th, and lists that last as long (the
+// pairs at 64^2 where th/4 lists 2 500); th/4 gives 0.75 th, and lists that last as long (the
 // lists are renewed about every step at 128^2 either way). docs/CONTACT.md "What it costs".
 constexpr double kLargeStepReachCap = 0.25;
 // Under proximity_pairs (large steps), a refresh instead of a rebuild up to this fraction of the vertices.
