@@ -174,13 +174,13 @@ void BM_Step(benchmark::State& st, const std::string& integrator, bool self) {
   // The integrator's own search (baraff_witkin's self-contacts, SelfCollision::proximity_pairs),
   // inside the step: renewing the lists, and the pairs' filter and distances.
   double search_broad = 0, search_all = 0;
+  const loom::SelfCollision* sc = sim->scene().self_collision.get();
   for (auto _ : st) {
-    const auto* before = sim->scene().self_collision.get();
-    const loom::SelfCollisionTotals t0 = before ? before->totals() : loom::SelfCollisionTotals{};
+    const double broad0 = sc ? sc->totals().search_broad_seconds : 0, all0 = sc ? sc->totals().search_seconds : 0;
     sim->step();
-    if (const auto* sc = sim->scene().self_collision.get()) {
-      search_broad += sc->totals().search_broad_seconds - t0.search_broad_seconds;
-      search_all += sc->totals().search_seconds - t0.search_seconds;
+    if (sc) {
+      search_broad += sc->totals().search_broad_seconds - broad0;
+      search_all += sc->totals().search_seconds - all0;
       const auto& s = sc->last_stats();
       broad += s.broad_seconds;
       narrow += s.narrow_seconds;

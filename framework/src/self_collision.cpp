@@ -892,11 +892,7 @@ void SelfCollision::traverse(double gap, bool exact, bool refreshed) {
   }
   if (static_cast<int>(tstack_.size()) < nth) tstack_.resize(nth);
   if (static_cast<int>(qstacks_.size()) < nth) qstacks_.resize(nth);
-  // Triangles that share a vertex (their element pairs are the neighbour lists').
-  auto share_vertex = [](const TriRecord& A, const TriRecord& B) {
-    return A.v[0] == B.v[0] || A.v[0] == B.v[1] || A.v[0] == B.v[2] || A.v[1] == B.v[0] || A.v[1] == B.v[1] ||
-           A.v[1] == B.v[2] || A.v[2] == B.v[0] || A.v[2] == B.v[1] || A.v[2] == B.v[2];
-  };
+  auto share_vertex = [](const TriRecord& A, const TriRecord& B) { return selfcol::triangles_share_vertex(A.v, B.v); };
   auto overlap = [](const double* alo, const double* ahi, const double* blo, const double* bhi) {
     return alo[0] <= bhi[0] && blo[0] <= ahi[0] && alo[1] <= bhi[1] && blo[1] <= ahi[1] && alo[2] <= bhi[2] &&
            blo[2] <= ahi[2];

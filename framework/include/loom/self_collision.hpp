@@ -49,6 +49,12 @@ bool point_triangle_farther_than(const double* p, const double* a, const double*
 /// sheet neighbours beside each other). Triangles that share a vertex are never rejected.
 bool triangles_farther_than(const double* a0, const double* a1, const double* a2, const double* b0, const double* b1,
                             const double* b2, double r);
+/// Whether two triangles, given by their three vertex indices, share a vertex (their element
+/// pairs are the neighbour lists', not a traversal's).
+inline bool triangles_share_vertex(const Index* a, const Index* b) {
+  return a[0] == b[0] || a[0] == b[1] || a[0] == b[2] || a[1] == b[0] || a[1] == b[1] || a[1] == b[2] ||
+         a[2] == b[0] || a[2] == b[1] || a[2] == b[2];
+}
 
 /// Continuous collision detection for linear motion x(t) = x0 + t (x1 - x0), t in [0, 1].
 /// Vertex-triangle: points are {p, a, b, c}; edge-edge: {p0, p1, q0, q1}. A collision is the
@@ -152,10 +158,7 @@ void TriangleBvh::pairs_from(std::array<Index, 2> task, F&& emit, std::vector<st
            a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
   };
   skip_sharing = skip_sharing && have_vertices_;
-  auto share = [](const Leaf& a, const Leaf& b) {
-    return a.v[0] == b.v[0] || a.v[0] == b.v[1] || a.v[0] == b.v[2] || a.v[1] == b.v[0] || a.v[1] == b.v[1] ||
-           a.v[1] == b.v[2] || a.v[2] == b.v[0] || a.v[2] == b.v[1] || a.v[2] == b.v[2];
-  };
+  auto share = [](const Leaf& a, const Leaf& b) { return triangles_share_vertex(a.v, b.v); };
   auto extent = [](const Node& a) { return (a.hi[0] - a.lo[0]) + (a.hi[1] - a.lo[1]) + (a.hi[2] - a.lo[2]); };
   stack.clear();
   stack.push_back(task);  // {a, a}: the pairs inside node a; {a, b}: pairs between a and b
