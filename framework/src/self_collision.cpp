@@ -1355,9 +1355,17 @@ Index SelfCollision::freeze_pass(State& s, bool changed_only, const double* d_re
   // to 0, by |d_ref| of it: counted in `change` before the next pass.
   const double th = opt_.thickness;
   const double tol = kCcdTolerance * th;
-  const Index nvt = static_cast<Index>(vt_.size());
   Index frozen = 0;
   for (;;) {
+    // A frozen vertex's d is 0, so in the lists' frame it moves by the frame's own motion over
+    // the step, which can be far beyond its reach (a cloth falling as a whole gives its vertices
+    // reaches of half a thickness): then the lists are renewed for the d of now, and every pair
+    // is tested (test AVertexTheFailSafeStopsInAClothFallingAsAWholeIsCheckedAgainstTheLayerAbove).
+    if (frozen > 0 && !candidates_valid()) {
+      update_candidates(x0_.data());
+      changed_only = false;
+    }
+    const Index nvt = static_cast<Index>(vt_.size());
     Index found = 0;
     const Index before = frozen;
     const bool use_near = changed_only && 2 * change < th - tol;

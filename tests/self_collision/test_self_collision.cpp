@@ -1055,3 +1055,64 @@ TEST(SelfCollisionBvh, AClothTurningAsAWholeKeepsItsListsInTheFrameOfItsRotation
     EXPECT_GT(far, 20 * th);
   }
 }
+
+TEST(SelfCollisionResponse, AVertexTheFailSafeStopsInAClothFallingAsAWholeIsCheckedAgainstTheLayerAbove) {
+  // The lists measure motion in their frame, which follows the cloth's mean motion: in a cloth
+  // falling as a whole, a vertex has a reach of half a thickness although it falls 3 thicknesses
+  // per step. When the fail-safe stops such a vertex, it moves by the frame's whole step
+  // relative to the frame, far beyond its reach: the lists must be renewed for it before the
+  // next pass, or the layer above, 2.2 thicknesses up (not in the lists: farther than th + the
+  // two reaches), falls through it unchecked. Two 21 x 21 sheets U (above) and L fall together,
+  // accelerating by 0.1 thickness per step for 30 steps, onto a small triangle C at rest: in the
+  // last step L passes through C. Fail-safe alone, refreshes only (no rebuild resets reaches).
+  // Without the renewal, 228 pairs of U's and L's triangles intersect after the last step.
+  const double th = 0.0025, h = 0.01;  // edge 0.01
+  const Mesh sheet = make_grid(21, 21, 0.2, 0.2, GridPlane::XZ);
+  const Index ns = sheet.num_vertices(), ts = sheet.num_triangles();
+  Mesh mesh;
+  const double lower0 = 48 * th, gap = 2.2 * th;  // L falls 46.5 th in 31 steps, then 3 th onto C (1.5 th below)
+  for (int layer = 0; layer < 2; ++layer) {
+    for (Index i = 0; i < ns; ++i)
+      mesh.positions.insert(mesh.positions.end(), {sheet.positions[3 * i], lower0 + (layer == 0 ? gap : 0.0),
+                                                   sheet.positions[3 * i + 2]});
+    for (Index k = 0; k < 3 * ts; ++k) mesh.triangles.push_back(sheet.triangles[k] + layer * ns);
+  }
+  const Index c0 = 2 * ns;  // C: under the middle of L, its corners clear of L's vertices' xz
+  double x_lo = 1e300, z_lo = 1e300;
+  for (Index i = 0; i < ns; ++i) x_lo = std::min(x_lo, sheet.positions[3 * i]), z_lo = std::min(z_lo, sheet.positions[3 * i + 2]);
+  mesh.positions.insert(mesh.positions.end(), {x_lo + 0.0555, 0.0, z_lo + 0.0555, x_lo + 0.1455, 0.0, z_lo + 0.0555,
+                                               x_lo + 0.0555, 0.0, z_lo + 0.1455});
+  mesh.triangles.insert(mesh.triangles.end(), {c0, c0 + 1, c0 + 2});
+  const Index nv = mesh.num_vertices();
+  SelfCollision::Options o{th, 0.0};
+  o.ccd_iterations = 0;
+  o.repulsion = false;
+  o.refresh_fraction = 1.0;
+  SelfCollision sc(o, mesh);
+  State s;
+  s.resize(nv);
+  for (Index i = 0; i < nv; ++i) s.mass[i] = 1e-4;
+  s.update_inverse_masses();
+  s.x = mesh.positions;
+  ASSERT_EQ(loom::count_intersecting_pairs(mesh, s.x), 0u);
+  for (int step = 0; step <= 31; ++step) {
+    const double fall = std::min(step, 30) * 0.1 * th;
+    if (step == 31) {
+      // The layers are apart in the lists: no pair of a U vertex and an L triangle is listed.
+      std::vector<std::array<Index, 2>> vt, ee;
+      sc.candidate_lists(vt, ee);
+      for (const auto& p : vt)
+        ASSERT_FALSE(p[0] < ns && p[1] >= ts && p[1] < 2 * ts) << "U vertex " << p[0] << ", L triangle " << p[1];
+    }
+    sc.begin_step(s);
+    for (Index i = 0; i < c0; ++i) s.x[3 * i + 1] -= fall, s.v[3 * i + 1] = -fall / h;
+    sc.resolve(s, h);
+    if (step < 31) ASSERT_EQ(sc.last_stats().frozen, 0) << "step " << step;
+  }
+  EXPECT_GT(sc.last_stats().frozen, 0);
+  EXPECT_EQ(loom::count_intersecting_pairs(mesh, s.x), 0u);
+  // Some of U stopped above the stopped part of L.
+  Index u_stopped = 0;
+  for (Index i = 0; i < ns; ++i) u_stopped += s.v[3 * i + 1] == 0 ? 1 : 0;
+  EXPECT_GT(u_stopped, 0);
+}
