@@ -1356,14 +1356,17 @@ Index SelfCollision::freeze_pass(State& s, bool changed_only, const double* d_re
   const double th = opt_.thickness;
   const double tol = kCcdTolerance * th;
   Index frozen = 0;
+  // The lists are complete on entry (the caller checked); only freezing changes a vertex's step.
+  // A frozen vertex's d is 0, so in the lists' frame it moves by the frame's own motion over the
+  // step, which can be far beyond its reach (a cloth falling as a whole gives its vertices reaches
+  // of half a thickness): then the lists are renewed for the d of now before the next pass, and
+  // every pair is tested (test AVertexTheFailSafeStopsInAClothFallingAsAWholeIsCheckedAgainstTheLayerAbove).
+  bool left_reach = false;
   for (;;) {
-    // A frozen vertex's d is 0, so in the lists' frame it moves by the frame's own motion over
-    // the step, which can be far beyond its reach (a cloth falling as a whole gives its vertices
-    // reaches of half a thickness): then the lists are renewed for the d of now, and every pair
-    // is tested (test AVertexTheFailSafeStopsInAClothFallingAsAWholeIsCheckedAgainstTheLayerAbove).
-    if (frozen > 0 && !candidates_valid()) {
+    if (left_reach) {
       update_candidates(x0_.data());
       changed_only = false;
+      left_reach = false;
     }
     const Index nvt = static_cast<Index>(vt_.size());
     Index found = 0;
@@ -1413,6 +1416,7 @@ Index SelfCollision::freeze_pass(State& s, bool changed_only, const double* d_re
             s.v[3 * v + k] = 0;
           }
           step_len_[v] = frame_step(&x0_[3 * v], &d_[3 * v]);
+          left_reach |= moved_[v] + step_len_[v] > reach_[v];
         }
       }
     }
